@@ -1,0 +1,36 @@
+# mirrorcoach entry points. Every target creates .venv and installs on first use.
+PY      ?= python3.11
+VENV    := .venv
+BIN     := $(VENV)/bin
+STAMP   := $(VENV)/.installed
+HDM05   ?= $(abspath ../shared/data/hdm05)
+OUT     ?= out
+
+.PHONY: install demo test bench reproduce up down status dashboard clean
+
+$(STAMP): pyproject.toml
+	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (mirrorcoach needs Python 3.11)"; exit 1; }
+	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/python -m shared.demo --out $(OUT)/demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+bench: $(STAMP)
+	$(BIN)/python -m bench.run --hdm05 $(HDM05) --out bench/results
+
+reproduce: $(STAMP)
+	$(BIN)/python -m bench.recognition --hdm05 $(HDM05) --out reports
+
+up down status dashboard:
+	@echo "'make $@' arrives with the cluster (issue 3); today mirrorcoach is the library and its CLI."; exit 2
+
+clean:
+	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -1,0 +1,45 @@
+"""Errors of the mirrorcoach library.
+
+Every error carries a stable ``code`` (the strings the bus uses: ``bad_request``,
+``not_found``, ``conflict``, ``unavailable``, ``internal``) so that a service can turn it
+into a ``reply_err`` and the CLI into a one-line message, never a traceback.
+"""
+
+from __future__ import annotations
+
+
+class MirrorcoachError(Exception):
+    """Base class: a failure the user can act on."""
+
+    code = "internal"
+
+    def __init__(self, message: str, **details):
+        super().__init__(message)
+        self.message = message
+        self.details = details
+
+
+class BadInput(MirrorcoachError):
+    """The caller gave something that cannot be used (shape, value, name)."""
+
+    code = "bad_request"
+
+
+class NotFound(MirrorcoachError):
+    code = "not_found"
+
+
+class ClipFormatError(BadInput):
+    """A clip or skeleton file cannot be read; names the file and, where known, the line."""
+
+    def __init__(self, path, message: str, line: int | None = None):
+        where = f"{path}:{line}" if line is not None else f"{path}"
+        super().__init__(f"{where}: {message}", path=str(path), line=line)
+        self.path = str(path)
+        self.line = line
+
+
+class ModelError(MirrorcoachError):
+    """A model could not be trained or used (degenerate HMM, too few frames, ...)."""
+
+    code = "bad_request"

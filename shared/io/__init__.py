@@ -1,0 +1,73 @@
+"""Reading and writing clips: ASF/AMC, BVH and NPZ, chosen by file extension."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from shared.clip import Clip
+from shared.errors import ClipFormatError
+from shared.io.asf_amc import find_skeleton, read_amc, read_asf, write_amc
+from shared.io.bvh import read_bvh, write_bvh
+from shared.io.npz import read_npz, write_npz
+
+CLIP_SUFFIXES = (".amc", ".bvh", ".npz")
+_ASF_CACHE: dict[str, object] = {}
+
+
+def load_skeleton(path):
+    key = str(Path(path).resolve())
+    if key not in _ASF_CACHE:
+        _ASF_CACHE[key] = read_asf(path)
+    return _ASF_CACHE[key]
+
+
+def load_clip(path, skeleton=None, label: str | None = None) -> Clip:
+    """Read a clip. For AMC the skeleton is found beside the file (see ``find_skeleton``)
+    unless ``skeleton`` (a path or a Skeleton) is given. The label defaults to the name of
+    the clip's parent folder."""
+    path = Path(path)
+    if not path.exists():
+        raise ClipFormatError(path, "no such file")
+    suffix = path.suffix.lower()
+    if suffix == ".amc":
+        if skeleton is None:
+            skeleton = find_skeleton(path)
+        if not hasattr(skeleton, "joints"):
+            skeleton = load_skeleton(skeleton)
+        return read_amc(path, skeleton, label=label)
+    if suffix == ".bvh":
+        return read_bvh(path, label=label)
+    if suffix == ".npz":
+        return read_npz(path, label=label)
+    raise ClipFormatError(path, f"unknown clip format {suffix!r} (expected one of {', '.join(CLIP_SUFFIXES)})")
+
+
+def save_clip(clip: Clip, path) -> None:
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".bvh":
+        write_bvh(clip, path)
+    elif suffix == ".npz":
+        write_npz(clip, path)
+    elif suffix == ".amc":
+        write_amc(clip, path)
+    else:
+        raise ClipFormatError(path, f"cannot write {suffix!r} (use .bvh, .npz or .amc)")
+
+
+def find_clips(paths) -> list[Path]:
+    """Every clip file under the given files or folders, sorted."""
+    out: list[Path] = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir():
+            out.extend(sorted(q for q in p.rglob("*") if q.suffix.lower() in CLIP_SUFFIXES))
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise ClipFormatError(p, "no such file or folder")
+    return out
+
+
+__all__ = ["load_clip", "save_clip", "find_clips", "load_skeleton", "read_asf", "read_amc", "write_amc",
+           "read_bvh", "write_bvh", "read_npz", "write_npz", "find_skeleton"]

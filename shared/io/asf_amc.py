@@ -1,0 +1,277 @@
+"""Acclaim ASF (skeleton) and AMC (motion) files, HDM05 and CMU flavours.
+
+Both flavours: CRLF or LF line ends, Latin-1 bytes in comment lines (files are decoded as
+Latin-1, which never fails), ``:units length`` in inches scaled (HDM05: 0.45 means one unit
+is 1/0.45 inch), angles in degrees that may run continuously past 360 (kept as they are).
+Bad files raise :class:`~shared.errors.ClipFormatError` naming the file and line.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from shared.clip import Clip
+from shared.errors import ClipFormatError
+from shared.skeleton import Joint, Skeleton
+
+INCH_M = 0.0254
+_DOF_MAP = {"rx": "rx", "ry": "ry", "rz": "rz", "tx": "tx", "ty": "ty", "tz": "tz", "l": None}
+
+
+def _lines(path: Path) -> list[str]:
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as e:
+        raise ClipFormatError(path, f"cannot read file: {e.strerror or e}") from None
+    return raw.decode("latin-1").splitlines()
+
+
+def _floats(path, lineno, parts, n=None) -> list[float]:
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise ClipFormatError(path, f"expected numbers, got {' '.join(parts)!r}", lineno) from None
+    if n is not None and len(vals) != n:
+        raise ClipFormatError(path, f"expected {n} numbers, got {len(vals)}", lineno)
+    if not np.all(np.isfinite(vals)):
+        raise ClipFormatError(path, "non-finite number", lineno)
+    return vals
+
+
+def read_asf(path) -> Skeleton:
+    """Read an ASF skeleton (see :mod:`shared.skeleton` for the joint convention)."""
+    path = Path(path)
+    lines = _lines(path)
+    section = None
+    length_unit = 1.0
+    angle_deg = True
+    root = {"order": ["tx", "ty", "tz", "rx", "ry", "rz"], "axis": "xyz", "position": [0, 0, 0], "orientation": [0, 0, 0]}
+    bones: dict[str, dict] = {}
+    bone_order: list[str] = []
+    hierarchy: dict[str, list[str]] = {}
+    cur: dict | None = None
+    in_limits = False
+    for lineno, line in enumerate(lines, 1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        if s.startswith(":"):
+            head = s.split()
+            section = head[0][1:].lower()
+            in_limits = False
+            continue
+        parts = s.split()
+        key = parts[0].lower()
+        if section == "units":
+            if key == "length":
+                length_unit = _floats(path, lineno, parts[1:], 1)[0]
+            elif key == "angle":
+                angle_deg = parts[1].lower().startswith("deg")
+        elif section == "root":
+            if key == "order":
+                order = [p.lower() for p in parts[1:]]
+                if any(p not in _DOF_MAP or _DOF_MAP[p] is None for p in order):
+                    raise ClipFormatError(path, f"unknown root channel in {s!r}", lineno)
+                root["order"] = order
+            elif key == "axis":
+                root["axis"] = parts[1].lower()
+            elif key in ("position", "orientation"):
+                root[key] = _floats(path, lineno, parts[1:], 3)
+        elif section == "bonedata":
+            if key == "begin":
+                cur = {"limits": [], "dof": [], "axis": [0, 0, 0], "axis_order": "xyz"}
+                in_limits = False
+            elif key == "end":
+                if cur is None or "name" not in cur:
+                    raise ClipFormatError(path, "bone block without a name", lineno)
+                for req in ("direction", "length"):
+                    if req not in cur:
+                        raise ClipFormatError(path, f"bone {cur['name']!r} has no {req}", lineno)
+                bones[cur["name"]] = cur
+                bone_order.append(cur["name"])
+                cur = None
+                in_limits = False
+            elif cur is None:
+                raise ClipFormatError(path, f"{parts[0]!r} outside a begin/end bone block", lineno)
+            elif key == "name":
+                cur["name"] = parts[1]
+            elif key == "direction":
+                cur["direction"] = _floats(path, lineno, parts[1:], 3)
+            elif key == "length":
+                cur["length"] = _floats(path, lineno, parts[1:], 1)[0]
+            elif key == "axis":
+                cur["axis"] = _floats(path, lineno, parts[1:4], 3)
+                cur["axis_order"] = parts[4].lower() if len(parts) > 4 else "xyz"
+            elif key == "dof":
+                dofs = [p.lower() for p in parts[1:]]
+                bad = [d for d in dofs if d not in _DOF_MAP]
+                if bad:
+                    raise ClipFormatError(path, f"unknown degree of freedom {bad[0]!r}", lineno)
+                cur["dof"] = [d for d in dofs if _DOF_MAP[d]]
+            elif key == "limits" or in_limits:
+                in_limits = True
+                txt = s[len("limits"):] if key == "limits" else s
+                for a, b in re.findall(r"\(\s*([-+\w.]+)\s+([-+\w.]+)\s*\)", txt):
+                    cur["limits"].append((_limit(a), _limit(b)))
+            elif key == "id":
+                pass
+            elif key == "bodymass" or key == "cofmass":
+                pass
+            else:
+                raise ClipFormatError(path, f"unknown bone field {parts[0]!r}", lineno)
+        elif section == "hierarchy":
+            if key in ("begin", "end"):
+                continue
+            hierarchy[parts[0]] = parts[1:]
+    if not bones:
+        raise ClipFormatError(path, "no :bonedata found (is this an ASF file?)")
+    parent: dict[str, str] = {}
+    for p, kids in hierarchy.items():
+        for k in kids:
+            if k not in bones:
+                raise ClipFormatError(path, f"hierarchy names unknown bone {k!r}")
+            parent[k] = p
+    order = ["root"]
+    queue = ["root"]
+    while queue:  # parents first, in hierarchy order
+        p = queue.pop(0)
+        for k in hierarchy.get(p, []):
+            order.append(k)
+            queue.append(k)
+    missing = [b for b in bone_order if b not in order]
+    if missing:
+        raise ClipFormatError(path, f"bones not connected to the root: {missing[:3]}")
+    scale = 1.0 if angle_deg else 180.0 / np.pi
+
+    def bone_vec(name):
+        if name == "root":
+            return np.zeros(3)
+        b = bones[name]
+        d = np.asarray(b["direction"], float)
+        nrm = np.linalg.norm(d)
+        return d / nrm * b["length"] if nrm > 0 else np.zeros(3)
+
+    joints: list[Joint] = []
+    index = {}
+    for name in order:
+        if name == "root":
+            pre = Rotation.from_euler(root["axis"], np.asarray(root["orientation"]) * scale, degrees=True).as_matrix()
+            j = Joint(name="root", parent=-1, offset=np.asarray(root["position"], float), dofs=list(root["order"]),
+                      euler=root["axis"], pre=pre)
+        else:
+            b = bones[name]
+            pre = Rotation.from_euler(b["axis_order"], np.asarray(b["axis"]) * scale, degrees=True).as_matrix()
+            limits = {}
+            if len(b["limits"]) == len(b["dof"]):
+                limits = {d: lim for d, lim in zip(b["dof"], b["limits"])}
+            j = Joint(name=name, parent=index[parent[name]], offset=bone_vec(parent[name]), dofs=list(b["dof"]),
+                      euler=b["axis_order"], pre=pre, limits=limits)
+            if not hierarchy.get(name):
+                j.end = bone_vec(name)
+        index[name] = len(joints)
+        joints.append(j)
+    return Skeleton(name=path.stem, joints=joints, unit_m=INCH_M / length_unit, up_axis=1, source_format="asf")
+
+
+def _limit(tok: str) -> float:
+    t = tok.lower()
+    if t in ("inf", "+inf"):
+        return float("inf")
+    if t == "-inf":
+        return float("-inf")
+    return float(tok)
+
+
+def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = None) -> Clip:
+    """Read an AMC motion for ``skeleton``. HDM05 and CMU AMC files carry no frame rate:
+    HDM05 is 120 fps (the default), CMU 120 fps as well."""
+    path = Path(path)
+    lines = _lines(path)
+    dofs = {j.name: j.dofs for j in skeleton.joints}
+    channels = skeleton.channels()
+    col = {c: i for i, c in enumerate(channels)}
+    frames: list[np.ndarray] = []
+    cur: np.ndarray | None = None
+    seen: set[str] = set()
+    expected_frame = None
+    for lineno, line in enumerate(lines, 1):
+        s = line.strip()
+        if not s or s.startswith("#") or s.startswith(":"):
+            continue
+        parts = s.split()
+        if len(parts) == 1 and parts[0].isdigit():
+            n = int(parts[0])
+            if expected_frame is not None and n != expected_frame:
+                raise ClipFormatError(path, f"frame {n} where frame {expected_frame} was expected", lineno)
+            if cur is not None:
+                frames.append(cur)
+            cur = np.zeros(len(channels))
+            seen = set()
+            expected_frame = n + 1
+            continue
+        if cur is None:
+            raise ClipFormatError(path, f"bone line {parts[0]!r} before the first frame number", lineno)
+        bone = parts[0]
+        if bone not in dofs:
+            raise ClipFormatError(path, f"bone {bone!r} is not in skeleton {skeleton.name!r}", lineno)
+        vals = _floats(path, lineno, parts[1:], len(dofs[bone]))
+        for d, v in zip(dofs[bone], vals):
+            cur[col[f"{bone}.{d}"]] = v
+        seen.add(bone)
+    if cur is not None:
+        frames.append(cur)
+    if not frames:
+        raise ClipFormatError(path, "no frames found (is this an AMC file?)")
+    data = np.vstack(frames)
+    cls = label if label is not None else path.parent.name
+    return Clip(data=data, channels=channels, fps=fps, skeleton=skeleton, groups={"motion": list(channels)},
+                name=path.stem, label=cls, source=str(path))
+
+
+def write_amc(clip: Clip, path) -> None:
+    """Write an AMC file for a clip whose skeleton came from an ASF file."""
+    if clip.skeleton is None or clip.skeleton.source_format != "asf":
+        raise ClipFormatError(path, "AMC needs a clip on an ASF skeleton; write BVH or NPZ instead")
+    sk = clip.skeleton
+    values = {c: clip.data[:, i] for i, c in enumerate(clip.channels)}
+    out = [":FULLY-SPECIFIED", ":DEGREES"]
+    for t in range(clip.n_frames):
+        out.append(str(t + 1))
+        for j in sk.joints:
+            if j.dofs:
+                vals = [values[f"{j.name}.{d}"][t] if f"{j.name}.{d}" in values else 0.0 for d in j.dofs]
+                out.append(j.name + " " + " ".join(f"{v:.10g}" for v in vals))
+    Path(path).write_text("\n".join(out) + "\n", encoding="latin-1")
+
+
+def find_skeleton(amc_path) -> Path:
+    """The ASF of an AMC file in the usual layouts: beside it or in a sibling ``asf/`` folder
+    (also one level up, as in ``amc/<class>/x.amc`` + ``asf/``), named after the actor:
+    ``HDM_bd_..._120.amc`` -> ``HDM_bd.asf``; CMU ``07_01.amc`` -> ``07.asf``."""
+    amc_path = Path(amc_path)
+    stem = amc_path.stem
+    names = []
+    m = re.match(r"^(HDM_[A-Za-z]+)_", stem)
+    if m:
+        names.append(m.group(1) + ".asf")
+    m = re.match(r"^(\d+)_\d+$", stem)
+    if m:
+        names.append(m.group(1) + ".asf")
+    names.append(stem + ".asf")
+    parts = stem.split("_")
+    for k in range(len(parts) - 1, 0, -1):
+        names.append("_".join(parts[:k]) + ".asf")
+    folders = [amc_path.parent, amc_path.parent / "asf", amc_path.parent.parent / "asf", amc_path.parent.parent.parent / "asf"]
+    for folder in folders:
+        for n in names:
+            cand = folder / n
+            if cand.is_file():
+                return cand
+    asfs = sorted(amc_path.parent.glob("*.asf"))
+    if len(asfs) == 1:
+        return asfs[0]
+    raise ClipFormatError(amc_path, "no skeleton found: put the actor's .asf beside it or in a sibling asf/ folder, or pass --skeleton FILE")

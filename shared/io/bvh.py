@@ -1,0 +1,244 @@
+"""Biovision BVH: read, and write so that any animation tool opens a generated motion.
+
+A BVH file read here gives channels named ``<joint>.<dof>`` (``Zrotation`` -> ``rz``) and a
+skeleton whose joints compose their rotation channels in file order (intrinsic, as BVH
+specifies). Lengths are taken to be centimetres (``unit_m = 0.01``), the usual BVH unit.
+
+Writing a clip whose skeleton came from BVH writes its own channels unchanged (so a read -
+write - read round trip gives the same numbers to the printed precision). Writing a clip on an
+ASF skeleton folds each bone's ``axis`` pre-rotation into its local rotation
+(``L = C M C^T``), writes ``Zrotation Xrotation Yrotation`` for every joint (angles unwrapped
+over time, so they stay continuous) and converts lengths to centimetres; forward kinematics of
+the written file gives the same joint positions as the ASF/AMC original.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from shared.clip import Clip
+from shared.errors import ClipFormatError
+from shared.skeleton import Joint, Skeleton
+
+_BVH_TO_DOF = {
+    "xposition": "tx", "yposition": "ty", "zposition": "tz",
+    "xrotation": "rx", "yrotation": "ry", "zrotation": "rz",
+}
+_DOF_TO_BVH = {"tx": "Xposition", "ty": "Yposition", "tz": "Zposition", "rx": "Xrotation", "ry": "Yrotation", "rz": "Zrotation"}
+BVH_UNIT_M = 0.01
+DECIMALS = 6
+
+
+class _Tokens:
+    def __init__(self, path: Path, lines: list[str]):
+        self.path = path
+        self.toks: list[tuple[str, int]] = []
+        for n, line in enumerate(lines, 1):
+            for t in line.replace("{", " { ").replace("}", " } ").split():
+                self.toks.append((t, n))
+        self.i = 0
+
+    def peek(self) -> str:
+        return self.toks[self.i][0] if self.i < len(self.toks) else ""
+
+    def line(self) -> int:
+        return self.toks[min(self.i, len(self.toks) - 1)][1] if self.toks else 1
+
+    def next(self, expect: str | None = None) -> str:
+        if self.i >= len(self.toks):
+            raise ClipFormatError(self.path, f"unexpected end of file{f' (expected {expect!r})' if expect else ''}", self.line())
+        t, n = self.toks[self.i]
+        if expect is not None and t.upper() != expect.upper():
+            raise ClipFormatError(self.path, f"expected {expect!r}, got {t!r}", n)
+        self.i += 1
+        return t
+
+    def number(self) -> float:
+        t, n = self.toks[self.i] if self.i < len(self.toks) else ("", self.line())
+        try:
+            v = float(t)
+        except ValueError:
+            raise ClipFormatError(self.path, f"expected a number, got {t!r}", n) from None
+        self.i += 1
+        return v
+
+
+def read_bvh(path, label: str | None = None) -> Clip:
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("latin-1")
+    except OSError as e:
+        raise ClipFormatError(path, f"cannot read file: {e.strerror or e}") from None
+    lines = text.splitlines()
+    motion_line = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
+    if motion_line is None:
+        raise ClipFormatError(path, "no MOTION section (is this a BVH file?)")
+    tk = _Tokens(path, lines[:motion_line])
+    tk.next("HIERARCHY")
+    joints: list[Joint] = []
+    channels: list[str] = []
+
+    def parse_joint(parent: int, kind: str):
+        name = tk.next()
+        tk.next("{")
+        tk.next("OFFSET")
+        offset = np.array([tk.number() for _ in range(3)])
+        dofs: list[str] = []
+        if tk.peek().upper() == "CHANNELS":
+            tk.next()
+            ln = tk.line()
+            try:
+                n = int(tk.next())
+            except ValueError:
+                raise ClipFormatError(path, "CHANNELS needs a count", ln) from None
+            for _ in range(n):
+                ln = tk.line()
+                c = tk.next()
+                if c.lower() not in _BVH_TO_DOF:
+                    raise ClipFormatError(path, f"unknown channel {c!r}", ln)
+                dofs.append(_BVH_TO_DOF[c.lower()])
+        seq = "".join(d[1].upper() for d in dofs if d.startswith("r"))
+        j = Joint(name=name, parent=parent, offset=offset, dofs=dofs, euler=seq)
+        idx = len(joints)
+        joints.append(j)
+        channels.extend(f"{name}.{d}" for d in dofs)
+        while True:
+            t = tk.peek().upper()
+            if t == "JOINT":
+                tk.next()
+                parse_joint(idx, "JOINT")
+            elif t == "END":
+                tk.next()
+                tk.next("Site")
+                tk.next("{")
+                tk.next("OFFSET")
+                j.end = np.array([tk.number() for _ in range(3)])
+                tk.next("}")
+            elif t == "}":
+                tk.next()
+                return
+            else:
+                raise ClipFormatError(path, f"unexpected {tk.peek() or 'end of file'!r} in joint {name!r}", tk.line())
+
+    tk.next("ROOT")
+    parse_joint(-1, "ROOT")
+    body = lines[motion_line + 1:]
+    n_frames = None
+    frame_time = None
+    k = 0
+    while k < len(body) and (n_frames is None or frame_time is None):
+        s = body[k].strip()
+        ln = motion_line + 2 + k
+        if s.lower().startswith("frames:"):
+            try:
+                n_frames = int(s.split(":", 1)[1])
+            except ValueError:
+                raise ClipFormatError(path, "bad 'Frames:' line", ln) from None
+        elif s.lower().startswith("frame time:"):
+            try:
+                frame_time = float(s.split(":", 1)[1])
+            except ValueError:
+                raise ClipFormatError(path, "bad 'Frame Time:' line", ln) from None
+        elif s:
+            raise ClipFormatError(path, f"expected 'Frames:' and 'Frame Time:', got {s[:40]!r}", ln)
+        k += 1
+    if n_frames is None or frame_time is None or frame_time <= 0:
+        raise ClipFormatError(path, "missing or invalid 'Frames:' / 'Frame Time:'")
+    rows = []
+    for i, s in enumerate(body[k:], start=motion_line + 2 + k):
+        if not s.strip():
+            continue
+        try:
+            vals = np.array(s.split(), dtype=float)
+        except ValueError:
+            raise ClipFormatError(path, "frame line with a non-number", i) from None
+        if vals.size != len(channels):
+            raise ClipFormatError(path, f"frame has {vals.size} values, the hierarchy declares {len(channels)} channels", i)
+        if not np.all(np.isfinite(vals)):
+            raise ClipFormatError(path, "frame line with a non-finite value", i)
+        rows.append(vals)
+    if len(rows) != n_frames:
+        raise ClipFormatError(path, f"'Frames: {n_frames}' but {len(rows)} frame lines")
+    if not rows:
+        raise ClipFormatError(path, "no frames")
+    sk = Skeleton(name=path.stem, joints=joints, unit_m=BVH_UNIT_M, up_axis=1, source_format="bvh")
+    fps = 1.0 / frame_time
+    if abs(fps - round(fps)) < 1e-3 * fps:  # "0.008333" means 120 fps, not 120.0048
+        fps = float(round(fps))
+    return Clip(data=np.vstack(rows), channels=channels, fps=fps, skeleton=sk,
+                groups={"motion": list(channels)}, name=path.stem,
+                label=label if label is not None else path.parent.name, source=str(path))
+
+
+def to_bvh_form(clip: Clip) -> tuple[Skeleton, np.ndarray, list[str]]:
+    """The clip's skeleton and motion in BVH form: C folded into ZXY rotations, centimetres."""
+    sk = clip.skeleton
+    if sk is None:
+        raise ClipFormatError(clip.source or clip.name, "a BVH file needs a skeleton; this clip has none")
+    if sk.source_format == "bvh":
+        chans = sk.channels()
+        data = np.column_stack([clip.column(c) if c in clip.channels else np.zeros(clip.n_frames) for c in chans])
+        return sk, data, chans
+    scale = sk.unit_m / BVH_UNIT_M
+    values = {c: clip.data[:, i] for i, c in enumerate(clip.channels)}
+    local = sk.local_rotations(values, clip.n_frames)
+    joints, cols, chans = [], [], []
+    for j, rot in zip(sk.joints, local):
+        dofs = (["tx", "ty", "tz"] if j.parent < 0 else []) + ["rz", "rx", "ry"]
+        nj = Joint(name=j.name, parent=j.parent, offset=j.offset * scale, dofs=dofs, euler="ZXY",
+                   end=None if j.end is None else j.end * scale, limits={})
+        if j.parent < 0:
+            for d in ("tx", "ty", "tz"):
+                cols.append(values.get(f"{j.name}.{d}", np.zeros(clip.n_frames)) * scale)
+        eul = np.unwrap(np.deg2rad(rot.as_euler("ZXY", degrees=True)), axis=0)
+        cols.extend(np.rad2deg(eul).T)
+        joints.append(nj)
+        chans.extend(f"{j.name}.{d}" for d in dofs)
+    out = Skeleton(name=sk.name, joints=joints, unit_m=BVH_UNIT_M, up_axis=sk.up_axis, source_format="bvh")
+    return out, np.column_stack(cols), chans
+
+
+def write_bvh(clip: Clip, path) -> None:
+    """Write the motion channels of ``clip`` as BVH (sensor channels are not part of BVH;
+    keep them with NPZ)."""
+    sk, data, chans = to_bvh_form(clip)
+    out = ["HIERARCHY"]
+
+    def fmt(v):
+        return " ".join(f"{x:.{DECIMALS}f}" for x in v)
+
+    def emit(i: int, depth: int):
+        j = sk.joints[i]
+        pad = "\t" * depth
+        out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}")
+        out.append(pad + "{")
+        out.append(f"{pad}\tOFFSET {fmt(j.offset)}")
+        if j.dofs:
+            out.append(f"{pad}\tCHANNELS {len(j.dofs)} " + " ".join(_DOF_TO_BVH[d] for d in j.dofs))
+        kids = sk.children(i)
+        for k in kids:
+            emit(k, depth + 1)
+        if not kids:
+            end = j.end if j.end is not None else np.zeros(3)
+            out.append(f"{pad}\tEnd Site")
+            out.append(f"{pad}\t{{")
+            out.append(f"{pad}\t\tOFFSET {fmt(end)}")
+            out.append(f"{pad}\t}}")
+        out.append(pad + "}")
+
+    emit(0, 0)
+    # BVH frame lines list channels in the order the hierarchy declares them (depth first)
+    declared = []
+    stack = [0]
+    while stack:
+        i = stack.pop()
+        declared.extend(f"{sk.joints[i].name}.{d}" for d in sk.joints[i].dofs)
+        stack.extend(reversed(sk.children(i)))
+    data = data[:, [chans.index(c) for c in declared]]
+    out.append("MOTION")
+    out.append(f"Frames: {data.shape[0]}")
+    out.append(f"Frame Time: {1.0 / clip.fps:.12g}")
+    out.extend(fmt(row) for row in data)
+    Path(path).write_text("\n".join(out) + "\n")

@@ -1,0 +1,173 @@
+"""Kinematic skeletons shared by the ASF and BVH readers, forward kinematics and the PSS.
+
+One representation serves both formats. A joint ``j`` sits at
+``p_j = p_parent + R_parent @ offset_j`` and turns by the local rotation
+``L_j = C_j @ M_j @ C_j^T`` where ``C_j`` is the ASF ``axis`` pre-rotation (identity for BVH)
+and ``M_j`` composes the joint's Euler channels in the joint's own order
+(``euler``: a scipy sequence, lower case extrinsic as ASF, upper case intrinsic as BVH).
+The global rotation is ``R_j = R_parent @ L_j``. A leaf joint's bone ends at
+``p_j + R_j @ end_j`` (BVH ``End Site``).
+
+For ASF the joint of bone ``b`` is placed at the start of the bone (the end of its parent)
+and carries bone ``b``'s rotation; its children are offset by ``direction * length`` of ``b``
+in the world-aligned rest frame. That is exactly the BVH convention with ``C = I`` after
+folding ``C`` into the local rotation, which is how :mod:`shared.io.bvh` writes ASF clips.
+
+Channel names are uniform across formats: ``<joint>.<dof>`` with dof one of
+``tx ty tz rx ry rz`` (BVH ``Xposition`` becomes ``tx``, ``Zrotation`` becomes ``rz``).
+Angles are in degrees, lengths in the skeleton's own unit; ``unit_m`` converts to metres.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+ROT_DOFS = ("rx", "ry", "rz")
+TRANS_DOFS = ("tx", "ty", "tz")
+
+
+@dataclass
+class Joint:
+    name: str
+    parent: int
+    offset: np.ndarray
+    dofs: list[str]
+    euler: str = "xyz"
+    pre: np.ndarray = field(default_factory=lambda: np.eye(3))
+    end: np.ndarray | None = None
+    limits: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "parent": self.parent,
+            "offset": [float(v) for v in self.offset],
+            "dofs": list(self.dofs),
+            "euler": self.euler,
+            "pre": [[float(v) for v in row] for row in self.pre],
+            "end": None if self.end is None else [float(v) for v in self.end],
+            "limits": {k: [float(a), float(b)] for k, (a, b) in self.limits.items()},
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Joint":
+        return cls(
+            name=d["name"],
+            parent=int(d["parent"]),
+            offset=np.asarray(d["offset"], dtype=float),
+            dofs=list(d["dofs"]),
+            euler=d["euler"],
+            pre=np.asarray(d["pre"], dtype=float),
+            end=None if d["end"] is None else np.asarray(d["end"], dtype=float),
+            limits={k: (float(v[0]), float(v[1])) for k, v in d.get("limits", {}).items()},
+        )
+
+
+@dataclass
+class Skeleton:
+    """A kinematic tree; joints are stored parents first."""
+
+    name: str
+    joints: list[Joint]
+    unit_m: float = 1.0
+    up_axis: int = 1
+    source_format: str = "asf"
+
+    # ----------------------------------------------------------------- structure
+    def index(self, name: str) -> int:
+        for i, j in enumerate(self.joints):
+            if j.name == name:
+                return i
+        raise KeyError(name)
+
+    @property
+    def root(self) -> Joint:
+        return self.joints[0]
+
+    def channels(self) -> list[str]:
+        return [f"{j.name}.{d}" for j in self.joints for d in j.dofs]
+
+    def children(self, i: int) -> list[int]:
+        return [k for k, j in enumerate(self.joints) if j.parent == i]
+
+    # ----------------------------------------------------------------- rotations
+    def local_rotations(self, values: dict[str, np.ndarray], n_frames: int) -> list[Rotation]:
+        """Local rotation ``L_j = C_j M_j C_j^T`` of every joint for every frame."""
+        out = []
+        for j in self.joints:
+            seq = j.euler
+            if not seq:
+                out.append(Rotation.identity(n_frames))
+                continue
+            angles = np.zeros((n_frames, len(seq)))
+            for k, ax in enumerate(seq.lower()):
+                ch = f"{j.name}.r{ax}"
+                if ch in values:
+                    angles[:, k] = values[ch]
+            m = Rotation.from_euler(seq, angles, degrees=True)
+            if not np.allclose(j.pre, np.eye(3)):
+                c = Rotation.from_matrix(j.pre)
+                m = c * m * c.inv()
+            out.append(m)
+        return out
+
+    def forward_kinematics(self, data: np.ndarray, channels: list[str], *, ends: bool = True) -> np.ndarray:
+        """Joint positions in metres, shape (T, J [+ leaves], 3).
+
+        ``data`` holds the clip's frames over ``channels``; channels the skeleton does not
+        know are ignored, missing ones are zero.
+        """
+        data = np.asarray(data, dtype=float)
+        n = data.shape[0]
+        values = {c: data[:, i] for i, c in enumerate(channels)}
+        local = self.local_rotations(values, n)
+        glob: list[Rotation] = []
+        pos = np.zeros((n, len(self.joints), 3))
+        end_pos = []
+        for i, j in enumerate(self.joints):
+            if j.parent < 0:
+                t = np.stack([values.get(f"{j.name}.{d}", np.zeros(n)) for d in TRANS_DOFS], axis=1)
+                pos[:, i] = j.offset + t
+                glob.append(local[i])
+            else:
+                pos[:, i] = pos[:, j.parent] + glob[j.parent].apply(j.offset)
+                glob.append(glob[j.parent] * local[i])
+            if ends and j.end is not None and not self.children(i):
+                end_pos.append(pos[:, i] + glob[i].apply(j.end))
+        if end_pos:
+            pos = np.concatenate([pos, np.stack(end_pos, axis=1)], axis=1)
+        return pos * self.unit_m
+
+    def global_root_rotation(self, data: np.ndarray, channels: list[str]) -> Rotation:
+        values = {c: np.asarray(data)[:, i] for i, c in enumerate(channels)}
+        return self.local_rotations(values, np.asarray(data).shape[0])[0]
+
+    # ----------------------------------------------------------------- persistence
+    def to_json(self) -> str:
+        return json.dumps(
+            {
+                "name": self.name,
+                "unit_m": self.unit_m,
+                "up_axis": self.up_axis,
+                "source_format": self.source_format,
+                "joints": [j.to_dict() for j in self.joints],
+            }
+        )
+
+    @classmethod
+    def from_json(cls, text: str) -> "Skeleton":
+        d = json.loads(text)
+        return cls(
+            name=d["name"],
+            joints=[Joint.from_dict(j) for j in d["joints"]],
+            unit_m=float(d["unit_m"]),
+            up_axis=int(d.get("up_axis", 1)),
+            source_format=d.get("source_format", "asf"),
+        )
+
+    def __eq__(self, other) -> bool:  # dataclass eq would compare arrays element-wise
+        return isinstance(other, Skeleton) and self.to_json() == other.to_json()
