@@ -1,0 +1,371 @@
+"""Left-to-right continuous HMMs: the proto-symbols of the thesis (eq. 2.1, 2.2).
+
+A proto-symbol ``lambda = {a_ij, b_i}`` is a left-to-right HMM with one Gaussian output per
+state (the single-Gaussian case of eq. 2.1 that the thesis uses for synthesis, ch. 4.3.1),
+trained by Baum-Welch on one or several repetitions of a motion.
+
+Choices the thesis leaves open, made here:
+
+* topology: state ``i`` may stay or move to ``i + 1`` only; every sequence starts in state 0
+  (``pi = 1``) and, by default, ends in the last state, so that every state stands for a part
+  of the motion (a model whose last states are never reached is what makes hmmlearn write NaN);
+* initialisation by uniform segmentation of every repetition into ``n_states`` parts (not
+  k-means): state means and variances from the segments, stay probabilities from the segment
+  lengths;
+* a variance floor applied after every M-step (hmmlearn does not apply ``min_covar`` in its
+  M-step), so no state degenerates on a nearly constant channel;
+* convergence: the log-likelihood gain per frame falls below ``tol``; reported on the model.
+
+Two trainers give the same model: ``backend="banded"`` (default) exploits the band structure
+with a numba forward-backward of cost ``O(T N)`` plus BLAS emissions; ``backend="hmmlearn"``
+is the library reference (``GaussianHMM`` with the same initialisation and the floor applied
+after fitting). Tests check that both reach the same log-likelihood.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from shared.errors import ModelError
+
+LOG2PI = np.log(2.0 * np.pi)
+
+
+@dataclass
+class LeftToRightHMM:
+    """A trained proto-symbol. ``stay[i]`` is ``a_ii``; ``a_{i,i+1} = 1 - a_ii``."""
+
+    means: np.ndarray  # (N, D)
+    covars: np.ndarray  # (N, D) diagonal or (N, D, D) full
+    stay: np.ndarray  # (N,)
+    covariance_type: str = "diag"
+    n_iter: int = 0
+    converged: bool = False
+    log_likelihood: float = float("nan")
+    n_frames: int = 0
+    history: list[float] = field(default_factory=list)
+
+    @property
+    def n_states(self) -> int:
+        return self.means.shape[0]
+
+    @property
+    def n_features(self) -> int:
+        return self.means.shape[1]
+
+    def expected_durations(self) -> np.ndarray:
+        """Expected stay in each state, in frames: ``1 / (1 - a_ii)`` (the time domain of ch. 4.3.1)."""
+        return 1.0 / np.maximum(1.0 - self.stay, 1e-9)
+
+    def transmat(self) -> np.ndarray:
+        n = self.n_states
+        a = np.diag(self.stay.astype(float))
+        a[np.arange(n - 1), np.arange(1, n)] = 1.0 - self.stay[:-1]
+        a[-1, -1] = 1.0
+        return a
+
+    def variances(self) -> np.ndarray:
+        """Per-state variances (N, D): the diagonal of full covariances."""
+        if self.covariance_type == "full":
+            return np.einsum("nii->ni", self.covars)
+        return self.covars
+
+    def marginal(self, features: np.ndarray) -> "LeftToRightHMM":
+        """The same HMM seen on a subset of its output features (for association, eq. 2.8)."""
+        f = np.asarray(features)
+        cov = self.covars[:, f][:, :, f] if self.covariance_type == "full" else self.covars[:, f]
+        return LeftToRightHMM(self.means[:, f], cov, self.stay.copy(), self.covariance_type)
+
+    def prefix(self, k: int) -> "LeftToRightHMM":
+        """The first ``k`` states (the start of the motion)."""
+        return LeftToRightHMM(self.means[:k], self.covars[:k], self.stay[:k].copy(), self.covariance_type)
+
+    def is_valid(self) -> bool:
+        ok = np.all(np.isfinite(self.means)) and np.all(np.isfinite(self.covars)) and np.all(np.isfinite(self.stay))
+        return bool(ok and np.all(self.variances() > 0) and np.all((self.stay >= 0) & (self.stay < 1)))
+
+    def log_likelihood_of(self, sequences, end_in_last: bool = True) -> float:
+        """Total log-likelihood of the sequences (forward algorithm)."""
+        seqs = _as_sequences(sequences, self.n_features)
+        total = 0.0
+        for x in seqs:
+            logb = emission_logprob(x, self.means, self.covars, self.covariance_type)
+            ll, _ = _forward_loglik(logb, np.log(np.maximum(self.stay, 1e-300)), np.log(np.maximum(1 - self.stay, 1e-300)), end_in_last)
+            total += ll
+        return float(total)
+
+    def progress(self, sequence) -> np.ndarray:
+        """Posterior of the state at the last frame when the sequence need not end in the last
+        state: how far through the motion a partial observation is (eq. 2.8, missing frames)."""
+        x = _as_sequences([sequence], self.n_features)[0]
+        logb = emission_logprob(x, self.means, self.covars, self.covariance_type)
+        _, alpha_last = _forward_loglik(logb, np.log(np.maximum(self.stay, 1e-300)), np.log(np.maximum(1 - self.stay, 1e-300)), False)
+        p = np.exp(alpha_last - alpha_last.max())
+        return p / p.sum()
+
+
+def _as_sequences(sequences, n_features=None) -> list[np.ndarray]:
+    if isinstance(sequences, np.ndarray):
+        sequences = [sequences]
+    seqs = [np.ascontiguousarray(s, dtype=np.float64) for s in sequences]
+    for s in seqs:
+        if s.ndim != 2:
+            raise ModelError(f"a sequence must be frames x features, got shape {s.shape}")
+        if n_features is not None and s.shape[1] != n_features:
+            raise ModelError(f"sequence has {s.shape[1]} features, the model has {n_features}")
+        if not np.all(np.isfinite(s)):
+            raise ModelError("sequence contains NaN or Inf")
+    return seqs
+
+
+def emission_logprob(x: np.ndarray, means: np.ndarray, covars: np.ndarray, covariance_type: str) -> np.ndarray:
+    """``log b_i(o_t)`` for every frame and state (eq. 2.2), shape (T, N)."""
+    if covariance_type == "diag":
+        prec = 1.0 / covars
+        out = -0.5 * ((x * x) @ prec.T - 2.0 * x @ (means * prec).T + np.sum(means * means * prec, axis=1))
+        out -= 0.5 * (np.sum(np.log(covars), axis=1) + x.shape[1] * LOG2PI)
+        return out
+    t, d = x.shape
+    out = np.empty((t, means.shape[0]))
+    for i in range(means.shape[0]):
+        chol = np.linalg.cholesky(covars[i])
+        z = np.linalg.solve(chol, (x - means[i]).T)
+        out[:, i] = -0.5 * np.sum(z * z, axis=0) - np.sum(np.log(np.diag(chol))) - 0.5 * d * LOG2PI
+    return out
+
+
+@numba.njit(cache=True)
+def _logaddexp(a, b):
+    if a == -np.inf:
+        return b
+    if b == -np.inf:
+        return a
+    if a > b:
+        return a + np.log1p(np.exp(b - a))
+    return b + np.log1p(np.exp(a - b))
+
+
+@numba.njit(cache=True)
+def _forward_loglik(logb, log_stay, log_move, end_in_last):
+    t_len, n = logb.shape
+    alpha = np.full(n, -np.inf)
+    alpha[0] = logb[0, 0]
+    for t in range(1, t_len):
+        new = np.empty(n)
+        new[0] = alpha[0] + log_stay[0] + logb[t, 0]
+        for i in range(1, n):
+            new[i] = _logaddexp(alpha[i] + log_stay[i], alpha[i - 1] + log_move[i - 1]) + logb[t, i]
+        alpha = new
+    if end_in_last:
+        return alpha[n - 1], alpha
+    m = alpha.max()
+    return m + np.log(np.sum(np.exp(alpha - m))), alpha
+
+
+@numba.njit(cache=True)
+def _forward_backward(logb, log_stay, log_move, end_in_last):
+    """Banded forward-backward in log space. Returns (loglik, gamma (T,N), xi_stay (N,), xi_move (N,))."""
+    t_len, n = logb.shape
+    la = np.full((t_len, n), -np.inf)
+    lb = np.full((t_len, n), -np.inf)
+    la[0, 0] = logb[0, 0]
+    for t in range(1, t_len):
+        la[t, 0] = la[t - 1, 0] + log_stay[0] + logb[t, 0]
+        for i in range(1, n):
+            la[t, i] = _logaddexp(la[t - 1, i] + log_stay[i], la[t - 1, i - 1] + log_move[i - 1]) + logb[t, i]
+    if end_in_last:
+        lb[t_len - 1, n - 1] = 0.0
+        loglik = la[t_len - 1, n - 1]
+    else:
+        for i in range(n):
+            lb[t_len - 1, i] = 0.0
+        m = la[t_len - 1].max()
+        loglik = m + np.log(np.sum(np.exp(la[t_len - 1] - m)))
+    for t in range(t_len - 2, -1, -1):
+        for i in range(n):
+            v = lb[t + 1, i] + log_stay[i] + logb[t + 1, i]
+            if i + 1 < n:
+                v = _logaddexp(v, lb[t + 1, i + 1] + log_move[i] + logb[t + 1, i + 1])
+            lb[t, i] = v
+    gamma = np.exp(la + lb - loglik)
+    xi_stay = np.zeros(n)
+    xi_move = np.zeros(n)
+    for t in range(t_len - 1):
+        for i in range(n):
+            if la[t, i] == -np.inf:
+                continue
+            xi_stay[i] += np.exp(la[t, i] + log_stay[i] + logb[t + 1, i] + lb[t + 1, i] - loglik)
+            if i + 1 < n:
+                xi_move[i] += np.exp(la[t, i] + log_move[i] + logb[t + 1, i + 1] + lb[t + 1, i + 1] - loglik)
+    return loglik, gamma, xi_stay, xi_move
+
+
+def uniform_segmentation(seqs: list[np.ndarray], n_states: int, var_floor: float, covariance_type: str):
+    """Initial parameters: every repetition cut into ``n_states`` equal parts."""
+    d = seqs[0].shape[1]
+    parts = [[] for _ in range(n_states)]
+    lengths = np.zeros(n_states)
+    for x in seqs:
+        for i, idx in enumerate(np.array_split(np.arange(len(x)), n_states)):
+            parts[i].append(x[idx])
+            lengths[i] += len(idx)
+    means = np.array([np.vstack(p).mean(axis=0) for p in parts])
+    if covariance_type == "diag":
+        covars = np.array([np.vstack(p).var(axis=0) for p in parts])
+        covars = np.maximum(covars, var_floor)
+    else:
+        covars = np.array([np.cov(np.vstack(p).T, bias=True).reshape(d, d) if len(np.vstack(p)) > 1 else np.zeros((d, d)) for p in parts])
+        covars = covars + var_floor * np.eye(d)
+    mean_len = np.maximum(lengths / len(seqs), 1.0)
+    stay = 1.0 - 1.0 / np.maximum(mean_len, 1.0 + 1e-6)
+    return means, covars, np.clip(stay, 0.0, 0.999)
+
+
+def fit_hmm(
+    sequences,
+    n_states: int,
+    *,
+    covariance_type: str = "diag",
+    var_floor: float = 0.01,
+    n_iter: int = 30,
+    tol: float = 1e-4,
+    backend: str = "banded",
+    end_in_last: bool = True,
+) -> LeftToRightHMM:
+    """Train a left-to-right HMM on one or several repetitions (Baum-Welch, eq. 2.1-2.2).
+
+    Parameters
+    ----------
+    sequences : array (T, D) or list of arrays
+        Feature frames of one or several repetitions of one motion.
+    n_states : int
+        Number of states; every repetition needs at least ``n_states`` frames.
+    covariance_type : {"diag", "full"}
+    var_floor : float
+        Lower bound on every output variance (full: added to the diagonal), applied after each M-step.
+    tol : float
+        Convergence when the log-likelihood gain per frame is below ``tol``.
+    backend : {"banded", "hmmlearn"}
+    """
+    if covariance_type not in ("diag", "full"):
+        raise ModelError(f"covariance_type must be 'diag' or 'full', got {covariance_type!r}")
+    if n_states < 1:
+        raise ModelError("n_states must be at least 1")
+    seqs = _as_sequences(sequences)
+    if not seqs:
+        raise ModelError("no sequence to train on")
+    d = seqs[0].shape[1]
+    if any(s.shape[1] != d for s in seqs):
+        raise ModelError("repetitions have different numbers of features")
+    short = min(len(s) for s in seqs)
+    if short < n_states:
+        raise ModelError(f"a repetition has {short} frames, fewer than the {n_states} HMM states; use fewer states or a longer clip",
+                         frames=short, states=n_states)
+    means, covars, stay = uniform_segmentation(seqs, n_states, var_floor, covariance_type)
+    n_frames = sum(len(s) for s in seqs)
+    if backend == "hmmlearn":
+        model = _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol * n_frames)
+    elif backend == "banded":
+        model = _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol * n_frames, end_in_last)
+    else:
+        raise ModelError(f"unknown backend {backend!r}")
+    model.n_frames = n_frames
+    if not model.is_valid():
+        raise ModelError("HMM training produced invalid parameters (NaN or non-positive variance); the clip is too short or degenerate for this many states")
+    return model
+
+
+def _floor(covars, var_floor, covariance_type):
+    if covariance_type == "diag":
+        return np.maximum(covars, var_floor)
+    d = covars.shape[1]
+    out = covars.copy()
+    idx = np.arange(d)
+    out[:, idx, idx] = np.maximum(out[:, idx, idx], var_floor)
+    # keep positive definite: add a ridge where the smallest eigenvalue is below the floor
+    for i in range(out.shape[0]):
+        w = np.linalg.eigvalsh(out[i]).min()
+        if w < var_floor * 1e-3:
+            out[i] += (var_floor * 1e-3 - w) * np.eye(d)
+    return out
+
+
+def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total, end_in_last):
+    n, d = means.shape
+    history: list[float] = []
+    converged = False
+    x_all = np.vstack(seqs)
+    bounds = np.cumsum([0] + [len(s) for s in seqs])
+    it = 0
+    for it in range(1, n_iter + 1):
+        log_stay = np.log(np.maximum(stay, 1e-300))
+        log_move = np.log(np.maximum(1.0 - stay, 1e-300))
+        logb_all = emission_logprob(x_all, means, covars, covariance_type)
+        gamma = np.empty((len(x_all), n))
+        xs = np.zeros(n)
+        xm = np.zeros(n)
+        ll = 0.0
+        for k in range(len(seqs)):
+            lo, hi = bounds[k], bounds[k + 1]
+            lk, g, s_, m_ = _forward_backward(np.ascontiguousarray(logb_all[lo:hi]), log_stay, log_move, end_in_last)
+            if not np.isfinite(lk):
+                raise ModelError("a repetition has zero likelihood under the model (it cannot pass through every state)")
+            ll += lk
+            gamma[lo:hi] = g
+            xs += s_
+            xm += m_
+        history.append(float(ll))
+        # M-step
+        occ = gamma.sum(axis=0)
+        occ_safe = np.maximum(occ, 1e-12)
+        means = (gamma.T @ x_all) / occ_safe[:, None]
+        if covariance_type == "diag":
+            covars = (gamma.T @ (x_all * x_all)) / occ_safe[:, None] - means * means
+        else:
+            covars = np.empty((n, d, d))
+            for i in range(n):
+                xc = x_all - means[i]
+                covars[i] = (xc * gamma[:, i:i + 1]).T @ xc / occ_safe[i]
+        covars = _floor(covars, var_floor, covariance_type)
+        denom = xs + xm
+        stay = np.where(denom > 0, xs / np.maximum(denom, 1e-300), stay)
+        stay[-1] = np.clip(stay[-1], 0.0, 0.999) if denom[-1] > 0 else stay[-1]
+        stay = np.clip(stay, 0.0, 0.999)
+        if len(history) > 1 and history[-1] - history[-2] < tol_total:
+            converged = True
+            break
+    model = LeftToRightHMM(means, covars, stay, covariance_type, n_iter=it, converged=converged,
+                           history=history)
+    model.log_likelihood = model.log_likelihood_of(seqs, end_in_last)
+    return model
+
+
+def _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total):
+    from hmmlearn.hmm import GaussianHMM
+
+    n = means.shape[0]
+    m = GaussianHMM(n_components=n, covariance_type=covariance_type, init_params="", params="stmc",
+                    n_iter=n_iter, tol=tol_total, min_covar=var_floor, implementation="log")
+    m.startprob_ = np.eye(n)[0]
+    a = np.diag(stay)
+    a[np.arange(n - 1), np.arange(1, n)] = 1.0 - stay[:-1]
+    a[-1, -1] = 1.0
+    m.transmat_ = a
+    m.means_ = means
+    m.covars_ = covars
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        m.fit(np.vstack(seqs), [len(s) for s in seqs])
+    cov = m._covars_ if covariance_type == "diag" else m.covars_
+    cov = _floor(np.array(cov), var_floor, covariance_type)
+    st = np.diag(m.transmat_).copy()
+    model = LeftToRightHMM(np.array(m.means_), cov, np.clip(st, 0.0, 0.999), covariance_type,
+                           n_iter=m.monitor_.iter, converged=bool(m.monitor_.converged),
+                           history=[float(v) for v in m.monitor_.history])
+    if model.is_valid():
+        model.log_likelihood = float(m.score(np.vstack(seqs), [len(s) for s in seqs]))
+    return model
