@@ -95,10 +95,10 @@ class Skeleton:
         return [k for k, j in enumerate(self.joints) if j.parent == i]
 
     # ----------------------------------------------------------------- rotations
-    def local_rotations(self, values: dict[str, np.ndarray], n_frames: int) -> list[Rotation]:
-        """Local rotation ``L_j = C_j M_j C_j^T`` of every joint for every frame."""
+    def local_rotations(self, values: dict[str, np.ndarray], n_frames: int, joints=None) -> list[Rotation]:
+        """Local rotation ``L_j = C_j M_j C_j^T`` of every joint (or of ``joints``) for every frame."""
         out = []
-        for j in self.joints:
+        for j in self.joints if joints is None else joints:
             seq = j.euler
             if not seq:
                 out.append(Rotation.identity(n_frames))
@@ -144,7 +144,7 @@ class Skeleton:
 
     def global_root_rotation(self, data: np.ndarray, channels: list[str]) -> Rotation:
         values = {c: np.asarray(data)[:, i] for i, c in enumerate(channels)}
-        return self.local_rotations(values, np.asarray(data).shape[0])[0]
+        return self.local_rotations(values, np.asarray(data).shape[0], joints=[self.root])[0]
 
     # ----------------------------------------------------------------- persistence
     def to_json(self) -> str:

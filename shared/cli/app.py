@@ -1,0 +1,185 @@
+"""The ``mirrorcoach`` command line.
+
+Library-level commands for now (``clip info``, ``clip convert``, ``space build|recognize|
+generate`` on local space files); the bus-backed commands arrive with the cluster. Every
+error the user can act on is one line on stderr and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from shared.errors import MirrorcoachError
+
+app = typer.Typer(help="mirrorcoach: motion coaching with the Proto-symbol Space method.", no_args_is_help=True,
+                  pretty_exceptions_enable=False, add_completion=False)
+clip_app = typer.Typer(help="Read, inspect and convert motion clips (ASF/AMC, BVH, NPZ).", no_args_is_help=True)
+space_app = typer.Typer(help="Proto-symbol spaces stored as local files (library level).", no_args_is_help=True)
+app.add_typer(clip_app, name="clip")
+app.add_typer(space_app, name="space")
+
+SKELETON_HELP = "ASF skeleton for AMC files (default: found beside the file or in a sibling asf/ folder)."
+
+
+def _fail(msg: str) -> None:
+    typer.echo(f"error: {msg}", err=True)
+    raise typer.Exit(2)
+
+
+@clip_app.command("info")
+def clip_info(file: Path = typer.Argument(..., help="Clip file: .amc, .bvh or .npz."),
+              skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+              as_json: bool = typer.Option(False, "--json", help="Machine-readable output.")):
+    """Frames, frame rate, duration, skeleton and channel groups of a clip."""
+    from shared.io import load_clip
+
+    c = load_clip(file, skeleton=skeleton)
+    info = {
+        "file": str(file), "name": c.name, "label": c.label, "frames": c.n_frames, "fps": c.fps,
+        "duration_s": round(c.duration, 4), "channels": len(c.channels),
+        "groups": {g: len(v) for g, v in c.groups.items()},
+        "skeleton": None if c.skeleton is None else {"name": c.skeleton.name, "joints": len(c.skeleton.joints),
+                                                     "format": c.skeleton.source_format,
+                                                     "unit_m": c.skeleton.unit_m},
+        "range_deg": [float(np.min(c.data)), float(np.max(c.data))] if c.data.size else None,
+    }
+    if as_json:
+        typer.echo(json.dumps(info))
+        return
+    typer.echo(f"{c.name}  ({file})")
+    typer.echo(f"  label     {c.label}")
+    typer.echo(f"  frames    {c.n_frames} at {c.fps:g} fps ({c.duration:.2f} s)")
+    typer.echo(f"  channels  {len(c.channels)}: " + ", ".join(f"{g} {n}" for g, n in info["groups"].items()))
+    if c.skeleton is not None:
+        typer.echo(f"  skeleton  {c.skeleton.name} ({len(c.skeleton.joints)} joints, {c.skeleton.source_format}, "
+                   f"1 unit = {c.skeleton.unit_m:.4g} m)")
+
+
+@clip_app.command("convert")
+def clip_convert(src: Path = typer.Argument(..., help="Input clip: .amc, .bvh or .npz."),
+                 dst: Path = typer.Argument(..., help="Output clip: .bvh, .npz or .amc (chosen by extension)."),
+                 skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                 fps: Optional[float] = typer.Option(None, "--fps", help="Resample to this frame rate first.")):
+    """Convert a clip between AMC, BVH and NPZ (BVH holds motion only; NPZ keeps everything)."""
+    from shared.io import load_clip, save_clip
+
+    c = load_clip(src, skeleton=skeleton)
+    if fps is not None:
+        c = c.resample(fps)
+    if dst.exists() and dst.resolve() == src.resolve():
+        _fail("output would overwrite the input")
+    save_clip(c, dst)
+    typer.echo(f"wrote {dst} ({c.n_frames} frames at {c.fps:g} fps)")
+
+
+def _load_clips(paths: list[Path], skeleton):
+    from rich.progress import track
+
+    from shared.io import find_clips, load_clip
+
+    files = find_clips(paths)
+    if not files:
+        _fail("no clip files (.amc, .bvh, .npz) under the given paths")
+    return [load_clip(f, skeleton=skeleton) for f in track(files, description="reading clips", transient=True,
+                                                            disable=not sys.stderr.isatty())]
+
+
+@space_app.command("build")
+def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)."),
+                paths: list[Path] = typer.Argument(..., help="Clip files or folders; label = the clip's parent folder."),
+                dim: int = typer.Option(3, help="Dimension of the space."),
+                states: Optional[int] = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
+                group_by: str = typer.Option("clip", help="'clip': a proto-symbol per clip; 'label': one per label."),
+                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+    """Build a Proto-symbol Space from clips (eq. 2.5) and save it."""
+    from rich.progress import Progress
+
+    from shared.pss.space import ProtoSymbolSpace
+
+    clips = _load_clips(paths, skeleton)
+    with Progress(transient=True, disable=not sys.stderr.isatty()) as prog:
+        task = prog.add_task("training proto-symbols", total=len(clips))
+        space = ProtoSymbolSpace.build(clips, dim=dim, n_states=states, group_by=group_by, name=out.stem,
+                                       progress=lambda done, total: prog.update(task, completed=done, total=total))
+    space.save(out)
+    i = space.info()
+    typer.echo(f"wrote {out}: {i['n_proto_symbols']} proto-symbols, {len(i['labels'])} labels, "
+               f"{space.params.n_states} states, stress-1 {i['stress1']:.3f}")
+
+
+@space_app.command("recognize")
+def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
+                    clips: list[Path] = typer.Argument(..., help="Clip(s): several are repetitions of one motion."),
+                    as_json: bool = typer.Option(False, "--json"),
+                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+    """Recognise a motion as a point of the space (eq. 2.6) and list its nearest proto-symbols."""
+    from shared.io import load_clip
+    from shared.pss.space import ProtoSymbolSpace
+
+    space = ProtoSymbolSpace.load(space_file)
+    reps = [load_clip(c, skeleton=skeleton) for c in clips]
+    r = space.recognize(reps)
+    out = {"label": r.label, "point": [float(v) for v in r.point],
+           "nearest": [{"name": n, "label": lab, "distance": d} for n, lab, d in r.nearest], "stress": r.stress}
+    if as_json:
+        typer.echo(json.dumps(out))
+        return
+    typer.echo(f"label {r.label}   point ({', '.join(f'{v:.3f}' for v in r.point)})")
+    for n, lab, d in r.nearest:
+        typer.echo(f"  {d:9.3f}  {lab:<30} {n}")
+
+
+@space_app.command("generate")
+def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
+                   out: Path = typer.Option(..., "--out", help="Output clip (.bvh or .npz)."),
+                   point: Optional[str] = typer.Option(None, help="Point as comma-separated coordinates."),
+                   mix: Optional[list[str]] = typer.Option(None, help="NAME=W, repeatable; weights sum to 1 (may be negative)."),
+                   method: str = typer.Option("expected", help="'expected' (deterministic) or 'monte_carlo'."),
+                   seed: int = typer.Option(0, help="Seed of the Monte Carlo generation.")):
+    """Generate a motion from a point or a weighted mix of proto-symbols (eq. 2.7, 4.2)."""
+    from shared.io import save_clip
+    from shared.pss.space import ProtoSymbolSpace
+
+    if (point is None) == (not mix):
+        _fail("give exactly one of --point or --mix")
+    space = ProtoSymbolSpace.load(space_file)
+    if point is not None:
+        try:
+            x = np.array([float(v) for v in point.split(",")])
+        except ValueError:
+            _fail(f"--point must be comma-separated numbers, got {point!r}")
+        clip = space.generate(x, method=method, seed=seed, name=out.stem)
+    else:
+        parsed = {}
+        for m in mix:
+            name, sep, w = m.rpartition("=")
+            try:
+                parsed[name] = float(w)
+            except ValueError:
+                _fail(f"--mix needs NAME=WEIGHT, got {m!r}")
+            if not sep or not name:
+                _fail(f"--mix needs NAME=WEIGHT, got {m!r}")
+        clip = space.generate(weights=space.mix_weights(parsed), method=method, seed=seed, name=out.stem)
+    save_clip(clip, out)
+    typer.echo(f"wrote {out} ({clip.n_frames} frames at {clip.fps:g} fps)")
+
+
+def main() -> None:
+    try:
+        app()
+    except MirrorcoachError as e:
+        typer.echo(f"error: {e.message}", err=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,133 @@
+"""Multidimensional scaling: proto-symbols as points of a Euclidean space (thesis ch. 2.5).
+
+The space minimises the stress ``S^2 = sum_{i<j} (f_ij - d_ij)^2`` between the HMM distances
+``f_ij`` (eq. 2.4) and the Euclidean distances ``d_ij`` of the points. Metric SMACOF
+(majorisation with the Guttman transform) started from classical (Torgerson) MDS; the
+out-of-sample placement of a new motion (eq. 2.6) minimises the same stress over the one new
+point with every existing point fixed. scikit-learn's ``smacof`` is the reference the tests
+compare with; this implementation exists because the out-of-sample step needs the same
+majorisation with fixed points, which scikit-learn does not offer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from shared.errors import BadInput
+
+
+@dataclass
+class Embedding:
+    points: np.ndarray
+    stress: float  # raw stress sum_{i<j} (f_ij - d_ij)^2
+    stress1: float  # Kruskal's normalised stress sqrt(S^2 / sum f_ij^2)
+    n_iter: int
+    converged: bool
+
+
+def _pdist(x: np.ndarray) -> np.ndarray:
+    sq = np.sum(x * x, axis=1)
+    d2 = sq[:, None] + sq[None, :] - 2.0 * x @ x.T
+    return np.sqrt(np.maximum(d2, 0.0))
+
+
+def raw_stress(f: np.ndarray, x: np.ndarray) -> float:
+    d = _pdist(x)
+    iu = np.triu_indices(len(x), 1)
+    return float(np.sum((f[iu] - d[iu]) ** 2))
+
+
+def classical_mds(f: np.ndarray, dim: int) -> np.ndarray:
+    """Torgerson scaling: the top eigenvectors of the double-centred squared distances."""
+    n = len(f)
+    j = np.eye(n) - 1.0 / n
+    b = -0.5 * j @ (f * f) @ j
+    w, v = np.linalg.eigh(b)
+    order = np.argsort(w)[::-1][:dim]
+    x = v[:, order] * np.sqrt(np.maximum(w[order], 0.0))
+    if x.shape[1] < dim:
+        x = np.hstack([x, np.zeros((n, dim - x.shape[1]))])
+    return x
+
+
+def smacof(f: np.ndarray, dim: int, *, init: np.ndarray | None = None, max_iter: int = 3000, eps: float = 1e-9) -> Embedding:
+    """Metric MDS minimising ``sum (f_ij - d_ij)^2`` (the criterion of ch. 2.5)."""
+    f = np.asarray(f, dtype=float)
+    n = len(f)
+    if f.shape != (n, n) or not np.allclose(f, f.T) or np.any(np.diag(f) != 0) or np.any(f < 0):
+        raise BadInput("MDS needs a symmetric, non-negative distance matrix with a zero diagonal")
+    if not np.all(np.isfinite(f)):
+        raise BadInput("MDS distance matrix contains NaN or Inf")
+    if dim < 1:
+        raise BadInput("dimension must be at least 1")
+    x = classical_mds(f, dim) if init is None else np.array(init, dtype=float)
+    if n < 2:
+        return Embedding(x, 0.0, 0.0, 0, True)
+    total = float(np.sum(np.triu(f, 1) ** 2)) or 1.0
+    stress = raw_stress(f, x)
+    converged = False
+    it = 0
+    for it in range(1, max_iter + 1):
+        d = _pdist(x)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(d > 1e-12, f / d, 0.0)
+        b = -ratio
+        np.fill_diagonal(b, 0.0)
+        np.fill_diagonal(b, -b.sum(axis=1))
+        x = b @ x / n
+        new = raw_stress(f, x)
+        if stress - new < eps * total:
+            stress = new
+            converged = True
+            break
+        stress = new
+    x = x - x.mean(axis=0)
+    return Embedding(x, stress, float(np.sqrt(stress / total)), it, converged)
+
+
+def place_point(points: np.ndarray, f: np.ndarray, *, max_iter: int = 300, eps: float = 1e-9) -> tuple[np.ndarray, float]:
+    """Out-of-sample embedding (eq. 2.6): the point ``x`` minimising
+    ``sum_i (f_i - |x - x_i|)^2`` with the space's points ``x_i`` fixed.
+
+    Guttman majorisation for one free point, from several starts (the nearest proto-symbol,
+    the inverse-distance centroid and their mirror images); returns the best point and its stress.
+    """
+    points = np.asarray(points, float)
+    f = np.asarray(f, float)
+    if len(points) != len(f):
+        raise BadInput("one distance per proto-symbol is needed")
+    if not np.all(np.isfinite(f)) or np.any(f < 0):
+        raise BadInput("distances must be finite and non-negative")
+    n, dim = points.shape
+    if n == 1:
+        x = points[0].copy()
+        x[0] += f[0]
+        return x, 0.0
+    w = 1.0 / np.maximum(f, 1e-12)
+    centroid = (w[:, None] * points).sum(axis=0) / w.sum()
+    nearest = points[np.argmin(f)]
+    spread = points.std(axis=0).mean() or 1.0
+    rng = np.random.default_rng(0)
+    starts = [nearest + 1e-3 * spread * rng.standard_normal(dim), centroid,
+              2 * centroid - nearest, centroid + 0.5 * (centroid - points.mean(axis=0))]
+
+    x = np.stack(starts)  # (S, dim): every start iterated together
+
+    def stress_of(x):
+        d = np.linalg.norm(x[:, None, :] - points[None], axis=2)
+        return np.sum((f - d) ** 2, axis=1), d
+
+    s, d = stress_of(x)
+    for _ in range(max_iter):
+        diff = x[:, None, :] - points[None]
+        unit = np.where(d[..., None] > 1e-12, diff / np.maximum(d, 1e-12)[..., None], 0.0)
+        x = np.mean(points[None] + f[None, :, None] * unit, axis=1)
+        s_new, d = stress_of(x)
+        done = np.all(s - s_new < eps * (1.0 + s))
+        s = s_new
+        if done:
+            break
+    b = int(np.argmin(s))
+    return x[b], float(s[b])

@@ -1,0 +1,449 @@
+"""The Proto-symbol Space: ``P = F_build(D)`` (eq. 2.5), ``x = F_recog(M)`` (eq. 2.6),
+``M = F_gen(x)`` (eq. 2.7) and association ``M_whole = F_gen(F_recog(M_partial))`` (eq. 2.8).
+
+A space holds a database ``D`` of clips abstracted into proto-symbols (left-to-right HMMs,
+:mod:`shared.pss.hmm`), their pairwise eq. 2.4 distances and their points from metric MDS
+(:mod:`shared.pss.mds`). Every HMM of a space has the same number of states; by default that
+number comes from the shortest repetition (half its frames, between 2 and 15) so that no
+state is left without frames. All clips are resampled to the space's frame rate (30 fps by
+default) and encoded by :class:`~shared.pss.features.MotionFeatures`.
+
+A space is one ``.npz`` file (arrays plus a JSON header, no pickle), written atomically;
+loading it gives identical points, distances and generations. Every random step is seeded.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from shared.clip import Clip
+from shared.errors import BadInput, ModelError, NotFound
+from shared.pss.distance import distances_to, distance_matrix
+from shared.pss.features import MotionFeatures
+from shared.pss.hmm import LeftToRightHMM, fit_hmm
+from shared.pss.mds import Embedding, place_point, smacof
+from shared.pss.synthesis import combine, generate, point_weights
+
+FORMAT = "mirrorcoach.space/1"
+MAX_STATES = 15
+
+
+@dataclass
+class ProtoSymbol:
+    """One proto-symbol ``lambda`` of the space: an HMM and what it abstracts."""
+
+    name: str
+    label: str
+    hmm: LeftToRightHMM
+    clips: list[str] = field(default_factory=list)
+    n_frames: list[int] = field(default_factory=list)
+
+
+@dataclass
+class Recognition:
+    """Result of ``F_recog`` (eq. 2.6)."""
+
+    point: np.ndarray
+    distances: np.ndarray  # eq. 2.4 distance to every proto-symbol
+    nearest: list[tuple[str, str, float]]  # (name, label, distance), nearest first
+    label: str  # label of the nearest proto-symbol by eq. 2.4
+    label_in_space: str  # label of the nearest point in the space
+    stress: float
+    hmm: LeftToRightHMM
+    seconds: float = 0.0
+
+
+@dataclass
+class Association:
+    """Result of eq. 2.8: the point, its weights, the whole generated pattern, and the
+    unobserved part estimated on the observed frames."""
+
+    recognition: Recognition
+    weights: np.ndarray
+    whole: Clip
+    aligned: Clip | None = None
+    progress: float | None = None
+
+
+@dataclass
+class SpaceParams:
+    n_states: int
+    fps: float = 30.0
+    dim: int = 3
+    covariance_type: str = "diag"
+    var_floor: float = 0.01
+    backend: str = "banded"
+    n_iter: int = 30
+    group_by: str = "clip"
+
+    def to_dict(self):
+        return dict(self.__dict__)
+
+
+def default_n_states(min_frames: int) -> int:
+    """Half the frames of the shortest repetition, between 2 and 15 states."""
+    return int(np.clip(min_frames // 2, 2, MAX_STATES))
+
+
+class ProtoSymbolSpace:
+    """A named space ``P`` built from a database ``D`` (see module docstring)."""
+
+    def __init__(self, params: SpaceParams, features: MotionFeatures, symbols: list[ProtoSymbol],
+                 distances: np.ndarray, embedding: Embedding, name: str = "space"):
+        self.params = params
+        self.features = features
+        self.symbols = symbols
+        self.distances = distances
+        self.embedding = embedding
+        self.name = name
+        self._partial_scale: dict[str, float] = {}
+
+    # ------------------------------------------------------------------ build
+    @classmethod
+    def build(cls, clips: list[Clip], *, n_states: int | None = None, dim: int = 3, fps: float = 30.0,
+              covariance_type: str = "diag", var_floor: float = 0.01, backend: str = "banded",
+              group_by: str = "clip", sensor: bool = True, name: str = "space", progress=None) -> "ProtoSymbolSpace":
+        """``P = F_build(D)`` (eq. 2.5).
+
+        Parameters
+        ----------
+        clips : list of Clip
+            The database ``D``; every clip needs a ``label`` (its motion class).
+        group_by : {"clip", "label"}
+            One proto-symbol per clip, or one per label trained on all its repetitions.
+        progress : callable(done, total), optional
+            Called after every HMM is trained.
+        """
+        if not clips:
+            raise BadInput("a space needs at least one clip")
+        if group_by not in ("clip", "label"):
+            raise BadInput(f"group_by must be 'clip' or 'label', got {group_by!r}")
+        if dim < 1:
+            raise BadInput("dimension must be at least 1")
+        clips = [c.resample(fps) for c in clips]
+        features = MotionFeatures.for_clips(clips, sensor=sensor)
+        groups: dict[str, list[Clip]] = {}
+        for c in clips:
+            key = (c.label or c.name) if group_by == "label" else c.name
+            if key in groups and group_by == "clip":
+                raise BadInput(f"two clips are named {key!r}; clip names must be unique in a space")
+            groups.setdefault(key, []).append(c)
+        shortest = min(c.n_frames for c in clips)
+        if n_states is None:
+            n_states = default_n_states(shortest)
+        if shortest < n_states:
+            short = min(clips, key=lambda c: c.n_frames)
+            raise BadInput(f"clip {short.name!r} has {short.n_frames} frames at {fps:g} fps, fewer than {n_states} HMM states",
+                           frames=short.n_frames, states=n_states)
+        params = SpaceParams(n_states=n_states, fps=fps, dim=dim, covariance_type=covariance_type,
+                             var_floor=var_floor, backend=backend, group_by=group_by)
+        symbols = []
+        for i, (key, members) in enumerate(groups.items()):
+            seqs = [features.encode(c) for c in members]
+            hmm = fit_hmm(seqs, n_states, covariance_type=covariance_type, var_floor=var_floor, backend=backend,
+                          n_iter=params.n_iter)
+            symbols.append(ProtoSymbol(key, members[0].label or key, hmm, [c.name for c in members],
+                                       [c.n_frames for c in members]))
+            if progress:
+                progress(i + 1, len(groups))
+        return cls.from_symbols(params, features, symbols, name=name)
+
+    @classmethod
+    def from_symbols(cls, params: SpaceParams, features: MotionFeatures, symbols: list[ProtoSymbol],
+                     name: str = "space") -> "ProtoSymbolSpace":
+        f = distance_matrix([s.hmm for s in symbols])
+        emb = smacof(f, params.dim)
+        return cls(params, features, symbols, f, emb, name=name)
+
+    def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None) -> "ProtoSymbolSpace":
+        """A new space from a modified database (ch. 3 rebuilds every conversation set)."""
+        remove = set(remove or [])
+        unknown = remove - {s.name for s in self.symbols}
+        if unknown:
+            raise NotFound(f"no proto-symbol named {sorted(unknown)[0]!r} in space {self.name!r}")
+        symbols = [s for s in self.symbols if s.name not in remove]
+        names = {s.name for s in symbols}
+        for c in add or []:
+            c = c.resample(self.params.fps)
+            if c.name in names:
+                raise BadInput(f"space {self.name!r} already has a proto-symbol named {c.name!r}")
+            hmm = self.abstract([c])
+            symbols.append(ProtoSymbol(c.name, c.label or c.name, hmm, [c.name], [c.n_frames]))
+            names.add(c.name)
+        if not symbols:
+            raise BadInput("a space needs at least one proto-symbol")
+        return ProtoSymbolSpace.from_symbols(self.params, self.features, symbols, name=self.name)
+
+    # ------------------------------------------------------------------ access
+    @property
+    def points(self) -> np.ndarray:
+        return self.embedding.points
+
+    @property
+    def labels(self) -> list[str]:
+        return [s.label for s in self.symbols]
+
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in self.symbols]
+
+    @property
+    def models(self) -> list[LeftToRightHMM]:
+        return [s.hmm for s in self.symbols]
+
+    def symbol(self, name_or_label: str) -> int:
+        for i, s in enumerate(self.symbols):
+            if s.name == name_or_label:
+                return i
+        hits = [i for i, s in enumerate(self.symbols) if s.label == name_or_label]
+        if len(hits) == 1:
+            return hits[0]
+        if hits:
+            raise BadInput(f"label {name_or_label!r} names {len(hits)} proto-symbols; use one of their names, e.g. {self.symbols[hits[0]].name!r}")
+        raise NotFound(f"no proto-symbol {name_or_label!r} in space {self.name!r}")
+
+    # ------------------------------------------------------------------ recognition
+    def _sequences(self, clip_or_clips, groups=("motion", "sensor")) -> list[np.ndarray]:
+        clips = [clip_or_clips] if isinstance(clip_or_clips, Clip) else list(clip_or_clips)
+        if not clips:
+            raise BadInput("nothing to recognise")
+        seqs = []
+        for c in clips:
+            c = c.resample(self.params.fps)
+            if c.n_frames < self.params.n_states:
+                raise BadInput(f"clip {c.name!r} has {c.n_frames} frames at {self.params.fps:g} fps, fewer than the space's "
+                               f"{self.params.n_states} HMM states", frames=c.n_frames, states=self.params.n_states)
+            seqs.append(self.features.encode(c, groups))
+        return seqs
+
+    def abstract(self, clip_or_clips, groups=("motion", "sensor"), n_states: int | None = None) -> LeftToRightHMM:
+        """Abstract one or several repetitions into an HMM with the space's settings."""
+        p = self.params
+        if groups == ("motion", "sensor") and self.features.sensor_channels:
+            clips = [clip_or_clips] if isinstance(clip_or_clips, Clip) else list(clip_or_clips)
+            if any(not set(self.features.sensor_channels) <= set(c.channels) for c in clips):
+                raise BadInput("the clip lacks this space's sensor channels; use associate() to estimate them")
+        seqs = self._sequences(clip_or_clips, groups)
+        return fit_hmm(seqs, n_states or p.n_states, covariance_type=p.covariance_type, var_floor=p.var_floor,
+                       backend=p.backend, n_iter=p.n_iter)
+
+    def recognize(self, clip_or_clips, top: int = 5) -> Recognition:
+        """``x = F_recog(M)`` (eq. 2.6): abstract the new clip (or the repetitions of one
+        trial) into an HMM, measure eq. 2.4 to every proto-symbol and place it without moving
+        the space's points."""
+        t0 = time.perf_counter()
+        hmm = self.abstract(clip_or_clips)
+        f = distances_to(hmm, self.models)
+        rec = self._place(hmm, f, top)
+        rec.seconds = time.perf_counter() - t0
+        return rec
+
+    def _place(self, hmm, f, top=5) -> Recognition:
+        x, stress = place_point(self.points, f)
+        order = np.argsort(f)
+        nearest = [(self.symbols[i].name, self.symbols[i].label, float(f[i])) for i in order[:top]]
+        in_space = int(np.argmin(np.linalg.norm(self.points - x, axis=1)))
+        return Recognition(x, f, nearest, self.symbols[order[0]].label, self.symbols[in_space].label, stress, hmm)
+
+    # ------------------------------------------------------------------ generation
+    def weights(self, point, method: str = "affine") -> np.ndarray:
+        return point_weights(self.points, point, method=method)
+
+    def mix_weights(self, mix: dict[str, float]) -> np.ndarray:
+        """Weights from ``{proto-symbol name or label: weight}`` (must sum to 1)."""
+        c = np.zeros(len(self.symbols))
+        for key, w in mix.items():
+            c[self.symbol(key)] += float(w)
+        if abs(c.sum() - 1.0) > 1e-6:
+            raise BadInput(f"mix weights must sum to 1 (they sum to {c.sum():.6g})")
+        return c
+
+    def synthesize(self, weights) -> LeftToRightHMM:
+        """The HMM of a weighted combination of proto-symbols (eq. 4.2, time-domain durations)."""
+        return combine(self.models, weights, var_floor=self.params.var_floor * 1e-2)
+
+    def point_of(self, weights) -> np.ndarray:
+        return np.asarray(weights, float) @ self.points
+
+    def generate(self, point=None, *, weights=None, method: str = "expected", n_frames: int | None = None,
+                 seed: int = 0, name: str = "generated") -> Clip:
+        """``M = F_gen(x)`` (eq. 2.7 / 4.1) from a point or from explicit proto-symbol weights."""
+        if (point is None) == (weights is None):
+            raise BadInput("give either a point or weights")
+        c = self.weights(point) if weights is None else np.asarray(weights, float)
+        if c.shape != (len(self.symbols),):
+            raise BadInput(f"need {len(self.symbols)} weights, got {c.size}")
+        model = self.synthesize(c)
+        x = generate(model, n_frames, method=method, seed=seed)
+        return self.features.decode(x, self.params.fps, name=name)
+
+    def emphatic_weights(self, target: str, attempt: str, alpha: float) -> np.ndarray:
+        """Weights of the emphatic point ``x_s = x_t + alpha (x_t - x_p)`` (eq. 4.3)."""
+        c = np.zeros(len(self.symbols))
+        c[self.symbol(target)] += 1.0 + alpha
+        c[self.symbol(attempt)] -= alpha
+        return c
+
+    # ------------------------------------------------------------------ association
+    def _marginal_scale(self, group: str) -> float:
+        """Factor mapping eq. 2.4 distances on one channel group to full distances, fitted by
+        least squares on the space's own pairs."""
+        if group not in self._partial_scale:
+            idx = self.features.feature_indices(group)
+            part = distance_matrix([m.marginal(idx) for m in self.models])
+            iu = np.triu_indices(len(self.symbols), 1)
+            num = float(np.sum(part[iu] * self.distances[iu]))
+            den = float(np.sum(part[iu] ** 2))
+            self._partial_scale[group] = num / den if den > 0 else 1.0
+        return self._partial_scale[group]
+
+    def associate(self, clip: Clip, missing: str = "sensor", *, method: str = "expected", seed: int = 0) -> Association:
+        """Eq. 2.8: the whole pattern from a partial one.
+
+        ``missing="sensor"``: the clip has the motion channels only; recognition uses the
+        motion part of every proto-symbol (distances rescaled to the full scale), the whole
+        pattern is generated from the point, and the sensor channels are also estimated on
+        the clip's own frames (their expectation under the synthesised HMM's state posteriors).
+
+        ``missing="frames"``: the clip is the start of a motion; how far it reaches is read
+        from the state posterior of its last frame under the best-fitting proto-symbol, and
+        the clip is compared with that many first states of every proto-symbol.
+        """
+        if missing == "sensor":
+            return self._associate_channels(clip, method, seed)
+        if missing == "frames":
+            return self._associate_frames(clip, method, seed)
+        raise BadInput(f"missing must be 'sensor' or 'frames', got {missing!r}")
+
+    def _associate_channels(self, clip, method, seed) -> Association:
+        if not self.features.sensor_channels:
+            raise BadInput(f"space {self.name!r} has no sensor channels to associate")
+        midx = self.features.feature_indices("motion")
+        seq = self._sequences(clip, ("motion",))
+        p = self.params
+        hmm = fit_hmm(seq, p.n_states, covariance_type=p.covariance_type, var_floor=p.var_floor, backend=p.backend,
+                      n_iter=p.n_iter)
+        f = distances_to(hmm, [m.marginal(midx) for m in self.models]) * self._marginal_scale("motion")
+        rec = self._place(hmm, f)
+        c = self.weights(rec.point)
+        model = self.synthesize(c)
+        whole = self.features.decode(generate(model, method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
+        # the missing channels on the observed frames: E[s_t] = sum_i gamma_t(i) mu_i^S
+        from shared.pss.hmm import _forward_backward, emission_logprob
+        mm = model.marginal(midx)
+        logb = emission_logprob(seq[0], mm.means, mm.covars, mm.covariance_type)
+        _, gamma, _, _ = _forward_backward(np.ascontiguousarray(logb), np.log(np.maximum(mm.stay, 1e-300)),
+                                           np.log(np.maximum(1 - mm.stay, 1e-300)), True)
+        sidx = self.features.feature_indices("sensor")
+        est = gamma @ model.means[:, sidx]
+        sens = est * self.features.sensor_scale + self.features.sensor_mean
+        obs = clip.resample(p.fps)
+        aligned = Clip(np.hstack([obs.select(self.features.motion_channels), sens]),
+                       self.features.motion_channels + self.features.sensor_channels, p.fps, obs.skeleton,
+                       {"motion": list(self.features.motion_channels), "sensor": list(self.features.sensor_channels)},
+                       name=f"{clip.name}-associated", label=rec.label)
+        return Association(rec, c, whole, aligned)
+
+    def _associate_frames(self, clip, method, seed) -> Association:
+        p = self.params
+        groups = ("motion", "sensor") if set(self.features.sensor_channels) <= set(clip.channels) and self.features.sensor_channels else ("motion",)
+        seq = self._sequences(clip, groups)[0]
+        models = self.models if groups == ("motion", "sensor") else [m.marginal(self.features.feature_indices("motion")) for m in self.models]
+        best, best_ll, best_prog = None, -np.inf, None
+        for m in models:
+            ll = m.log_likelihood_of([seq], end_in_last=False)
+            if ll > best_ll:
+                best_ll, best, best_prog = ll, m, m.progress(seq)
+        k = int(np.argmax(best_prog)) + 1
+        k = int(np.clip(k, 1, min(p.n_states, len(seq))))
+        hmm = fit_hmm([seq], k, covariance_type=p.covariance_type, var_floor=p.var_floor, backend=p.backend, n_iter=p.n_iter)
+        f = distances_to(hmm, [m.prefix(k) for m in models]) * (p.n_states / k)
+        if groups == ("motion",) and self.features.sensor_channels:
+            f = f * self._marginal_scale("motion")
+        rec = self._place(hmm, f)
+        c = self.weights(rec.point)
+        whole = self.features.decode(generate(self.synthesize(c), method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
+        return Association(rec, c, whole, None, progress=k / p.n_states)
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path) -> Path:
+        """Write the space to one ``.npz`` file, atomically (temporary file, then rename)."""
+        path = Path(path)
+        header = {
+            "format": FORMAT,
+            "name": self.name,
+            "params": self.params.to_dict(),
+            "features": self.features.to_json(),
+            "symbols": [{"name": s.name, "label": s.label, "clips": s.clips, "n_frames": s.n_frames,
+                         "n_iter": s.hmm.n_iter, "converged": s.hmm.converged, "log_likelihood": s.hmm.log_likelihood,
+                         "hmm_frames": s.hmm.n_frames} for s in self.symbols],
+            "embedding": {"stress": self.embedding.stress, "stress1": self.embedding.stress1,
+                          "n_iter": self.embedding.n_iter, "converged": self.embedding.converged},
+        }
+        arrays = {
+            "means": np.stack([s.hmm.means for s in self.symbols]),
+            "covars": np.stack([s.hmm.covars for s in self.symbols]),
+            "stay": np.stack([s.hmm.stay for s in self.symbols]),
+            "distances": self.distances,
+            "points": self.points,
+            "header": np.array(json.dumps(header)),
+        }
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, **arrays)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return path
+
+    @classmethod
+    def load(cls, path) -> "ProtoSymbolSpace":
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                header = json.loads(str(z["header"]))
+                arrays = {k: np.array(z[k]) for k in ("means", "covars", "stay", "distances", "points")}
+        except FileNotFoundError:
+            raise NotFound(f"no space file {path}") from None
+        except (OSError, KeyError, ValueError) as e:
+            raise BadInput(f"{path}: not a readable space file ({e})") from None
+        if header.get("format") != FORMAT:
+            raise BadInput(f"{path}: unknown space format {header.get('format')!r}")
+        params = SpaceParams(**header["params"])
+        features = MotionFeatures.from_json(header["features"])
+        symbols = []
+        for i, s in enumerate(header["symbols"]):
+            hmm = LeftToRightHMM(arrays["means"][i], arrays["covars"][i], arrays["stay"][i], params.covariance_type,
+                                 n_iter=s["n_iter"], converged=s["converged"], log_likelihood=s["log_likelihood"],
+                                 n_frames=s["hmm_frames"])
+            symbols.append(ProtoSymbol(s["name"], s["label"], hmm, s["clips"], s["n_frames"]))
+        e = header["embedding"]
+        emb = Embedding(arrays["points"], e["stress"], e["stress1"], e["n_iter"], e["converged"])
+        return cls(params, features, symbols, arrays["distances"], emb, name=header["name"])
+
+    # ------------------------------------------------------------------ summary
+    def info(self) -> dict:
+        return {
+            "name": self.name,
+            "n_proto_symbols": len(self.symbols),
+            "labels": sorted(set(self.labels)),
+            "params": self.params.to_dict(),
+            "n_features": self.features.n_features,
+            "sensor_channels": list(self.features.sensor_channels),
+            "stress": self.embedding.stress,
+            "stress1": self.embedding.stress1,
+            "mds_converged": self.embedding.converged,
+            "hmm_converged": sum(s.hmm.converged for s in self.symbols),
+        }
