@@ -36,6 +36,8 @@ class Clip:
             raise BadInput(
                 f"clip {self.name!r}: {self.data.shape[1]} data columns but {len(self.channels)} channel names"
             )
+        if not np.all(np.isfinite(self.data)):
+            raise BadInput(f"clip {self.name!r} contains NaN or Inf")
         if len(set(self.channels)) != len(self.channels):
             raise BadInput(f"clip {self.name!r}: duplicate channel names")
         if not (np.isfinite(self.fps) and self.fps > 0):

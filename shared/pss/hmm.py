@@ -232,7 +232,7 @@ def fit_hmm(
     covariance_type: str = "diag",
     var_floor: float = 0.01,
     n_iter: int = 30,
-    tol: float = 1e-4,
+    tol: float = 1e-3,
     backend: str = "banded",
     end_in_last: bool = True,
 ) -> LeftToRightHMM:

@@ -216,6 +216,8 @@ class ProtoSymbolSpace:
             raise BadInput("nothing to recognise")
         seqs = []
         for c in clips:
+            if not np.all(np.isfinite(c.data)):
+                raise BadInput(f"clip {c.name!r} contains NaN or Inf")
             c = c.resample(self.params.fps)
             if c.n_frames < self.params.n_states:
                 raise BadInput(f"clip {c.name!r} has {c.n_frames} frames at {self.params.fps:g} fps, fewer than the space's "

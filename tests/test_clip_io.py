@@ -1,0 +1,154 @@
+"""Clips: ASF/AMC, BVH and NPZ on real HDM05 files, round trips and bad files."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from shared.clip import Clip
+from shared.errors import BadInput, ClipFormatError
+from shared.io import find_skeleton, load_clip, read_asf, save_clip
+
+SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
+PAST_360 = "amc/depositFloorR/HDM_bd_depositFloorR_002_120.amc"
+
+
+def _positions_by_name(clip):
+    pos = clip.skeleton.forward_kinematics(clip.data, clip.channels, ends=False)
+    return {j.name: pos[:, i] for i, j in enumerate(clip.skeleton.joints)}
+
+
+def test_asf_reads_hdm05_skeleton(hdm05):
+    sk = read_asf(hdm05 / "asf/HDM_bd.asf")
+    assert len(sk.joints) == 31 and sk.joints[0].name == "root"
+    assert len(sk.channels()) == 62  # 6 root + 56 joint angles
+    assert sk.unit_m == pytest.approx(0.0254 / 0.45)
+    femur = sk.joints[sk.index("lfemur")]
+    assert femur.dofs == ["rx", "ry", "rz"] and femur.limits["rx"] == (-160.0, 20.0)
+    # the femur starts where the hip joint bone ends
+    assert np.linalg.norm(femur.offset) == pytest.approx(2.28399, rel=1e-5)
+
+
+def test_amc_reads_crlf_latin1_and_keeps_angles_past_360(hdm05):
+    raw = (hdm05 / PAST_360).read_bytes()
+    assert b"\r\n" in raw and any(b > 127 for b in raw[:200])  # the file really has both quirks
+    c = load_clip(hdm05 / PAST_360)
+    assert c.fps == 120 and c.label == "depositFloorR" and c.skeleton.name == "HDM_bd"
+    rx = c.column("root.rx")
+    assert np.abs(rx).max() > 360  # not wrapped
+    assert np.abs(np.diff(rx)).max() < 30  # and continuous
+    # first frame values are the file's own numbers
+    text = raw.decode("latin-1").splitlines()
+    first = next(ln for ln in text if ln.startswith("root "))
+    assert c.data[0, :6] == pytest.approx([float(v) for v in first.split()[1:]])
+
+
+def test_skeleton_is_found_in_the_usual_layouts(hdm05, tmp_path):
+    assert find_skeleton(hdm05 / SQUAT).name == "HDM_bd.asf"  # amc/<class>/x.amc + asf/
+    beside = tmp_path / "beside"
+    beside.mkdir()
+    shutil.copy(hdm05 / "asf/HDM_bk.asf", beside / "07.asf")
+    shutil.copy(hdm05 / SQUAT, beside / "07_01.amc")  # CMU naming: 07_01.amc -> 07.asf
+    assert find_skeleton(beside / "07_01.amc") == beside / "07.asf"
+    sib = tmp_path / "cmu"
+    (sib / "asf").mkdir(parents=True)
+    (sib / "amc").mkdir()
+    shutil.copy(hdm05 / "asf/HDM_bk.asf", sib / "asf" / "07.asf")
+    shutil.copy(hdm05 / SQUAT, sib / "amc" / "07_02.amc")
+    assert find_skeleton(sib / "amc" / "07_02.amc") == sib / "asf" / "07.asf"
+    lonely = tmp_path / "lonely"
+    lonely.mkdir()
+    shutil.copy(hdm05 / SQUAT, lonely / "x_1.amc")
+    with pytest.raises(ClipFormatError, match="--skeleton"):
+        load_clip(lonely / "x_1.amc")
+    c = load_clip(lonely / "x_1.amc", skeleton=hdm05 / "asf/HDM_dg.asf")  # the override
+    assert c.skeleton.name == "HDM_dg"
+
+
+def test_amc_to_bvh_keeps_every_joint_position(hdm05, tmp_path):
+    c = load_clip(hdm05 / SQUAT)
+    save_clip(c, tmp_path / "s.bvh")
+    b = load_clip(tmp_path / "s.bvh")
+    assert b.n_frames == c.n_frames and b.fps == 120
+    pa, pb = _positions_by_name(c), _positions_by_name(b)
+    err = max(np.abs(pa[n] - pb[n]).max() for n in pa)
+    assert err < 1e-5  # metres; the BVH prints 6 decimals of centimetres and degrees
+
+
+def test_bvh_round_trip_is_exact_to_print_precision(hdm05, tmp_path):
+    save_clip(load_clip(hdm05 / SQUAT), tmp_path / "a.bvh")
+    a = load_clip(tmp_path / "a.bvh")
+    save_clip(a, tmp_path / "b.bvh")
+    b = load_clip(tmp_path / "b.bvh")
+    assert b.channels == a.channels
+    np.testing.assert_allclose(b.data, a.data, atol=5e-7, rtol=0)
+    assert (tmp_path / "a.bvh").read_text() == (tmp_path / "b.bvh").read_text()
+
+
+def test_npz_and_amc_round_trips(hdm05, tmp_path):
+    c = load_clip(hdm05 / SQUAT)
+    c = c.add_channels(["tau.a", "tau.b"], np.random.default_rng(0).normal(size=(c.n_frames, 2)), "sensor")
+    save_clip(c, tmp_path / "c.npz")
+    n = load_clip(tmp_path / "c.npz")
+    assert np.array_equal(n.data, c.data) and n.channels == c.channels and n.groups == c.groups
+    assert n.skeleton == c.skeleton and n.fps == c.fps and n.label == c.label
+    m = load_clip(hdm05 / SQUAT)
+    save_clip(m, tmp_path / "HDM_bd_x_1.amc")
+    back = load_clip(tmp_path / "HDM_bd_x_1.amc", skeleton=hdm05 / "asf/HDM_bd.asf")
+    np.testing.assert_allclose(back.data, m.data, atol=1e-6)
+
+
+def test_resample_keeps_duration_and_values(hdm05):
+    c = load_clip(hdm05 / SQUAT)
+    r = c.resample(30)
+    assert r.fps == 30 and r.duration == pytest.approx(c.duration, abs=1 / 30)
+    assert r.n_frames == int(round(c.duration * 30)) + 1
+    np.testing.assert_allclose(r.data[::1][: (c.n_frames - 1) // 4 + 1], c.data[::4][: (c.n_frames - 1) // 4 + 1], atol=1e-9)
+    with pytest.raises(BadInput):
+        c.resample(0)
+
+
+@pytest.mark.parametrize(
+    "name, content, line, words",
+    [
+        ("trunc.bvh", "HIERARCHY\nROOT hip\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\nMOTION\n", 5, "end of file"),
+        ("badnum.bvh", "HIERARCHY\nROOT hip\n{\nOFFSET 0 zero 0\n}\nMOTION\nFrames: 1\nFrame Time: 0.1\n\n", 4, "number"),
+        ("count.bvh", "HIERARCHY\nROOT hip\n{\nOFFSET 0 0 0\nCHANNELS 1 Xposition\nEnd Site\n{\nOFFSET 0 1 0\n}\n}\nMOTION\nFrames: 2\nFrame Time: 0.1\n1\n2 3\n", 15, "values"),
+        ("nomotion.bvh", "HIERARCHY\n", None, "MOTION"),
+        ("bad.amc", ":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 0 0 0 0 zero\n", 4, "numbers"),
+        ("bone.amc", ":FULLY-SPECIFIED\n1\nnosuchbone 1 2 3\n", 3, "nosuchbone"),
+        ("empty.amc", "", None, "no frames"),
+        ("nan.amc", "1\nroot 0 0 0 0 0 nan\n", 2, "non-finite"),
+    ],
+)
+def test_bad_files_name_file_and_line(hdm05, tmp_path, name, content, line, words):
+    p = tmp_path / name
+    p.write_text(content)
+    with pytest.raises(ClipFormatError) as err:
+        load_clip(p, skeleton=hdm05 / "asf/HDM_bd.asf") if name.endswith(".amc") else load_clip(p)
+    msg = str(err.value)
+    assert str(p) in msg and words in msg
+    if line is not None:
+        assert err.value.line == line and f"{p}:{line}" in msg
+
+
+def test_missing_and_unknown_files(tmp_path):
+    with pytest.raises(ClipFormatError, match="no such file"):
+        load_clip(tmp_path / "nothing.amc")
+    (tmp_path / "x.txt").write_text("hello")
+    with pytest.raises(ClipFormatError, match="unknown clip format"):
+        load_clip(tmp_path / "x.txt")
+    (tmp_path / "x.npz").write_bytes(b"not a zip")
+    with pytest.raises(ClipFormatError, match="NPZ"):
+        load_clip(tmp_path / "x.npz")
+
+
+def test_clip_rejects_inconsistent_shapes():
+    with pytest.raises(BadInput):
+        Clip(np.zeros((3, 2)), ["a"], 30)
+    with pytest.raises(BadInput):
+        Clip(np.zeros((3, 2)), ["a", "a"], 30)
+    with pytest.raises(BadInput):
+        Clip(np.zeros((3, 1)), ["a"], 0)

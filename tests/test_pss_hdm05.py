@@ -1,0 +1,162 @@
+"""The Proto-symbol Space on real HDM05 motion capture (train bd + bk, test dg)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from shared.bodies.arm import arm_model, with_arm_torques
+from shared.errors import BadInput
+from shared.evaluation import dtw_recognition, pss_recognition
+from shared.pss.space import ProtoSymbolSpace
+
+
+def _angle_rmse_deg(a, b, channels):
+    """Joint-angle RMSE in degrees after time normalisation, wrap-aware."""
+    x, y = a.select(channels), b.select(channels)
+    t = np.linspace(0, 1, len(x))
+    y = np.column_stack([np.interp(t, np.linspace(0, 1, len(y)), y[:, k]) for k in range(y.shape[1])])
+    d = (x - y + 180.0) % 360.0 - 180.0
+    return float(np.sqrt(np.mean(d * d)))
+
+
+def test_recognition_of_actor_dg_beats_dtw(dev_space, dev_split, capsys):
+    train, test = dev_split
+    pss = pss_recognition(dev_space, test)
+    dtw = dtw_recognition(dev_space, train, test)
+    with capsys.disabled():
+        print(f"\nrecognition bd+bk -> dg, {len(test)} clips: PSS {pss.accuracy:.3f} ({pss.seconds_per_clip * 1e3:.1f} ms/clip), "
+              f"1-NN DTW {dtw.accuracy:.3f} ({dtw.seconds_per_clip * 1e3:.1f} ms/clip)")
+        for label, (ok, n) in pss.per_class.items():
+            print(f"  {label:<30} PSS {ok}/{n}   DTW {dtw.per_class[label][0]}/{n}")
+    assert len(pss.predictions) == len(test) == 61 and len(pss.per_class) == 11
+    assert pss.accuracy >= 0.77  # DESIGN.md: the prototype's 77 % is the floor to beat
+    assert pss.accuracy >= dtw.accuracy
+    assert dtw.accuracy > 0.5  # the baseline is a real baseline, not a broken one
+
+
+def _own_point_errors(space, train, names):
+    angles = space.features.angle_channels
+    errs, others = [], []
+    for name in names:
+        i = space.symbol(name)
+        clip = next(c for c in train if c.name == name).resample(space.params.fps)
+        errs.append(_angle_rmse_deg(clip, space.generate(space.points[i]), angles))
+        other = next(c for c in train if c.label != clip.label).resample(space.params.fps)
+        others.append(_angle_rmse_deg(clip, other, angles))
+        mc = space.generate(space.points[i], method="monte_carlo", seed=2)
+        assert _angle_rmse_deg(clip, mc, angles) < others[-1]
+    return np.array(errs), np.array(others)
+
+
+def test_generation_from_a_clips_own_point_reproduces_it(dev_space, dev_split, capsys):
+    train = dev_split[0]
+    names = ["HDM_bd_squat1Reps_001_120", "HDM_bk_kickLFront1Reps_007_120", "HDM_bd_throwBasketball_001_120"]
+    e7, others = _own_point_errors(dev_space, train, names)
+    assert np.all(e7 < others)  # closer to itself than to another motion
+    # the dev space has 7 states because its shortest clip (a hop) has 14 frames at 30 fps;
+    # a space of longer motions can afford 15 states and reproduces its clips more closely
+    longer = [c for c in train if c.label in ("squat1Reps", "kickLFront1Reps", "throwBasketball")]
+    space15 = ProtoSymbolSpace.build(longer, n_states=15, dim=3)
+    e15, _ = _own_point_errors(space15, longer, names)
+    with capsys.disabled():
+        print(f"\njoint-angle RMSE of F_gen(own point) vs clip (deg): 7 states {np.round(e7, 1)}, 15 states {np.round(e15, 1)}")
+    assert e15.mean() < e7.mean() and e15.max() < 12.0 and np.all(e15 < others / 2)
+
+
+def test_midpoint_recognises_between_and_emphasis_moves_away(dev_space):
+    a, b = dev_space.symbol("HDM_bd_squat1Reps_001_120"), dev_space.symbol("HDM_bd_kickLFront1Reps_001_120")
+    mid = dev_space.generate(weights=dev_space.mix_weights({dev_space.names[a]: 0.5, dev_space.names[b]: 0.5}))
+    r = dev_space.recognize(mid)
+    d_ab = dev_space.distances[a, b]
+    assert r.distances[a] < d_ab and r.distances[b] < d_ab
+    pa, pb = dev_space.points[a], dev_space.points[b]
+    s = float((r.point - pa) @ (pb - pa) / ((pb - pa) @ (pb - pa)))
+    assert 0.15 < s < 0.85  # the midpoint lies between its two motions
+    # extrapolation with alpha = 2 (eq. 4.3): target t, learner p
+    t, p = dev_space.symbol("HDM_bd_squat1Reps_001_120"), dev_space.symbol("HDM_bk_squat1Reps_013_120")
+    emph = dev_space.generate(weights=dev_space.emphatic_weights(dev_space.names[t], dev_space.names[p], 2.0))
+    re = dev_space.recognize(emph)
+    assert re.distances[p] > dev_space.distances[t, p]  # further from the learner than the target is
+    assert re.label == "squat1Reps"  # still the same kind of motion
+
+
+@pytest.fixture(scope="module")
+def torque_space(dev_split):
+    model = arm_model(body_mass=2.4)
+    train = [with_arm_torques(c, model) for c in dev_split[0]]
+    test = [with_arm_torques(c, model) for c in dev_split[1]]
+    return ProtoSymbolSpace.build(train, dim=3), train, test
+
+
+def test_association_estimates_torques_from_motion_alone(torque_space, capsys):
+    space, train, test = torque_space
+    s = space.features.sensor_channels
+    assert s == ["tau.shoulder_pitch", "tau.shoulder_roll", "tau.elbow"]
+    g_train = np.mean([np.abs(c.resample(30).select(s)).sum(axis=1).mean() for c in train])
+    err, base, ok = [], [], 0
+    for c in test:
+        motion = c.with_data(c.select(c.group("motion")), channels=c.group("motion"), groups={"motion": c.group("motion")})
+        a = space.associate(motion, "sensor")
+        assert a.whole.group("sensor") == s and a.aligned.n_frames == c.resample(30).n_frames
+        true = c.resample(30).select(s)
+        g = np.abs(true).sum(axis=1).mean()  # eq. 3.8 without tau_MAX
+        g_hat = np.abs(a.aligned.select(s)).sum(axis=1).mean()
+        err.append(abs(g - g_hat) / g)  # eq. 3.9
+        base.append(abs(g - g_train) / g)
+        ok += a.recognition.label == c.label
+    with capsys.disabled():
+        print(f"\nassociation motion -> torque on dg: |g - g_hat| / g = {np.mean(err):.3f} "
+              f"(training mean torque: {np.mean(base):.3f}); recognised from motion alone {ok}/{len(test)}")
+    assert np.mean(err) < np.mean(base)
+    assert ok / len(test) >= 0.7
+
+
+def test_association_from_the_first_part_of_a_motion(dev_space, dev_split):
+    test = dev_split[1]
+    ok, later = 0, 0
+    for c in test:
+        part = c.frames(0, int(0.8 * c.n_frames))
+        a = dev_space.associate(part, "frames")
+        ok += a.recognition.label == c.label
+        assert a.whole.n_frames > part.resample(dev_space.params.fps).n_frames * 0.9
+        early = dev_space.associate(c.frames(0, int(0.5 * c.n_frames)), "frames")
+        later += a.progress >= early.progress
+    assert ok / len(test) > 0.35  # chance is 1/11
+    assert later / len(test) > 0.8  # a longer start is read as further through the motion
+
+
+def test_space_saves_and_loads_identically(dev_space, dev_split, tmp_path):
+    path = dev_space.save(tmp_path / "dev.npz")
+    back = ProtoSymbolSpace.load(path)
+    assert np.array_equal(back.points, dev_space.points) and np.array_equal(back.distances, dev_space.distances)
+    assert back.names == dev_space.names and back.labels == dev_space.labels
+    x = dev_space.points[:3].mean(axis=0)
+    for method in ("expected", "monte_carlo"):
+        assert np.array_equal(back.generate(x, method=method, seed=5).data, dev_space.generate(x, method=method, seed=5).data)
+    c = dev_split[1][0]
+    assert np.array_equal(back.recognize(c).point, dev_space.recognize(c).point)
+    assert not list(tmp_path.glob(".*"))  # no temporary file left behind
+
+
+def test_rebuild_from_a_modified_database(dev_space, dev_split):
+    small = ProtoSymbolSpace.build(dev_split[0][:6], dim=2, n_states=dev_space.params.n_states)
+    grown = small.rebuilt(add=[dev_split[1][0]], remove=[small.names[0]])
+    assert len(grown.symbols) == 6 and dev_split[1][0].name in grown.names and small.names[0] not in grown.names
+    with pytest.raises(BadInput):
+        small.rebuilt(add=[dev_split[0][1]])  # already there
+
+
+def test_space_refuses_bad_clips(dev_space, dev_split):
+    c = dev_split[1][0]
+    with pytest.raises(BadInput, match="fewer than"):
+        dev_space.recognize(c.frames(0, 8))
+    bad = c.with_data(c.data.copy())
+    bad.data[5, 10] = np.nan
+    with pytest.raises(BadInput, match="NaN"):
+        dev_space.recognize(bad)
+    wrong = c.with_data(c.data[:, :10], channels=c.channels[:10], groups={"motion": c.channels[:10]})
+    with pytest.raises(BadInput, match="lacks"):
+        dev_space.recognize(wrong)
+    with pytest.raises(BadInput):
+        ProtoSymbolSpace.build([])
