@@ -294,6 +294,12 @@ def _floor(covars, var_floor, covariance_type):
     return out
 
 
+def _stay_from_occupancy(frames_in_state: float, n_sequences: int) -> float:
+    """``a_ii`` whose expected stay ``1 / (1 - a_ii)`` is the state's frames per repetition."""
+    d = max(float(frames_in_state) / max(n_sequences, 1), 1.0)
+    return float(np.clip(1.0 - 1.0 / d, 0.0, 0.999))
+
+
 def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total, end_in_last):
     n, d = means.shape
     history: list[float] = []
@@ -333,7 +339,9 @@ def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, t
         covars = _floor(covars, var_floor, covariance_type)
         denom = xs + xm
         stay = np.where(denom > 0, xs / np.maximum(denom, 1e-300), stay)
-        stay[-1] = np.clip(stay[-1], 0.0, 0.999) if denom[-1] > 0 else stay[-1]
+        # the last state has no exit transition to count: its expected stay is its occupancy
+        # per repetition (every repetition ends there), d = 1 / (1 - a_NN)
+        stay[-1] = _stay_from_occupancy(occ[-1], len(seqs))
         stay = np.clip(stay, 0.0, 0.999)
         if len(history) > 1 and history[-1] - history[-2] < tol_total:
             converged = True
@@ -345,8 +353,11 @@ def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, t
 
 
 def _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total):
+    import logging
+
     from hmmlearn.hmm import GaussianHMM
 
+    logging.getLogger("hmmlearn.base").setLevel(logging.ERROR)  # it logs non-monotone steps of its own
     n = means.shape[0]
     m = GaussianHMM(n_components=n, covariance_type=covariance_type, init_params="", params="stmc",
                     n_iter=n_iter, tol=tol_total, min_covar=var_floor, implementation="log")
@@ -360,12 +371,18 @@ def _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter,
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         m.fit(np.vstack(seqs), [len(s) for s in seqs])
+    x_all, lengths = np.vstack(seqs), [len(s) for s in seqs]
     cov = m._covars_ if covariance_type == "diag" else m.covars_
     cov = _floor(np.array(cov), var_floor, covariance_type)
     st = np.diag(m.transmat_).copy()
+    if np.all(np.isfinite(m.means_)):  # hmmlearn's last state is absorbing: a_NN from its occupancy
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            occ = m.predict_proba(x_all, lengths).sum(axis=0)
+        st[-1] = _stay_from_occupancy(occ[-1], len(seqs))
     model = LeftToRightHMM(np.array(m.means_), cov, np.clip(st, 0.0, 0.999), covariance_type,
                            n_iter=m.monitor_.iter, converged=bool(m.monitor_.converged),
                            history=[float(v) for v in m.monitor_.history])
     if model.is_valid():
-        model.log_likelihood = float(m.score(np.vstack(seqs), [len(s) for s in seqs]))
+        model.log_likelihood = float(m.score(x_all, lengths))
     return model
