@@ -26,11 +26,8 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m bench.run --hdm05 $(HDM05) --out bench/results
 
-reproduce: $(STAMP)
-	$(BIN)/python -m bench.recognition --hdm05 $(HDM05) --out reports
-
-up down status dashboard:
-	@echo "'make $@' arrives with the cluster (issue 3); today mirrorcoach is the library and its CLI."; exit 2
+up down status dashboard reproduce:
+	@echo "'make $@' arrives with the cluster and the experiments (issues 3-7); today mirrorcoach is the library and its CLI."; exit 2
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

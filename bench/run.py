@@ -1,0 +1,120 @@
+"""``make bench``: speed of the PSS core on this machine (issue 2 targets).
+
+* one trial = 5 repetitions of a ~200-frame clip with all HDM05 angle channels: HMM training
+  (target <= 50 ms), banded trainer and hmmlearn reference;
+* recognition of a clip against a 200-clip space (target <= 80 ms);
+* building a 200-clip space (target <= 30 s);
+* how recognition and training grow with the number of clips, frames and channels.
+
+The 200-clip space is the 188 HDM05 dev clips plus 12 of them time-stretched by 10 %.
+Writes ``bench/results/pss.json`` and ``bench/results/pss.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from shared.io import find_clips, load_clip
+from shared.pss.hmm import fit_hmm
+from shared.pss.space import ProtoSymbolSpace
+
+
+def _time(fn, repeat: int) -> dict:
+    fn()  # warm-up (numba compile, caches)
+    ts = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return {"median_ms": 1e3 * statistics.median(ts), "p95_ms": 1e3 * float(np.percentile(ts, 95)), "n": repeat}
+
+
+def _stretch(clip, factor):
+    c = clip.resample(clip.fps * factor)
+    c.fps = clip.fps
+    c.name = f"{clip.name}-x{factor:g}"
+    return c
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--hdm05", type=Path, required=True)
+    ap.add_argument("--out", type=Path, default=Path("bench/results"))
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    clips = [load_clip(f) for f in find_clips([args.hdm05 / "amc"])]
+    res: dict = {"machine": {"python": platform.python_version(), "cpu": platform.processor() or platform.machine()}}
+
+    # ---- one trial: 5 repetitions of a ~200-frame motion, all angle channels
+    space1 = ProtoSymbolSpace.build(clips[:2], n_states=15)
+    feats = space1.features
+    kicks = sorted((c for c in clips if c.label == "kickLFront1Reps"), key=lambda c: abs(c.n_frames - 200))[:5]
+    reps = [feats.encode(c) for c in kicks]  # at 120 fps: ~200 frames each
+    trial = {"frames": [len(r) for r in reps], "features": reps[0].shape[1], "states": 15}
+    for backend in ("banded", "hmmlearn"):
+        trial[backend] = _time(lambda: fit_hmm(reps, 15, backend=backend), 10 if backend == "banded" else 3)
+    res["trial_training"] = trial
+    print(f"HMM training, one trial {trial['frames']} frames x {trial['features']} features: "
+          f"banded {trial['banded']['median_ms']:.1f} ms, hmmlearn {trial['hmmlearn']['median_ms']:.1f} ms")
+
+    # ---- 200-clip space: build and recognise
+    extra = [_stretch(c, 1.1) for c in clips[::16][:12]]
+    db = clips + extra
+    t0 = time.perf_counter()
+    space = ProtoSymbolSpace.build(db, dim=3)
+    build_s = time.perf_counter() - t0
+    probe = next(c for c in clips if c.label == "squat1Reps" and "_dg_" in c.name)
+    rec = _time(lambda: space.recognize(probe), 20)
+    res["space200"] = {"clips": len(db), "build_s": build_s, "stress1": space.embedding.stress1, "recognize": rec,
+                       "probe_frames_120fps": probe.n_frames}
+    print(f"200-clip space: build {build_s:.1f} s; recognition {rec['median_ms']:.1f} ms median, {rec['p95_ms']:.1f} ms p95")
+
+    # ---- growth
+    growth = {"clips": [], "frames": [], "channels": []}
+    for n in (25, 50, 100, 200):
+        sub = db[:n]
+        t0 = time.perf_counter()
+        sp = ProtoSymbolSpace.build(sub, dim=3, n_states=space.params.n_states)
+        b = time.perf_counter() - t0
+        r = _time(lambda: sp.recognize(probe), 10)
+        growth["clips"].append({"n": n, "build_s": b, "recognize_ms": r["median_ms"]})
+    base = feats.encode(kicks[0])
+    for frames in (100, 200, 400, 800):
+        x = np.vstack([base] * (frames // len(base) + 1))[:frames]
+        growth["frames"].append({"n": frames, "train_ms": _time(lambda: fit_hmm([x], 15), 5)["median_ms"]})
+    for d in (20, 60, 119):
+        x = base[:, :d]
+        growth["channels"].append({"n": d, "train_ms": _time(lambda: fit_hmm([x] * 5, 15), 5)["median_ms"]})
+    res["growth"] = growth
+
+    (args.out / "pss.json").write_text(json.dumps(res, indent=2))
+    lines = [
+        "# PSS core benchmark (`make bench`)", "",
+        f"Python {res['machine']['python']}, 2-core machine. Medians of repeated runs after a warm-up.", "",
+        "| what | measured | target |", "|---|---|---|",
+        f"| HMM training, one trial (5 x {trial['frames'][0]}-ish frames x {trial['features']} features, 15 states), banded | "
+        f"{trial['banded']['median_ms']:.1f} ms | <= 50 ms |",
+        f"| same, hmmlearn reference | {trial['hmmlearn']['median_ms']:.1f} ms | - |",
+        f"| recognition against a {len(db)}-clip space | {rec['median_ms']:.1f} ms (p95 {rec['p95_ms']:.1f}) | <= 80 ms |",
+        f"| building a {len(db)}-clip space | {build_s:.1f} s | <= 30 s |", "",
+        "## Growth", "", "| clips | build (s) | recognition (ms) |", "|---|---|---|",
+        *[f"| {g['n']} | {g['build_s']:.2f} | {g['recognize_ms']:.1f} |" for g in growth["clips"]], "",
+        "| frames (one sequence, 119 features, 15 states) | training (ms) |", "|---|---|",
+        *[f"| {g['n']} | {g['train_ms']:.1f} |" for g in growth["frames"]], "",
+        "| features (5 repetitions, 15 states) | training (ms) |", "|---|---|",
+        *[f"| {g['n']} | {g['train_ms']:.1f} |" for g in growth["channels"]], "",
+    ]
+    (args.out / "pss.md").write_text("\n".join(lines))
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
