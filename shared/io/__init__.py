@@ -44,15 +44,14 @@ def load_clip(path, skeleton=None, label: str | None = None) -> Clip:
 
 def save_clip(clip: Clip, path) -> None:
     path = Path(path)
+    writers = {".bvh": write_bvh, ".npz": write_npz, ".amc": write_amc}
     suffix = path.suffix.lower()
-    if suffix == ".bvh":
-        write_bvh(clip, path)
-    elif suffix == ".npz":
-        write_npz(clip, path)
-    elif suffix == ".amc":
-        write_amc(clip, path)
-    else:
+    if suffix not in writers:
         raise ClipFormatError(path, f"cannot write {suffix!r} (use .bvh, .npz or .amc)")
+    try:
+        writers[suffix](clip, path)
+    except OSError as e:
+        raise ClipFormatError(path, f"cannot write file: {e.strerror or e}") from None
 
 
 def find_clips(paths) -> list[Path]:

@@ -80,7 +80,7 @@ def read_bvh(path, label: str | None = None) -> Clip:
     joints: list[Joint] = []
     channels: list[str] = []
 
-    def parse_joint(parent: int, kind: str):
+    def parse_joint(parent: int):
         name = tk.next()
         tk.next("{")
         tk.next("OFFSET")
@@ -108,7 +108,7 @@ def read_bvh(path, label: str | None = None) -> Clip:
             t = tk.peek().upper()
             if t == "JOINT":
                 tk.next()
-                parse_joint(idx, "JOINT")
+                parse_joint(idx)
             elif t == "END":
                 tk.next()
                 tk.next("Site")
@@ -123,7 +123,7 @@ def read_bvh(path, label: str | None = None) -> Clip:
                 raise ClipFormatError(path, f"unexpected {tk.peek() or 'end of file'!r} in joint {name!r}", tk.line())
 
     tk.next("ROOT")
-    parse_joint(-1, "ROOT")
+    parse_joint(-1)
     body = lines[motion_line + 1:]
     n_frames = None
     frame_time = None

@@ -88,13 +88,23 @@ class LeftToRightHMM:
         ok = np.all(np.isfinite(self.means)) and np.all(np.isfinite(self.covars)) and np.all(np.isfinite(self.stay))
         return bool(ok and np.all(self.variances() > 0) and np.all((self.stay >= 0) & (self.stay < 1)))
 
+    def _log_transitions(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.log(np.maximum(self.stay, 1e-300)), np.log(np.maximum(1.0 - self.stay, 1e-300))
+
+    def posteriors(self, sequence, end_in_last: bool = True) -> np.ndarray:
+        """State posteriors ``gamma_t(i)`` of one sequence (T, N), forward-backward."""
+        x = _as_sequences([sequence], self.n_features)[0]
+        logb = emission_logprob(x, self.means, self.covars, self.covariance_type)
+        _, gamma, _, _ = _forward_backward(np.ascontiguousarray(logb), *self._log_transitions(), end_in_last)
+        return gamma
+
     def log_likelihood_of(self, sequences, end_in_last: bool = True) -> float:
         """Total log-likelihood of the sequences (forward algorithm)."""
         seqs = _as_sequences(sequences, self.n_features)
         total = 0.0
         for x in seqs:
             logb = emission_logprob(x, self.means, self.covars, self.covariance_type)
-            ll, _ = _forward_loglik(logb, np.log(np.maximum(self.stay, 1e-300)), np.log(np.maximum(1 - self.stay, 1e-300)), end_in_last)
+            ll, _ = _forward_loglik(logb, *self._log_transitions(), end_in_last)
             total += ll
         return float(total)
 
@@ -103,7 +113,7 @@ class LeftToRightHMM:
         state: how far through the motion a partial observation is (eq. 2.8, missing frames)."""
         x = _as_sequences([sequence], self.n_features)[0]
         logb = emission_logprob(x, self.means, self.covars, self.covariance_type)
-        _, alpha_last = _forward_loglik(logb, np.log(np.maximum(self.stay, 1e-300)), np.log(np.maximum(1 - self.stay, 1e-300)), False)
+        _, alpha_last = _forward_loglik(logb, *self._log_transitions(), False)
         p = np.exp(alpha_last - alpha_last.max())
         return p / p.sum()
 

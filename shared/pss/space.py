@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.clip import Clip
-from shared.errors import BadInput, ModelError, NotFound
+from shared.errors import BadInput, NotFound
 from shared.pss.distance import distances_to, distance_matrix
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
@@ -338,11 +338,7 @@ class ProtoSymbolSpace:
         model = self.synthesize(c)
         whole = self.features.decode(generate(model, method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
         # the missing channels on the observed frames: E[s_t] = sum_i gamma_t(i) mu_i^S
-        from shared.pss.hmm import _forward_backward, emission_logprob
-        mm = model.marginal(midx)
-        logb = emission_logprob(seq[0], mm.means, mm.covars, mm.covariance_type)
-        _, gamma, _, _ = _forward_backward(np.ascontiguousarray(logb), np.log(np.maximum(mm.stay, 1e-300)),
-                                           np.log(np.maximum(1 - mm.stay, 1e-300)), True)
+        gamma = model.marginal(midx).posteriors(seq[0])
         sidx = self.features.feature_indices("sensor")
         est = gamma @ model.means[:, sidx]
         sens = est * self.features.sensor_scale + self.features.sensor_mean

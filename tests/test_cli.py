@@ -1,0 +1,56 @@
+"""The mirrorcoach CLI as a user runs it: a real subprocess, real files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+from shared.io import load_clip
+
+SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "shared.cli.app", *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+def test_clip_info_and_convert(bundled, tmp_path):
+    r = run("clip", "info", bundled / SQUAT, "--json")
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["frames"] == 140 and info["fps"] == 120 and info["channels"] == 62 and info["label"] == "squat1Reps"
+    r = run("clip", "convert", bundled / SQUAT, tmp_path / "s.bvh", "--fps", "30")
+    assert r.returncode == 0, r.stderr
+    b = load_clip(tmp_path / "s.bvh")
+    assert b.fps == 30 and b.n_frames == 36
+
+
+def test_space_build_recognize_generate(bundled, tmp_path):
+    space = tmp_path / "s.npz"
+    r = run("space", "build", space, bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps")
+    assert r.returncode == 0, r.stderr
+    held = next((bundled / "amc/squat1Reps").glob("HDM_dg_*.amc"))
+    r = run("space", "recognize", space, held, "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["label"] == "squat1Reps"
+    names = [n["name"] for n in json.loads(r.stdout)["nearest"]]
+    r = run("space", "generate", space, "--mix", f"{names[0]}=3", "--mix", f"{names[1]}=-2", "--out", tmp_path / "e.bvh")
+    assert r.returncode == 0, r.stderr
+    assert np.all(np.isfinite(load_clip(tmp_path / "e.bvh").data))
+
+
+def test_errors_are_one_line_without_traceback(bundled, tmp_path):
+    cases = [
+        ("clip", "info", tmp_path / "missing.amc"),
+        ("clip", "convert", bundled / SQUAT, tmp_path / "no/such/dir/x.bvh"),
+        ("clip", "convert", bundled / SQUAT, tmp_path / "x.txt"),
+        ("space", "recognize", tmp_path / "nospace.npz", bundled / SQUAT),
+        ("space", "generate", tmp_path / "nospace.npz", "--point", "a,b", "--out", tmp_path / "g.bvh"),
+    ]
+    for args in cases:
+        r = run(*args)
+        assert r.returncode == 2, (args, r.stderr)
+        assert r.stderr.startswith("error: ") and "Traceback" not in r.stderr, (args, r.stderr)
