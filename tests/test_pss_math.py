@@ -96,6 +96,37 @@ def test_banded_training_matches_hmmlearn_log_likelihood():
         absorbing.log_likelihood_of(reps, end_in_last=False), rel=1e-9)
 
 
+@pytest.mark.parametrize("end_in_last", [True, False])
+def test_scaled_estep_matches_the_log_domain_forward_backward(end_in_last):
+    from shared.pss.hmm import _estep, _estep_scaled, _forward_backward
+
+    rng = np.random.default_rng(7)
+    n, lens = 5, [40, 33, 57]
+    logb = rng.normal(scale=30.0, size=(sum(lens), n))  # emissions hundreds of nats apart
+    stay = rng.uniform(0.5, 0.95, size=n)
+    bounds = np.cumsum([0] + lens).astype(np.int64)
+    ok, ll, gamma, xs, xm = _estep_scaled(logb, bounds, stay, end_in_last)
+    assert ok
+    ref_ll, ref_xs, ref_xm = 0.0, np.zeros(n), np.zeros(n)
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        lk, g, s_, m_ = _forward_backward(np.ascontiguousarray(logb[lo:hi]), np.log(stay), np.log(1 - stay), end_in_last)
+        ref_ll += lk
+        ref_xs += s_
+        ref_xm += m_
+        np.testing.assert_allclose(gamma[lo:hi], g, atol=1e-9)
+    assert ll == pytest.approx(ref_ll, rel=1e-10)
+    np.testing.assert_allclose(xs, ref_xs, rtol=1e-8)
+    np.testing.assert_allclose(xm, ref_xm, rtol=1e-8)
+    if end_in_last:
+        # the last state's emission at the last frame is 1e6 nats below the others: exp()
+        # underflows after scaling, the scaled pass says so and _estep takes the log domain
+        logb[lens[0] - 1, n - 1] = -1e6
+        assert not _estep_scaled(logb, bounds, stay, True)[0]
+        ll2, gamma2, _, _ = _estep(logb, bounds, stay, True)
+        assert np.isfinite(ll2) and ll2 < ll - 9e5
+        np.testing.assert_allclose(gamma2.sum(axis=1), 1.0, atol=1e-9)
+
+
 def test_training_is_left_to_right_floored_and_reports_convergence():
     rng = np.random.default_rng(4)
     reps = _repetitions(rng)

@@ -17,7 +17,9 @@ Choices the thesis leaves open, made here:
 * convergence: the log-likelihood gain per frame falls below ``tol``; reported on the model.
 
 Two trainers give the same model: ``backend="banded"`` (default) exploits the band structure
-with a numba forward-backward of cost ``O(T N)`` plus BLAS emissions; ``backend="hmmlearn"``
+with a numba forward-backward of cost ``O(T N)`` (scaled probabilities over all repetitions at
+once, the log-domain pass where scaling underflows) plus one BLAS product each for the emissions
+and the M-step; ``backend="hmmlearn"``
 is the library reference (``GaussianHMM`` with the same initialisation and the floor applied
 after fitting). Tests check that both reach the same log-likelihood.
 """
@@ -310,38 +312,144 @@ def _stay_from_occupancy(frames_in_state: float, n_sequences: int) -> float:
     return float(np.clip(1.0 - 1.0 / d, 0.0, 0.999))
 
 
+@numba.njit(cache=True)
+def _estep_scaled(logb, bounds, stay, end_in_last):
+    """E-step over every repetition at once, in the scaled probability domain (Rabiner's
+    scaling, with each frame's emissions shifted by their largest reachable value).
+
+    Returns (ok, loglik, gamma (T, N), xi_stay (N,), xi_move (N,)). ``ok`` is False when a
+    scale factor underflowed; the caller then falls back to the log-domain ``_forward_backward``.
+    """
+    t_all, n = logb.shape
+    gamma = np.zeros((t_all, n))
+    xs = np.zeros(n)
+    xm = np.zeros(n)
+    total = 0.0
+    move = 1.0 - stay
+    for k in range(bounds.shape[0] - 1):
+        lo = bounds[k]
+        t_len = bounds[k + 1] - lo
+        a = np.zeros((t_len, n))
+        b = np.zeros((t_len, n))  # shifted emissions exp(logb - m_t)
+        c = np.zeros(t_len)
+        # t = 0: only state 0
+        b[0, 0] = 1.0
+        a[0, 0] = 1.0
+        c[0] = 1.0
+        total += logb[lo, 0]
+        pred = np.empty(n)
+        for t in range(1, t_len):
+            m = -np.inf
+            pred[0] = a[t - 1, 0] * stay[0]
+            for i in range(1, n):
+                pred[i] = a[t - 1, i] * stay[i] + a[t - 1, i - 1] * move[i - 1]
+            for i in range(n):
+                if pred[i] > 0.0 and logb[lo + t, i] > m:
+                    m = logb[lo + t, i]
+            s = 0.0
+            for i in range(n):
+                b[t, i] = np.exp(logb[lo + t, i] - m)
+                a[t, i] = pred[i] * b[t, i]
+                s += a[t, i]
+            if not (s > 0.0) or not np.isfinite(s):
+                return False, -np.inf, gamma, xs, xm
+            for i in range(n):
+                a[t, i] /= s
+            c[t] = s
+            total += m + np.log(s)
+        # backward pass: beta is rescaled to max 1 at every frame and gamma_t, xi_t are
+        # normalised per frame (both sum to 1), so nothing overflows whatever alpha_T is
+        beta = np.zeros(n)
+        if end_in_last:
+            if not (a[t_len - 1, n - 1] > 0.0):
+                return False, -np.inf, gamma, xs, xm
+            total += np.log(a[t_len - 1, n - 1])
+            beta[n - 1] = 1.0
+        else:
+            beta[:] = 1.0
+        s = 0.0
+        for i in range(n):
+            s += a[t_len - 1, i] * beta[i]
+        for i in range(n):
+            gamma[lo + t_len - 1, i] = a[t_len - 1, i] * beta[i] / s
+        nb = np.empty(n)
+        ws = np.empty(n)
+        wm = np.zeros(n)
+        for t in range(t_len - 2, -1, -1):
+            s = 0.0
+            top = 0.0
+            for i in range(n):
+                ws[i] = stay[i] * b[t + 1, i] * beta[i]
+                nb[i] = ws[i]
+                if i + 1 < n:
+                    wm[i] = move[i] * b[t + 1, i + 1] * beta[i + 1]
+                    nb[i] += wm[i]
+                s += a[t, i] * nb[i]
+                if nb[i] > top:
+                    top = nb[i]
+            if not (s > 0.0) or not np.isfinite(s):
+                return False, -np.inf, gamma, xs, xm
+            for i in range(n):
+                gamma[lo + t, i] = a[t, i] * nb[i] / s
+                xs[i] += a[t, i] * ws[i] / s
+                if i + 1 < n:
+                    xm[i] += a[t, i] * wm[i] / s
+                beta[i] = nb[i] / top
+    return True, total, gamma, xs, xm
+
+
+def _estep(logb_all, bounds, stay, end_in_last):
+    """E-step: scaled (fast) path, log-domain path for the repetitions where scaling underflows."""
+    ok, ll, gamma, xs, xm = _estep_scaled(logb_all, bounds, stay, end_in_last)
+    if ok:
+        return ll, gamma, xs, xm
+    log_stay, log_move = np.log(np.maximum(stay, 1e-300)), np.log(np.maximum(1.0 - stay, 1e-300))
+    n = logb_all.shape[1]
+    gamma = np.empty_like(logb_all)
+    xs, xm, ll = np.zeros(n), np.zeros(n), 0.0
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        lk, g, s_, m_ = _forward_backward(np.ascontiguousarray(logb_all[lo:hi]), log_stay, log_move, end_in_last)
+        ll += lk
+        gamma[lo:hi] = g
+        xs += s_
+        xm += m_
+    return ll, gamma, xs, xm
+
+
 def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total, end_in_last):
+    """Baum-Welch with the banded E-step. For diagonal covariances the frames are stacked once
+    as ``z = [x, x*x]`` so the emissions (eq. 2.2) and the M-step's sufficient statistics are a
+    single matrix product each."""
     n, d = means.shape
     history: list[float] = []
     converged = False
     x_all = np.vstack(seqs)
-    bounds = np.cumsum([0] + [len(s) for s in seqs])
+    bounds = np.cumsum([0] + [len(s) for s in seqs]).astype(np.int64)
+    diag = covariance_type == "diag"
+    if diag:
+        z = np.hstack([x_all, x_all * x_all])
     it = 0
     for it in range(1, n_iter + 1):
-        log_stay = np.log(np.maximum(stay, 1e-300))
-        log_move = np.log(np.maximum(1.0 - stay, 1e-300))
-        logb_all = emission_logprob(x_all, means, covars, covariance_type)
-        gamma = np.empty((len(x_all), n))
-        xs = np.zeros(n)
-        xm = np.zeros(n)
-        ll = 0.0
-        for k in range(len(seqs)):
-            lo, hi = bounds[k], bounds[k + 1]
-            lk, g, s_, m_ = _forward_backward(np.ascontiguousarray(logb_all[lo:hi]), log_stay, log_move, end_in_last)
-            if not np.isfinite(lk):
-                raise ModelError("a repetition has zero likelihood under the model (it cannot pass through every state)")
-            ll += lk
-            gamma[lo:hi] = g
-            xs += s_
-            xm += m_
+        if diag:
+            prec = 1.0 / covars
+            w = np.vstack([(means * prec).T, -0.5 * prec.T])
+            const = -0.5 * (np.sum(means * means * prec, axis=1) + np.sum(np.log(covars), axis=1) + d * LOG2PI)
+            logb_all = z @ w + const
+        else:
+            logb_all = emission_logprob(x_all, means, covars, covariance_type)
+        ll, gamma, xs, xm = _estep(np.ascontiguousarray(logb_all), bounds, stay, end_in_last)
+        if not np.isfinite(ll):
+            raise ModelError("a repetition has zero likelihood under the model (it cannot pass through every state)")
         history.append(float(ll))
         # M-step
         occ = gamma.sum(axis=0)
         occ_safe = np.maximum(occ, 1e-12)
-        means = (gamma.T @ x_all) / occ_safe[:, None]
-        if covariance_type == "diag":
-            covars = (gamma.T @ (x_all * x_all)) / occ_safe[:, None] - means * means
+        if diag:
+            stats = (gamma.T @ z) / occ_safe[:, None]
+            means = stats[:, :d]
+            covars = stats[:, d:] - means * means
         else:
+            means = (gamma.T @ x_all) / occ_safe[:, None]
             covars = np.empty((n, d, d))
             for i in range(n):
                 xc = x_all - means[i]
