@@ -1,0 +1,9 @@
+"""Message contracts, one module per service; services and contract tests import them.
+
+``CONTRACTS`` maps a service name to its module (``ENDPOINTS``, ``EVENTS``);
+``mirrorcoach schemas`` prints them.
+"""
+
+from schemas import pss
+
+CONTRACTS = {"pss": pss}

@@ -1,8 +1,9 @@
 """The ``mirrorcoach`` command line.
 
-Library-level commands for now (``clip info``, ``clip convert``, ``space build|recognize|
-generate`` on local space files); the bus-backed commands arrive with the cluster. Every
-error the user can act on is one line on stderr and exit code 2, never a traceback.
+``clip`` works on files; ``offline`` works on space files without a cluster (library level);
+``space``, ``status``, ``up``, ``down`` and ``schemas`` talk to the running cluster
+(``shared/cli/cluster.py``). Every error the user can act on is one line on stderr and exit
+code 2, never a traceback.
 """
 
 from __future__ import annotations
@@ -20,9 +21,10 @@ from shared.errors import MirrorcoachError
 app = typer.Typer(help="mirrorcoach: motion coaching with the Proto-symbol Space method.", no_args_is_help=True,
                   pretty_exceptions_enable=False, add_completion=False)
 clip_app = typer.Typer(help="Read, inspect and convert motion clips (ASF/AMC, BVH, NPZ).", no_args_is_help=True)
-space_app = typer.Typer(help="Proto-symbol spaces stored as local files (library level).", no_args_is_help=True)
+offline_app = typer.Typer(help="Proto-symbol spaces as local .npz files, without a cluster (library level).",
+                          no_args_is_help=True)
 app.add_typer(clip_app, name="clip")
-app.add_typer(space_app, name="space")
+app.add_typer(offline_app, name="offline")
 
 SKELETON_HELP = "ASF skeleton for AMC files (default: found beside the file or in a sibling asf/ folder)."
 
@@ -78,7 +80,7 @@ def clip_convert(src: Path = typer.Argument(..., help="Input clip: .amc, .bvh or
     typer.echo(f"wrote {dst} ({c.n_frames} frames at {c.fps:g} fps)")
 
 
-def _load_clips(paths: list[Path], skeleton):
+def _load_clips(paths: list[Path], skeleton, label: str | None = None):
     from rich.progress import track
 
     from shared.io import find_clips, load_clip
@@ -86,11 +88,38 @@ def _load_clips(paths: list[Path], skeleton):
     files = find_clips(paths)
     if not files:
         _fail("no clip files (.amc, .bvh, .npz) under the given paths")
-    return [load_clip(f, skeleton=skeleton) for f in track(files, description="reading clips", transient=True,
-                                                            disable=not sys.stderr.isatty())]
+    clips = [load_clip(f, skeleton=skeleton) for f in track(files, description="reading clips", transient=True,
+                                                             disable=not sys.stderr.isatty())]
+    if label is not None:
+        for c in clips:
+            c.label = label
+    return clips
 
 
-@space_app.command("build")
+def _parse_point(point: str) -> np.ndarray:
+    try:
+        x = np.array([float(v) for v in point.split(",")])
+    except ValueError:
+        _fail(f"--point must be comma-separated numbers, got {point!r}")
+    if not np.all(np.isfinite(x)):
+        _fail("--point coordinates must be finite")
+    return x
+
+
+def _parse_mix(mix: list[str]) -> dict[str, float]:
+    parsed = {}
+    for m in mix:
+        name, sep, w = m.rpartition("=")
+        if not sep or not name:
+            _fail(f"--mix needs NAME=WEIGHT, got {m!r}")
+        try:
+            parsed[name] = float(w)
+        except ValueError:
+            _fail(f"--mix needs NAME=WEIGHT, got {m!r}")
+    return parsed
+
+
+@offline_app.command("build")
 def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)."),
                 paths: list[Path] = typer.Argument(..., help="Clip files or folders; label = the clip's parent folder."),
                 dim: int = typer.Option(3, help="Dimension of the space."),
@@ -113,7 +142,7 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
                f"{space.params.n_states} states, stress-1 {i['stress1']:.3f}")
 
 
-@space_app.command("recognize")
+@offline_app.command("recognize")
 def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
                     clips: list[Path] = typer.Argument(..., help="Clip(s): several are repetitions of one motion."),
                     as_json: bool = typer.Option(False, "--json"),
@@ -135,7 +164,7 @@ def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
         typer.echo(f"  {d:9.3f}  {lab:<30} {n}")
 
 
-@space_app.command("generate")
+@offline_app.command("generate")
 def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
                    out: Path = typer.Option(..., "--out", help="Output clip (.bvh or .npz)."),
                    point: Optional[str] = typer.Option(None, help="Point as comma-separated coordinates."),
@@ -150,24 +179,14 @@ def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
         _fail("give exactly one of --point or --mix")
     space = ProtoSymbolSpace.load(space_file)
     if point is not None:
-        try:
-            x = np.array([float(v) for v in point.split(",")])
-        except ValueError:
-            _fail(f"--point must be comma-separated numbers, got {point!r}")
-        clip = space.generate(x, method=method, seed=seed, name=out.stem)
+        clip = space.generate(_parse_point(point), method=method, seed=seed, name=out.stem)
     else:
-        parsed = {}
-        for m in mix:
-            name, sep, w = m.rpartition("=")
-            try:
-                parsed[name] = float(w)
-            except ValueError:
-                _fail(f"--mix needs NAME=WEIGHT, got {m!r}")
-            if not sep or not name:
-                _fail(f"--mix needs NAME=WEIGHT, got {m!r}")
-        clip = space.generate(weights=space.mix_weights(parsed), method=method, seed=seed, name=out.stem)
+        clip = space.generate(weights=space.mix_weights(_parse_mix(mix)), method=method, seed=seed, name=out.stem)
     save_clip(clip, out)
     typer.echo(f"wrote {out} ({clip.n_frames} frames at {clip.fps:g} fps)")
+
+
+from shared.cli import cluster as _cluster  # noqa: E402  (registers the cluster commands on app)
 
 
 def main() -> None:
@@ -181,5 +200,7 @@ def main() -> None:
         sys.exit(130)
 
 
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # run the imported module, so the cluster commands are registered on its app
+    from shared.cli.app import main as _main
+
+    _main()

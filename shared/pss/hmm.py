@@ -150,7 +150,7 @@ def emission_logprob(x: np.ndarray, means: np.ndarray, covars: np.ndarray, covar
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _logaddexp(a, b):
     if a == -np.inf:
         return b
@@ -161,7 +161,7 @@ def _logaddexp(a, b):
     return b + np.log1p(np.exp(a - b))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _forward_loglik(logb, log_stay, log_move, end_in_last):
     t_len, n = logb.shape
     alpha = np.full(n, -np.inf)
@@ -178,7 +178,7 @@ def _forward_loglik(logb, log_stay, log_move, end_in_last):
     return m + np.log(np.sum(np.exp(alpha - m))), alpha
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _forward_backward(logb, log_stay, log_move, end_in_last):
     """Banded forward-backward in log space. Returns (loglik, gamma (T,N), xi_stay (N,), xi_move (N,))."""
     t_len, n = logb.shape
@@ -312,7 +312,7 @@ def _stay_from_occupancy(frames_in_state: float, n_sequences: int) -> float:
     return float(np.clip(1.0 - 1.0 / d, 0.0, 0.999))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _estep_scaled(logb, bounds, stay, end_in_last):
     """E-step over every repetition at once, in the scaled probability domain (Rabiner's
     scaling, with each frame's emissions shifted by their largest reachable value).

@@ -1,0 +1,185 @@
+"""Contract of the PSS model service (``services/pss``): named Proto-symbol Spaces.
+
+Keys: ``<prefix>/pss/<verb>`` for requests; ``<prefix>/events/pss/space`` for changes.
+"""
+
+from __future__ import annotations
+
+from schemas.base import AnyMap, Array, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str, NAME_PATTERN
+from schemas.common import CLIP, name
+from shared.errors import BadInput
+
+SERVICE = "pss"
+MAX_CLIPS = 2000
+
+SPACE = name("space name: letters, digits, '_', '.', '-' (never a path)")
+SYMBOL = F(Str(max_len=64), "a proto-symbol's name or label")
+
+PARAMS = Map({
+    "n_states": F(Int(1, 100), "HMM states per proto-symbol"),
+    "fps": F(Float(1.0, 1000.0), "frame rate the clips are resampled to"),
+    "dim": F(Int(1, 20), "dimension of the space"),
+    "covariance_type": F(Str(choices=("diag", "full")), "HMM output covariance"),
+    "var_floor": F(Float(0.0), "variance floor"),
+    "backend": F(Str(choices=("banded", "hmmlearn")), "HMM trainer"),
+    "n_iter": F(Int(1, 1000), "Baum-Welch iteration cap"),
+    "group_by": F(Str(choices=("clip", "label")), "one proto-symbol per clip or per label"),
+})
+
+SYMBOL_ROW = Map({"name": F(Str(max_len=64)), "label": F(Str(max_len=64))})
+
+INFO = Map({
+    "space": SPACE,
+    "n_proto_symbols": F(Int(0), "number of proto-symbols"),
+    "labels": F(List(Str(max_len=64), max_len=MAX_CLIPS), "distinct labels, sorted"),
+    "proto_symbols": F(List(SYMBOL_ROW, max_len=MAX_CLIPS), "name and label of every proto-symbol, in point order"),
+    "points": F(Array(shape=(None, None)), "the proto-symbols' points (N x dim)"),
+    "params": F(PARAMS, "build parameters"),
+    "n_features": F(Int(1), "HMM output dimension"),
+    "sensor_channels": F(List(Str(max_len=64), max_len=1000), "sensor channels modelled with the motion"),
+    "stress": F(Float(0.0), "raw MDS stress"),
+    "stress1": F(Float(0.0), "Kruskal stress-1"),
+    "mds_converged": F(Bool()),
+    "hmm_converged": F(Int(0), "how many HMMs met the convergence tolerance"),
+})
+
+NEAREST = Map({"name": F(Str(max_len=64)), "label": F(Str(max_len=64)), "distance": F(Float(0.0), "eq. 2.4 distance")})
+
+
+def _point_or_mix(req: dict, path: str):
+    """exactly one of point and mix is given."""
+    if (req["point"] is None) == (req["mix"] is None):
+        raise BadInput("generate: give exactly one of point and mix", field="point")
+
+
+BUILD = Endpoint(
+    "build",
+    Message("pss.build", Map({
+        "space": SPACE,
+        "clips": F(List(CLIP, min_len=1, max_len=MAX_CLIPS), "the database D; every clip needs a label"),
+        "n_states": F(Int(1, 100), "HMM states (default: half the shortest clip's frames, 2..15)", required=False),
+        "dim": F(Int(1, 20), "dimension of the space", required=False, default=3),
+        "fps": F(Float(1.0, 240.0), "resample the clips to this frame rate", required=False, default=30.0),
+        "covariance_type": F(Str(choices=("diag", "full")), required=False, default="diag"),
+        "group_by": F(Str(choices=("clip", "label")), required=False, default="clip"),
+        "replace": F(Bool(), "replace an existing space of that name", required=False, default=False),
+    }), doc="build a space from clips (eq. 2.5)"),
+    Message("pss.build.reply", INFO),
+    "Build a named space from clips (eq. 2.5); fails with conflict if it exists and replace is false.",
+)
+
+ADD = Endpoint(
+    "add",
+    Message("pss.add", Map({
+        "space": SPACE,
+        "clips": F(List(CLIP, min_len=1, max_len=MAX_CLIPS), "clips to add as new proto-symbols"),
+    }), doc="add proto-symbols and rebuild the space"),
+    Message("pss.add.reply", INFO),
+    "Add clips as proto-symbols and rebuild the space's points.",
+)
+
+RECOGNIZE = Endpoint(
+    "recognize",
+    Message("pss.recognize", Map({
+        "space": SPACE,
+        "clips": F(List(CLIP, min_len=1, max_len=50), "one clip, or the repetitions of one trial"),
+        "top": F(Int(1, 100), "how many nearest proto-symbols to return", required=False, default=5),
+    }), doc="place a motion in the space (eq. 2.6)"),
+    Message("pss.recognize.reply", Map({
+        "space": SPACE,
+        "label": F(Str(max_len=64), "label of the nearest proto-symbol (eq. 2.4)"),
+        "label_in_space": F(Str(max_len=64), "label of the nearest point in the space"),
+        "point": F(Array(shape=(None,)), "the motion's point"),
+        "nearest": F(List(NEAREST, max_len=100), "nearest proto-symbols, nearest first"),
+        "stress": F(Float(0.0), "out-of-sample stress of the placement"),
+        "seconds": F(Float(0.0), "library time"),
+    })),
+    "Recognise a clip (or several repetitions) as a point, with its nearest proto-symbols.",
+)
+
+GENERATE = Endpoint(
+    "generate",
+    Message("pss.generate", Map({
+        "space": SPACE,
+        "point": F(Array(shape=(None,)), "a point of the space (inside or outside the hull)", required=False),
+        "mix": F(MapOf(Str(max_len=64), Float(-100.0, 100.0), min_len=1, max_len=MAX_CLIPS),
+                 "proto-symbol name or label -> weight, summing to 1", required=False),
+        "method": F(Str(choices=("expected", "monte_carlo")), "trajectory method", required=False, default="expected"),
+        "frames": F(Int(2, 100_000), "length of the motion (default: expected durations)", required=False),
+        "seed": F(Int(0, 2**32 - 1), "seed of the Monte Carlo sampling", required=False, default=0),
+        "name": F(Str(pattern=NAME_PATTERN, max_len=64), "name of the generated clip", required=False, default="generated"),
+    }, checks=[_point_or_mix]), doc="generate a motion from a point or a mix (eq. 2.7, 4.1)"),
+    Message("pss.generate.reply", Map({
+        "space": SPACE,
+        "clip": F(CLIP, "the generated motion, with the space's skeleton"),
+        "weights": F(Array(shape=(None,)), "weight of every proto-symbol"),
+        "point": F(Array(shape=(None,)), "the point generated from"),
+    })),
+    "Generate a motion from a point or from proto-symbol weights.",
+)
+
+ASSOCIATE = Endpoint(
+    "associate",
+    Message("pss.associate", Map({
+        "space": SPACE,
+        "clip": F(CLIP, "the partial pattern"),
+        "missing": F(Str(choices=("sensor", "frames")), "what is missing: the sensor channels or the end of the motion",
+                     required=False, default="sensor"),
+        "method": F(Str(choices=("expected", "monte_carlo")), required=False, default="expected"),
+        "seed": F(Int(0, 2**32 - 1), required=False, default=0),
+    }), doc="the whole pattern from a partial one (eq. 2.8)"),
+    Message("pss.associate.reply", Map({
+        "space": SPACE,
+        "label": F(Str(max_len=64)),
+        "point": F(Array(shape=(None,))),
+        "whole": F(CLIP, "the whole generated pattern"),
+        "aligned": F(CLIP, "the missing channels estimated on the clip's own frames", required=False),
+        "progress": F(Float(0.0, 1.0), "how far through the motion the partial clip reaches", required=False),
+    })),
+    "Associate: the whole pattern (motion and sensor, or the rest of the motion) from a partial one.",
+)
+
+DISTANCE = Endpoint(
+    "distance",
+    Message("pss.distance", Map({"space": SPACE, "a": SYMBOL, "b": SYMBOL}), doc="eq. 2.4 between two proto-symbols"),
+    Message("pss.distance.reply", Map({"space": SPACE, "a": F(Str(max_len=64)), "b": F(Str(max_len=64)),
+                                       "distance": F(Float(0.0), "eq. 2.4 distance")})),
+    "Distance (eq. 2.4) between two proto-symbols of a space.",
+)
+
+INFO_EP = Endpoint(
+    "info",
+    Message("pss.info", Map({"space": SPACE})),
+    Message("pss.info.reply", INFO),
+    "Everything about one space: proto-symbols, points, parameters, stress.",
+)
+
+LIST = Endpoint(
+    "list",
+    Message("pss.list", Map({})),
+    Message("pss.list.reply", Map({
+        "spaces": F(List(Map({"space": SPACE, "n_proto_symbols": F(Int(0)), "labels": F(List(Str(max_len=64), max_len=MAX_CLIPS)),
+                              "dim": F(Int(1)), "stress1": F(Float(0.0))}), max_len=10_000)),
+        "interrupted": F(List(Map({"space": SPACE, "operation": F(Str(max_len=32)), "started": F(Float(0.0))}),
+                              max_len=10_000), "builds or adds that never finished (the service stopped mid-way)"),
+    })),
+    "Every space, and any build that was interrupted.",
+)
+
+DELETE = Endpoint(
+    "delete",
+    Message("pss.delete", Map({"space": SPACE})),
+    Message("pss.delete.reply", Map({"space": SPACE, "deleted": F(Bool())})),
+    "Delete a space (its file too).",
+)
+
+ENDPOINTS = {e.verb: e for e in (BUILD, ADD, RECOGNIZE, GENERATE, ASSOCIATE, DISTANCE, INFO_EP, LIST, DELETE)}
+
+EVENTS = {
+    "space": Message("pss.event.space", Map({
+        "space": SPACE,
+        "change": F(Str(choices=("built", "added", "deleted")), "what happened"),
+        "n_proto_symbols": F(Int(0)),
+        "info": F(AnyMap(), "the space's info after the change (absent on delete)", required=False),
+    }), doc="published on <prefix>/events/pss/space when a space changes"),
+}

@@ -1,0 +1,140 @@
+"""The PSS model service: owns the named Proto-symbol Spaces (contract: ``schemas/pss.py``).
+
+Thin by design: every handler validates nothing itself (the runtime did), converts the wire
+clips, calls ``shared.pss`` and shapes the reply. State lives in a :class:`SpaceStore` under
+``$MIRRORCOACH_HOME/data/pss``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from schemas import pss as contract
+from schemas.common import clip_from_wire, clip_to_wire
+from shared.bus.config import Settings
+from shared.bus.runtime import Service
+from shared.errors import BadInput
+from shared.pss.space import ProtoSymbolSpace
+from shared.pss.store import Conflict, SpaceStore
+
+
+def space_info(name: str, space: ProtoSymbolSpace) -> dict:
+    info = space.info()
+    info.pop("name", None)
+    info["space"] = name
+    info["proto_symbols"] = [{"name": s.name, "label": s.label} for s in space.symbols]
+    info["points"] = np.asarray(space.points, dtype=np.float64)
+    info["mds_converged"] = bool(info["mds_converged"])
+    info["hmm_converged"] = int(info["hmm_converged"])
+    info["stress"], info["stress1"] = float(info["stress"]), float(info["stress1"])
+    return info
+
+
+def make_service(settings: Settings | None = None, workers: int = 8) -> Service:
+    settings = settings or Settings()
+    store = SpaceStore(settings.data_dir("pss"))
+    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings, workers=workers)
+
+    def changed(name, change, space=None):
+        svc.publish("space", {"space": name, "change": change,
+                              "n_proto_symbols": 0 if space is None else len(space.symbols),
+                              **({} if space is None else {"info": space_info(name, space)})})
+
+    def write(name, operation, make):
+        with store.writing(name, operation):
+            try:
+                space = make()
+            except BaseException:
+                store.abandon(name)  # nothing changed; a kill (not an exception) leaves the marker
+                raise
+            store.commit(name, space)
+        return space
+
+    @svc.handler("build")
+    def build(req):
+        name = req["space"]
+        if store.exists(name) and not req["replace"]:
+            raise Conflict(f"space {name!r} exists; delete it first or build with replace", space=name)
+        clips = [clip_from_wire(c) for c in req["clips"]]
+        space = write(name, "build", lambda: ProtoSymbolSpace.build(
+            clips, n_states=req["n_states"], dim=req["dim"], fps=req["fps"],
+            covariance_type=req["covariance_type"], group_by=req["group_by"], name=name))
+        changed(name, "built", space)
+        return space_info(name, space)
+
+    @svc.handler("add")
+    def add(req):
+        name = req["space"]
+        old = store.get(name)
+        clips = [clip_from_wire(c, old.features.skeleton) for c in req["clips"]]
+        space = write(name, "add", lambda: old.rebuilt(add=clips))
+        changed(name, "added", space)
+        return space_info(name, space)
+
+    @svc.handler("recognize")
+    def recognize(req):
+        space = store.get(req["space"])
+        clips = [clip_from_wire(c, space.features.skeleton) for c in req["clips"]]
+        rec = space.recognize(clips[0] if len(clips) == 1 else clips, top=req["top"])
+        return {"space": req["space"], "label": rec.label, "label_in_space": rec.label_in_space,
+                "point": np.asarray(rec.point, float), "stress": float(rec.stress), "seconds": float(rec.seconds),
+                "nearest": [{"name": n, "label": lab, "distance": float(d)} for n, lab, d in rec.nearest]}
+
+    @svc.handler("generate")
+    def generate(req):
+        space = store.get(req["space"])
+        if req["point"] is not None:
+            point = req["point"]
+            if point.shape != (space.params.dim,):
+                raise BadInput(f"generate: the point has {point.size} coordinates, space {req['space']!r} has {space.params.dim}",
+                               field="point")
+            weights = space.weights(point)
+        else:
+            weights = space.mix_weights(req["mix"])
+            point = space.point_of(weights)
+        clip = space.generate(weights=weights, method=req["method"], n_frames=req["frames"], seed=req["seed"],
+                              name=req["name"])
+        return {"space": req["space"], "clip": clip_to_wire(clip), "weights": np.asarray(weights, float),
+                "point": np.asarray(point, float)}
+
+    @svc.handler("associate")
+    def associate(req):
+        space = store.get(req["space"])
+        clip = clip_from_wire(req["clip"], space.features.skeleton)
+        a = space.associate(clip, req["missing"], method=req["method"], seed=req["seed"])
+        out = {"space": req["space"], "label": a.recognition.label, "point": np.asarray(a.recognition.point, float),
+               "whole": clip_to_wire(a.whole)}
+        if a.aligned is not None:
+            out["aligned"] = clip_to_wire(a.aligned, with_skeleton=False)
+        if a.progress is not None:
+            out["progress"] = float(a.progress)
+        return out
+
+    @svc.handler("distance")
+    def distance(req):
+        space = store.get(req["space"])
+        i, j = space.symbol(req["a"]), space.symbol(req["b"])
+        return {"space": req["space"], "a": space.symbols[i].name, "b": space.symbols[j].name,
+                "distance": float(space.distances[i, j])}
+
+    @svc.handler("info")
+    def info(req):
+        return space_info(req["space"], store.get(req["space"]))
+
+    @svc.handler("list")
+    def list_spaces(req):
+        rows = []
+        for name in store.names():
+            sp = store.get(name)
+            rows.append({"space": name, "n_proto_symbols": len(sp.symbols), "labels": sorted(set(sp.labels)),
+                         "dim": sp.params.dim, "stress1": float(sp.embedding.stress1)})
+        return {"spaces": rows, "interrupted": store.interrupted()}
+
+    @svc.handler("delete")
+    def delete(req):
+        store.delete(req["space"])
+        changed(req["space"], "deleted")
+        return {"space": req["space"], "deleted": True}
+
+    svc.store = store
+    return svc

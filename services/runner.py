@@ -1,0 +1,22 @@
+"""Start one service process: logging, settings, a clear exit on a bad configuration."""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import sys
+
+from shared.errors import MirrorcoachError
+
+
+def main(name: str, module: str) -> int:
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format=f"%(asctime)s {name} %(levelname)s %(message)s")
+    try:
+        from shared.bus.config import Settings
+
+        svc = importlib.import_module(module).make_service(Settings())
+    except MirrorcoachError as e:
+        print(f"error: {e.message}", file=sys.stderr)
+        return 2
+    return svc.run()

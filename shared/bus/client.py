@@ -1,0 +1,105 @@
+"""The client helper: one request, one reply or one clear error, always within a timeout.
+
+``Client.request("pss", "recognize", {...})`` returns the decoded reply map or raises:
+
+* :class:`RemoteError` with the service's stable code (``bad_request``, ``not_found``, ...);
+* :class:`Unavailable` when nothing answered: "service pss is not running (start it with
+  `make up`)" when its liveliness token is absent, or a timeout message when it is alive
+  but did not answer in time;
+* :class:`Unavailable` when there is no router: "the cluster is not running".
+"""
+
+from __future__ import annotations
+
+import time
+
+from shared.bus.config import Settings, client_config
+from shared.codec import pack, unpack
+from shared.errors import MirrorcoachError
+
+
+class Unavailable(MirrorcoachError):
+    code = "unavailable"
+
+
+class RemoteError(MirrorcoachError):
+    """An error a service replied with; ``code`` is the service's stable code."""
+
+    def __init__(self, code: str, message: str, details: dict | None = None):
+        super().__init__(message, **(details or {}))
+        self.code = code
+
+
+class Client:
+    """A Zenoh client session for requests, liveliness and event subscriptions."""
+
+    def __init__(self, settings: Settings | None = None, connect_timeout_s: float = 3.0):
+        import zenoh
+
+        self.settings = settings or Settings()
+        try:
+            self.session = zenoh.open(client_config(self.settings, wait=False, connect_timeout_s=connect_timeout_s))
+        except zenoh.ZError:
+            raise Unavailable(f"the cluster is not running (no router at {self.settings.router}; start it with `make up`)",
+                              router=self.settings.router) from None
+        self._subs = []
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self) -> None:
+        for s in self._subs:
+            s.undeclare()
+        self._subs.clear()
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+
+    # ------------------------------------------------------------------ requests
+    def request_raw(self, service: str, verb: str, payload: bytes, timeout: float | None = None) -> dict:
+        timeout = self.settings.timeout if timeout is None else timeout
+        t0 = time.monotonic()
+        replies = self.session.get(self.settings.key(service, verb), payload=payload, timeout=timeout)
+        for r in replies:
+            if r.ok is not None:
+                return unpack(r.ok.payload.to_bytes())
+            try:
+                err = unpack(r.err.payload.to_bytes())
+                raise RemoteError(str(err.get("code", "internal")), str(err.get("message", "")), err.get("details") or {})
+            except RemoteError:
+                raise
+            except MirrorcoachError:
+                raise RemoteError("internal", f"{service} sent an unreadable error: {r.err.payload.to_bytes()[:200]!r}") from None
+        waited = time.monotonic() - t0
+        if service not in self.alive(timeout=1.0):
+            raise Unavailable(f"service {service} is not running (start it with `make up`)", service=service)
+        if waited >= 0.9 * timeout:
+            raise Unavailable(f"service {service} did not answer {verb} within {timeout:g} s", service=service, timeout=timeout)
+        raise Unavailable(f"service {service} gave no answer to {verb} (it may have restarted meanwhile); retry",
+                          service=service)
+
+    def request(self, service: str, verb: str, message: dict | None = None, timeout: float | None = None) -> dict:
+        """Send ``message`` to ``<prefix>/<service>/<verb>``; the decoded reply map."""
+        return self.request_raw(service, verb, pack(message or {}), timeout)
+
+    # ------------------------------------------------------------------ liveliness and events
+    def alive(self, timeout: float = 2.0) -> set[str]:
+        """Names of the services whose liveliness token is declared."""
+        out = set()
+        for r in self.session.liveliness().get(self.settings.key("alive", "*"), timeout=timeout):
+            if r.ok is not None:
+                out.add(str(r.ok.key_expr).rsplit("/", 1)[-1])
+        return out
+
+    def subscribe(self, key: str, callback) -> None:
+        """Call ``callback(key, message)`` for every event on ``<prefix>/<key>`` (may use ``*``/``**``)."""
+        def on_sample(sample):
+            try:
+                callback(str(sample.key_expr), unpack(sample.payload.to_bytes()))
+            except MirrorcoachError:
+                pass
+
+        self._subs.append(self.session.declare_subscriber(self.settings.key(key), on_sample))

@@ -1,0 +1,109 @@
+"""Where the cluster lives: endpoints, key prefix, data folder, limits (environment variables).
+
+===========================  ==========================  ===========================================
+variable                     default                     meaning
+===========================  ==========================  ===========================================
+``MIRRORCOACH_ROUTER``       ``tcp/127.0.0.1:7447``      the router's endpoint (loopback only)
+``MIRRORCOACH_PREFIX``       ``mc``                      first segment of every key
+``MIRRORCOACH_HOME``         ``./var``                   data (``data/<service>``), logs, pid files
+``MIRRORCOACH_MAX_PAYLOAD``  ``67108864`` (64 MiB)       largest request a service accepts, bytes
+``MIRRORCOACH_TIMEOUT``      ``120``                     default request timeout of the CLI, seconds
+===========================  ==========================  ===========================================
+
+The embedded default topology (DESIGN.md "Bus conventions"): one router-mode Zenoh session
+listening on the loopback endpoint, every service and the CLI as clients connecting to it,
+multicast and gossip scouting off, so nothing binds or talks beyond 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import json
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from shared.codec import DEFAULT_MAX_PAYLOAD
+from shared.errors import BadInput
+
+LOOPBACK_HOSTS = {"localhost"}
+
+
+def _env(name: str, default: str) -> str:
+    v = os.environ.get(name, "").strip()
+    return v or default
+
+
+def check_loopback(endpoint: str) -> str:
+    """``tcp/127.0.0.1:7447`` -> itself; anything not on loopback is refused."""
+    m = re.fullmatch(r"(tcp|udp)/\[?([^\]]+?)\]?:(\d{1,5})", endpoint)
+    if not m:
+        raise BadInput(f"endpoint {endpoint!r} is not of the form tcp/127.0.0.1:PORT")
+    host, port = m.group(2), int(m.group(3))
+    if not 0 < port < 65536:
+        raise BadInput(f"endpoint {endpoint!r}: port out of range")
+    if host not in LOOPBACK_HOSTS:
+        try:
+            if not ipaddress.ip_address(host).is_loopback:
+                raise ValueError
+        except ValueError:
+            raise BadInput(f"endpoint {endpoint!r} is not a loopback address; the embedded cluster binds 127.0.0.1 only") from None
+    return endpoint
+
+
+@dataclass
+class Settings:
+    router: str = field(default_factory=lambda: _env("MIRRORCOACH_ROUTER", "tcp/127.0.0.1:7447"))
+    prefix: str = field(default_factory=lambda: _env("MIRRORCOACH_PREFIX", "mc"))
+    home: Path = field(default_factory=lambda: Path(_env("MIRRORCOACH_HOME", "var")).absolute())
+    max_payload: int = field(default_factory=lambda: int(_env("MIRRORCOACH_MAX_PAYLOAD", str(DEFAULT_MAX_PAYLOAD))))
+    timeout: float = field(default_factory=lambda: float(_env("MIRRORCOACH_TIMEOUT", "120")))
+
+    def __post_init__(self):
+        check_loopback(self.router)
+        if not re.fullmatch(r"[A-Za-z0-9_-]{1,32}", self.prefix):
+            raise BadInput(f"MIRRORCOACH_PREFIX {self.prefix!r} must be 1-32 letters, digits, '_' or '-'")
+
+    def key(self, *parts: str) -> str:
+        return "/".join((self.prefix, *parts))
+
+    def data_dir(self, service: str) -> Path:
+        return self.home / "data" / service
+
+    @property
+    def log_dir(self) -> Path:
+        return self.home / "logs"
+
+    @property
+    def run_dir(self) -> Path:
+        return self.home / "run"
+
+
+def _base(mode: str):
+    import zenoh
+
+    c = zenoh.Config()
+    c.insert_json5("mode", json.dumps(mode))
+    c.insert_json5("scouting/multicast/enabled", "false")
+    c.insert_json5("scouting/gossip/enabled", "false")
+    c.insert_json5("adminspace/enabled", "false")
+    return c
+
+
+def router_config(s: Settings):
+    """The router: listens on the loopback endpoint and nowhere else."""
+    c = _base("router")
+    c.insert_json5("listen/endpoints", json.dumps([s.router]))
+    return c
+
+
+def client_config(s: Settings, wait: bool = True, connect_timeout_s: float = 3.0):
+    """A client of the router. Services wait for it forever (start order does not matter);
+    the CLI gives up after ``connect_timeout_s`` with a clear message."""
+    c = _base("client")
+    c.insert_json5("listen/endpoints", "[]")
+    c.insert_json5("connect/endpoints", json.dumps([s.router]))
+    c.insert_json5("connect/timeout_ms", "-1" if wait else str(int(connect_timeout_s * 1000)))
+    c.insert_json5("connect/exit_on_failure", "false" if wait else "true")
+    return c

@@ -1,0 +1,203 @@
+"""The service runtime every mirrorcoach process uses.
+
+A :class:`Service` answers the verbs of its contract (``schemas/<service>.py``) on
+``<prefix>/<service>/<verb>``:
+
+1. the Zenoh callback only hands the query to a worker pool (callbacks run one at a time,
+   DESIGN.md), so a long request never blocks the others;
+2. the worker checks the payload size, decodes msgpack (``shared.codec``), validates the
+   request against the contract, calls the handler, validates the reply, and replies on the
+   query's concrete key;
+3. any :class:`~shared.errors.MirrorcoachError` becomes ``reply_err`` with its stable code;
+   anything else becomes ``internal`` (logged with its traceback, never shown to the caller);
+4. the query is always finalised (``with query``), so a caller never waits for a timeout.
+
+The service declares the liveliness token ``<prefix>/alive/<service>``, publishes events on
+``<prefix>/events/<service>/<topic>`` (congestion control BLOCK: events are not dropped) and a
+``request`` event per answered request (verb, milliseconds, code) for the observer. SIGTERM or
+SIGINT stops it cleanly: the queryable is undeclared, in-flight requests finish (bounded
+wait), ``on_stop`` hooks flush state, and the session is closed.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+import time
+import traceback
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable
+
+from schemas.base import Endpoint, Message
+from shared.bus.config import Settings, client_config
+from shared.codec import pack, unpack
+from shared.errors import BadInput, MirrorcoachError, NotFound
+
+log = logging.getLogger("mirrorcoach.service")
+
+
+def error_payload(code: str, message: str, details: dict | None = None) -> bytes:
+    safe = {}
+    for k, v in (details or {}).items():
+        safe[str(k)] = v if isinstance(v, (str, int, float, bool, type(None))) else str(v)
+    return pack({"code": code, "message": message, "details": safe})
+
+
+class Service:
+    """A named service answering the endpoints of its contract.
+
+    Parameters
+    ----------
+    name : str
+        The service's name (``pss``, ``simulator``, ...): its key segment and liveliness token.
+    endpoints : dict verb -> :class:`schemas.base.Endpoint`
+    events : dict topic -> :class:`schemas.base.Message`, optional
+    workers : int
+        Size of the worker pool (concurrent requests).
+    """
+
+    def __init__(self, name: str, endpoints: dict[str, Endpoint], events: dict[str, Message] | None = None,
+                 settings: Settings | None = None, workers: int = 8, stop_grace_s: float = 30.0):
+        self.name = name
+        self.endpoints = endpoints
+        self.events = events or {}
+        self.settings = settings or Settings()
+        self.handlers: dict[str, Callable[[dict], dict]] = {}
+        self.on_stop: list[Callable[[], None]] = []
+        self.workers = workers
+        self.stop_grace_s = stop_grace_s
+        self._stop = threading.Event()
+        self._pool: ThreadPoolExecutor | None = None
+        self._session = None
+        self._queryable = None
+        self._token = None
+        self._publishers: dict[str, object] = {}
+        self._inflight = 0
+        self._inflight_lock = threading.Lock()
+
+    # ------------------------------------------------------------------ declaration
+    def handler(self, verb: str):
+        """Decorator: ``@service.handler("build") def build(req: dict) -> dict``."""
+        if verb not in self.endpoints:
+            raise ValueError(f"{verb!r} is not a verb of the {self.name} contract")
+
+        def deco(fn):
+            self.handlers[verb] = fn
+            return fn
+
+        return deco
+
+    # ------------------------------------------------------------------ life cycle
+    def start(self) -> "Service":
+        import zenoh
+
+        missing = set(self.endpoints) - set(self.handlers)
+        if missing:
+            raise RuntimeError(f"service {self.name}: no handler for {sorted(missing)}")
+        self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix=f"{self.name}-worker")
+        self._session = zenoh.open(client_config(self.settings, wait=True))
+        for topic in list(self.events) + ["request"]:
+            self._publishers[topic] = self._session.declare_publisher(
+                self.settings.key("events", self.name, topic), congestion_control=zenoh.CongestionControl.BLOCK)
+        self._queryable = self._session.declare_queryable(self.settings.key(self.name, "*"), self._on_query)
+        self._token = self._session.liveliness().declare_token(self.settings.key("alive", self.name))
+        log.info("service %s up on %s (prefix %s)", self.name, self.settings.router, self.settings.prefix)
+        return self
+
+    def run(self) -> int:
+        """Start, serve until SIGTERM/SIGINT, stop. Returns the exit code."""
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: self._stop.set())
+        self.start()
+        try:
+            while not self._stop.wait(0.5):
+                pass
+        finally:
+            self.stop()
+        return 0
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._queryable is not None:
+            self._queryable.undeclare()
+            self._queryable = None
+        if self._pool is not None:
+            deadline = time.monotonic() + self.stop_grace_s
+            while self._inflight and time.monotonic() < deadline:
+                time.sleep(0.05)
+            self._pool.shutdown(wait=False, cancel_futures=True)
+        for hook in self.on_stop:
+            try:
+                hook()
+            except Exception:  # a failing hook must not keep the session open
+                log.exception("on_stop hook failed")
+        if self._token is not None:
+            self._token.undeclare()
+        for p in self._publishers.values():
+            p.undeclare()
+        self._publishers.clear()
+        if self._session is not None:
+            self._session.close()
+            self._session = None
+        log.info("service %s stopped", self.name)
+
+    # ------------------------------------------------------------------ events
+    def publish(self, topic: str, message: dict) -> None:
+        """Publish an event declared in the contract (validated first)."""
+        body = self.events[topic].validate(message) if topic in self.events else message
+        pub = self._publishers.get(topic)
+        if pub is not None:
+            pub.put(pack({"v": self.events[topic].version if topic in self.events else 1, **body}))
+
+    # ------------------------------------------------------------------ requests
+    def _on_query(self, query) -> None:
+        with self._inflight_lock:
+            self._inflight += 1
+        try:
+            self._pool.submit(self._serve, query)
+        except RuntimeError:  # pool shut down: we are stopping
+            with self._inflight_lock:
+                self._inflight -= 1
+            with query:
+                query.reply_err(error_payload("unavailable", f"service {self.name} is stopping"))
+
+    def _serve(self, query) -> None:
+        t0 = time.perf_counter()
+        verb = str(query.key_expr).rsplit("/", 1)[-1]
+        code = "ok"
+        try:
+            with query:
+                try:
+                    reply = self.handle(verb, query.payload.to_bytes() if query.payload is not None else b"")
+                    query.reply(query.key_expr, reply)
+                except MirrorcoachError as e:
+                    code = e.code
+                    query.reply_err(error_payload(e.code, e.message, e.details))
+                except Exception as e:  # a bug: log it, tell the caller without a traceback
+                    code = "internal"
+                    log.error("internal error in %s/%s: %s\n%s", self.name, verb, e, traceback.format_exc())
+                    query.reply_err(error_payload("internal", f"{self.name} failed on {verb}: {type(e).__name__}: {e}"))
+        finally:
+            with self._inflight_lock:
+                self._inflight -= 1
+            ms = 1e3 * (time.perf_counter() - t0)
+            log.info("%s %s %.1f ms", verb, code, ms)
+            try:
+                self.publish("request", {"service": self.name, "verb": verb, "ms": ms, "code": code})
+            except Exception:  # observability must never break a reply
+                pass
+
+    def handle(self, verb: str, payload: bytes) -> bytes:
+        """Decode, validate, call, validate the reply, encode (also usable without a bus)."""
+        ep = self.endpoints.get(verb)
+        if ep is None:
+            raise NotFound(f"service {self.name} has no verb {verb!r}; it answers {', '.join(sorted(self.endpoints))}")
+        msg = unpack(payload, self.settings.max_payload) if payload else {}
+        req = ep.request.validate(msg)
+        out = self.handlers[verb](req)
+        try:
+            out = ep.reply.validate(out)
+        except BadInput as e:  # our own reply is off-contract: a bug, not the caller's fault
+            raise RuntimeError(f"reply does not match {ep.reply.name}: {e.message}") from None
+        return pack({"v": ep.reply.version, **out})

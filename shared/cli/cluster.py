@@ -1,0 +1,247 @@
+"""CLI commands that talk to the running cluster: ``space ...``, ``status``, ``up``, ``down``,
+``schemas``. Clips are read here and sent as messages; the work happens in the services."""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from shared.cli.app import SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app
+
+space_app = typer.Typer(help="Proto-symbol spaces on the pss service (needs `make up`).", no_args_is_help=True)
+app.add_typer(space_app, name="space")
+
+TIMEOUT_HELP = "Seconds to wait for the service (default: $MIRRORCOACH_TIMEOUT or 120)."
+
+
+def _client():
+    from shared.bus.client import Client
+
+    return Client()
+
+
+def _wire_name(name: str) -> str:
+    """A clip name the contract accepts (letters, digits, '_', '.', '-')."""
+    n = re.sub(r"[^A-Za-z0-9_.-]", "_", name or "clip")[:64]
+    return n if n[:1].isalnum() else ("c" + n)[:64]
+
+
+def _wire(clip, with_skeleton=True) -> dict:
+    from schemas.common import clip_to_wire
+
+    d = clip_to_wire(clip, with_skeleton=with_skeleton)
+    d["name"] = _wire_name(d["name"])
+    if "label" in d:
+        d["label"] = _wire_name(d["label"])
+    return d
+
+
+def _busy(message: str):
+    from rich.console import Console
+
+    return Console(stderr=True).status(message) if sys.stderr.isatty() else _Quiet()
+
+
+class _Quiet:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+def _print_info(info: dict) -> None:
+    typer.echo(f"space {info['space']}: {info['n_proto_symbols']} proto-symbols, {len(info['labels'])} labels, "
+               f"dim {info['params']['dim']}, {info['params']['n_states']} HMM states, "
+               f"{info['n_features']} features, stress-1 {info['stress1']:.3f}")
+
+
+def _jsonable(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items() if k != "v"}
+    if isinstance(obj, list):
+        return [_jsonable(v) for v in obj]
+    return obj
+
+
+# ---------------------------------------------------------------------------- space
+@space_app.command("build")
+def space_build(name: str = typer.Argument(..., help="Name of the space (letters, digits, _ . -)."),
+                paths: list[Path] = typer.Argument(..., help="Clip files or folders of clips (.amc, .bvh, .npz)."),
+                label: Optional[str] = typer.Option(None, help="Label of every clip (default: the clip's parent folder)."),
+                dim: int = typer.Option(3, help="Dimension of the space."),
+                states: Optional[int] = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
+                group_by: str = typer.Option("clip", help="'clip': a proto-symbol per clip; 'label': one per label."),
+                replace: bool = typer.Option(False, "--replace", help="Replace an existing space of that name."),
+                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+                as_json: bool = typer.Option(False, "--json", help="Print the space's info as JSON.")):
+    """Build a named space on the pss service from clips (eq. 2.5)."""
+    clips = _load_clips(paths, skeleton, label)
+    req = {"space": name, "clips": [_wire(c) for c in clips], "dim": dim, "group_by": group_by, "replace": replace}
+    if states is not None:
+        req["n_states"] = states
+    with _client() as c, _busy(f"building space {name} from {len(clips)} clips"):
+        info = c.request("pss", "build", req, timeout=timeout)
+    if as_json:
+        typer.echo(json.dumps(_jsonable(info)))
+    else:
+        _print_info(info)
+
+
+@space_app.command("list")
+def space_list(as_json: bool = typer.Option(False, "--json")):
+    """Every space on the pss service (and any build that was interrupted)."""
+    with _client() as c:
+        r = c.request("pss", "list", timeout=30)
+    if as_json:
+        typer.echo(json.dumps(_jsonable(r)))
+        return
+    if not r["spaces"]:
+        typer.echo("no spaces (build one with `mirrorcoach space build NAME CLIPS...`)")
+    for s in r["spaces"]:
+        typer.echo(f"{s['space']:<24} {s['n_proto_symbols']:>4} proto-symbols  {len(s['labels']):>3} labels  "
+                   f"dim {s['dim']}  stress-1 {s['stress1']:.3f}")
+    for i in r["interrupted"]:
+        typer.echo(f"{i['space']:<24} INTERRUPTED: its {i['operation']} never finished (the service stopped); "
+                   "build it again or delete it")
+
+
+@space_app.command("show")
+def space_show(name: str = typer.Argument(..., help="Space name."), as_json: bool = typer.Option(False, "--json")):
+    """A space's proto-symbols, points, parameters and stress."""
+    with _client() as c:
+        info = c.request("pss", "info", {"space": name}, timeout=30)
+    if as_json:
+        typer.echo(json.dumps(_jsonable(info)))
+        return
+    _print_info(info)
+    for s, p in zip(info["proto_symbols"], info["points"]):
+        typer.echo(f"  {s['label']:<30} {s['name']:<45} ({', '.join(f'{v:8.3f}' for v in p)})")
+
+
+@space_app.command("recognize")
+def space_recognize(name: str = typer.Argument(..., help="Space name."),
+                    clips: list[Path] = typer.Argument(..., help="Clip(s): several are repetitions of one motion."),
+                    top: int = typer.Option(5, help="How many nearest proto-symbols to list."),
+                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                    timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+                    as_json: bool = typer.Option(False, "--json", help="label, point, nearest as JSON.")):
+    """Recognise a motion as a point of the space (eq. 2.6) and list its nearest proto-symbols."""
+    from shared.io import load_clip
+
+    reps = [_wire(load_clip(p, skeleton=skeleton)) for p in clips]
+    with _client() as c:
+        r = c.request("pss", "recognize", {"space": name, "clips": reps, "top": top}, timeout=timeout)
+    if as_json:
+        typer.echo(json.dumps(_jsonable(r)))
+        return
+    typer.echo(f"label {r['label']}   point ({', '.join(f'{v:.3f}' for v in r['point'])})")
+    for n in r["nearest"]:
+        typer.echo(f"  {n['distance']:9.3f}  {n['label']:<30} {n['name']}")
+
+
+@space_app.command("generate")
+def space_generate(name: str = typer.Argument(..., help="Space name."),
+                   out: Path = typer.Option(..., "--out", help="Output clip (.bvh, .npz or .amc)."),
+                   point: Optional[str] = typer.Option(None, help="Point as comma-separated coordinates."),
+                   mix: Optional[list[str]] = typer.Option(None, help="LABEL=W or NAME=W, repeatable; weights sum to 1 (may be negative)."),
+                   method: str = typer.Option("expected", help="'expected' (deterministic) or 'monte_carlo'."),
+                   seed: int = typer.Option(0, help="Seed of the Monte Carlo generation."),
+                   timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+                   as_json: bool = typer.Option(False, "--json")):
+    """Generate a motion from a point or a mix of proto-symbols (eq. 2.7, 4.2) and write it."""
+    from schemas.common import clip_from_wire
+    from shared.io import save_clip
+
+    if (point is None) == (not mix):
+        _fail("give exactly one of --point or --mix")
+    req = {"space": name, "method": method, "seed": seed, "name": _wire_name(out.stem)}
+    if point is not None:
+        req["point"] = _parse_point(point)
+    else:
+        req["mix"] = _parse_mix(mix)
+    with _client() as c:
+        r = c.request("pss", "generate", req, timeout=timeout)
+    clip = clip_from_wire(r["clip"])
+    save_clip(clip, out)
+    if as_json:
+        typer.echo(json.dumps({"file": str(out), "frames": clip.n_frames, "fps": clip.fps,
+                               "point": r["point"].tolist(), "weights": r["weights"].tolist()}))
+    else:
+        typer.echo(f"wrote {out} ({clip.n_frames} frames at {clip.fps:g} fps) from point "
+                   f"({', '.join(f'{v:.3f}' for v in r['point'])})")
+
+
+@space_app.command("delete")
+def space_delete(name: str = typer.Argument(..., help="Space name.")):
+    """Delete a space from the pss service (and its file)."""
+    with _client() as c:
+        c.request("pss", "delete", {"space": name}, timeout=30)
+    typer.echo(f"deleted space {name}")
+
+
+# ---------------------------------------------------------------------------- cluster
+@app.command("status")
+def status(as_json: bool = typer.Option(False, "--json")):
+    """Each process of the cluster and whether it is alive (exit 1 if any is down)."""
+    from shared.cluster import status as cluster_status
+
+    rows = cluster_status()
+    if as_json:
+        typer.echo(json.dumps(rows))
+    else:
+        for r in rows:
+            typer.echo(f"{r['name']:<12} {'alive' if r['alive'] else 'DOWN':<6} pid {r['pid'] or '-'}")
+    if not all(r["alive"] for r in rows):
+        raise typer.Exit(1)
+
+
+@app.command("up")
+def up(wait: float = typer.Option(120.0, help="Seconds to wait for every service to be alive.")):
+    """Start the local cluster (router + services of deploy/cluster.toml) in the background."""
+    from shared.cluster import up as cluster_up
+
+    raise typer.Exit(cluster_up(wait_s=wait, echo=typer.echo))
+
+
+@app.command("down")
+def down():
+    """Stop the local cluster."""
+    from shared.cluster import down as cluster_down
+
+    raise typer.Exit(cluster_down(echo=typer.echo))
+
+
+@app.command("schemas")
+def schemas(service: Optional[str] = typer.Argument(None, help="Only this service's contract.")):
+    """Print every request and reply of every service (the contracts in schemas/)."""
+    from schemas import CONTRACTS
+
+    if service is not None and service not in CONTRACTS:
+        _fail(f"no service {service!r}; services: {', '.join(CONTRACTS)}")
+    for name, mod in CONTRACTS.items():
+        if service is not None and name != service:
+            continue
+        typer.echo(f"# {name}  (keys {'<prefix>'}/{name}/<verb>)\n")
+        for ep in mod.ENDPOINTS.values():
+            typer.echo(f"## {name}/{ep.verb}: {ep.doc}")
+            typer.echo("request  " + ep.request.describe())
+            typer.echo("reply    " + ep.reply.describe())
+            typer.echo("")
+        for topic, msg in getattr(mod, "EVENTS", {}).items():
+            typer.echo(f"## event <prefix>/events/{name}/{topic}")
+            typer.echo(msg.describe())
+            typer.echo("")
+    if service is None:
+        from schemas.common import ERROR
+
+        typer.echo("# every error (reply_err)\n" + ERROR.describe())

@@ -1,0 +1,241 @@
+"""The local cluster: ``mirrorcoach up``, ``down`` and ``status`` (``make up|down|status``).
+
+``up`` starts a detached supervisor (``python -m shared.cluster supervise``) that runs the
+router and every service of ``deploy/cluster.toml`` as child processes, each logging to
+``$MIRRORCOACH_HOME/logs/<name>.log``, and restarts any that exits (back-off 0.5 s doubling to
+10 s, reset after 30 s of good running). ``up`` returns once every service's liveliness token
+is seen (or says which one is not up and where its log is). ``down`` sends SIGTERM to the
+supervisor, which stops the services, then the router, and waits for them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from shared.bus.config import Settings
+from shared.errors import MirrorcoachError
+
+PLAN = Path(__file__).resolve().parent.parent / "deploy" / "cluster.toml"
+log = logging.getLogger("mirrorcoach.supervisor")
+
+
+@dataclass
+class Proc:
+    name: str
+    module: str
+    popen: subprocess.Popen | None = None
+    started: float = 0.0
+    failures: int = 0
+    restart_at: float | None = None
+
+
+def load_plan(path: Path = PLAN) -> list[Proc]:
+    """Router first, then the services, from ``deploy/cluster.toml``."""
+    try:
+        d = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise MirrorcoachError(f"cannot read the cluster plan {path}: {e}") from None
+    procs = [Proc("router", d.get("router", {}).get("module", "shared.bus.router"))]
+    for s in d.get("service", []):
+        if not {"name", "module"} <= set(s):
+            raise MirrorcoachError(f"{path}: every [[service]] needs a name and a module")
+        procs.append(Proc(str(s["name"]), str(s["module"])))
+    return procs
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:  # a zombie child of ours is not alive
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return True
+
+
+def read_pid(path: Path) -> int | None:
+    try:
+        pid = int(path.read_text().strip())
+    except (OSError, ValueError):
+        return None
+    return pid if _pid_alive(pid) else None
+
+
+class Supervisor:
+    def __init__(self, settings: Settings, plan: list[Proc]):
+        self.s = settings
+        self.plan = plan
+        self.stopping = False
+
+    def _start(self, p: Proc) -> None:
+        self.s.log_dir.mkdir(parents=True, exist_ok=True)
+        with open(self.s.log_dir / f"{p.name}.log", "ab") as out:
+            p.popen = subprocess.Popen([sys.executable, "-m", p.module], stdout=out, stderr=subprocess.STDOUT,
+                                       stdin=subprocess.DEVNULL, env=os.environ.copy())
+        p.started = time.monotonic()
+        p.restart_at = None
+        (self.s.run_dir / f"{p.name}.pid").write_text(str(p.popen.pid))
+        log.info("started %s (pid %d)", p.name, p.popen.pid)
+
+    def run(self) -> int:
+        self.s.run_dir.mkdir(parents=True, exist_ok=True)
+        (self.s.run_dir / "supervisor.pid").write_text(str(os.getpid()))
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: setattr(self, "stopping", True))
+        try:
+            for p in self.plan:
+                self._start(p)
+            while not self.stopping:
+                now = time.monotonic()
+                for p in self.plan:
+                    if p.restart_at is not None:
+                        if now >= p.restart_at:
+                            self._start(p)
+                        continue
+                    code = p.popen.poll()
+                    if code is None:
+                        if now - p.started > 30:
+                            p.failures = 0
+                        continue
+                    delay = min(0.5 * 2 ** p.failures, 10.0)
+                    p.failures += 1
+                    p.restart_at = now + delay
+                    log.warning("%s exited with code %s; restarting in %.1f s (log: %s)", p.name, code, delay,
+                                self.s.log_dir / f"{p.name}.log")
+                time.sleep(0.1)
+        finally:
+            self._stop_all()
+            (self.s.run_dir / "supervisor.pid").unlink(missing_ok=True)
+        return 0
+
+    def _stop_all(self) -> None:
+        for p in reversed(self.plan):  # services first, the router last
+            if p.popen is None or p.popen.poll() is not None:
+                continue
+            p.popen.terminate()
+            try:
+                p.popen.wait(timeout=40)
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop in 40 s; killing it", p.name)
+                p.popen.kill()
+                p.popen.wait()
+            (self.s.run_dir / f"{p.name}.pid").unlink(missing_ok=True)
+            log.info("stopped %s", p.name)
+
+
+# ---------------------------------------------------------------------------- commands
+def status(settings: Settings | None = None) -> list[dict]:
+    """One row per process of the plan: name, pid (from the supervisor's pid files), alive."""
+    from shared.bus.client import Client, Unavailable
+
+    s = settings or Settings()
+    plan = load_plan()
+    alive: set[str] = set()
+    router_up = False
+    try:
+        with Client(s, connect_timeout_s=1.0) as c:
+            router_up = True
+            alive = c.alive(timeout=1.0)
+    except Unavailable:
+        pass
+    rows = [{"name": "supervisor", "pid": read_pid(s.run_dir / "supervisor.pid"),
+             "alive": read_pid(s.run_dir / "supervisor.pid") is not None}]
+    for p in plan:
+        up = router_up if p.name == "router" else p.name in alive
+        rows.append({"name": p.name, "pid": read_pid(s.run_dir / f"{p.name}.pid"), "alive": up})
+    return rows
+
+
+def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> int:
+    from shared.bus.client import Client, Unavailable
+
+    s = settings or Settings()
+    plan = load_plan()
+    s.run_dir.mkdir(parents=True, exist_ok=True)
+    s.log_dir.mkdir(parents=True, exist_ok=True)
+    sup = read_pid(s.run_dir / "supervisor.pid")
+    if sup is None:
+        with open(s.log_dir / "supervisor.log", "ab") as out:
+            proc = subprocess.Popen([sys.executable, "-m", "shared.cluster", "supervise"], stdout=out,
+                                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
+                                    env=os.environ.copy())
+        sup = proc.pid
+        echo(f"starting the cluster on {s.router} (supervisor pid {sup})")
+    else:
+        proc = None
+        echo(f"the cluster's supervisor is already running (pid {sup})")
+    want = {p.name for p in plan if p.name != "router"}
+    deadline = time.monotonic() + wait_s
+    alive: set[str] = set()
+    while time.monotonic() < deadline:
+        if proc is not None and proc.poll() is not None:
+            echo(f"error: the supervisor exited (code {proc.returncode}); see {s.log_dir / 'supervisor.log'}")
+            return 1
+        try:
+            with Client(s, connect_timeout_s=1.0) as c:
+                alive = c.alive(timeout=1.0)
+        except Unavailable:
+            alive = set()
+        if want <= alive:
+            echo(f"cluster up: router + {', '.join(sorted(want))}; logs in {s.log_dir}")
+            return 0
+        time.sleep(0.2)
+    missing = sorted(want - alive)
+    echo(f"error: not alive after {wait_s:g} s: {', '.join(missing)}; see " +
+         ", ".join(str(s.log_dir / f"{m}.log") for m in missing))
+    return 1
+
+
+def down(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> int:
+    s = settings or Settings()
+    sup = read_pid(s.run_dir / "supervisor.pid")
+    if sup is None:
+        echo("the cluster is not running")
+        return 0
+    os.kill(sup, signal.SIGTERM)
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        if not _pid_alive(sup):
+            echo("cluster stopped")
+            return 0
+        time.sleep(0.1)
+    echo(f"error: the supervisor (pid {sup}) did not stop within {wait_s:g} s; see {s.log_dir / 'supervisor.log'}")
+    return 1
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m shared.cluster", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("command", choices=["supervise", "up", "down", "status"])
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s supervisor %(levelname)s %(message)s")
+    try:
+        if args.command == "supervise":
+            return Supervisor(Settings(), load_plan()).run()
+        if args.command == "up":
+            return up()
+        if args.command == "down":
+            return down()
+        for r in status():
+            print(f"{r['name']:<12} {'alive' if r['alive'] else 'DOWN':<6} {r['pid'] or '-'}")
+        return 0
+    except MirrorcoachError as e:
+        print(f"error: {e.message}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,75 @@
+"""The wire format: msgpack maps, numpy arrays as ``{"__nd__": true, dtype, shape, data}``.
+
+No pickle, no object arrays: an array travels as its raw little-endian bytes with a dtype from
+a fixed list, and is decoded read-only (``np.frombuffer``) without a copy. Incoming payloads
+are size-checked before they are parsed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import msgpack
+import numpy as np
+
+from shared.errors import BadInput
+
+#: dtypes an array may have on the wire (little-endian); anything else is refused.
+WIRE_DTYPES = {"<f8", "<f4", "<i8", "<i4", "<i2", "|i1", "<u8", "<u4", "<u2", "|u1", "|b1"}
+
+#: default limit on an incoming payload, bytes (MIRRORCOACH_MAX_PAYLOAD overrides it in services)
+DEFAULT_MAX_PAYLOAD = 64 * 1024 * 1024
+
+
+def _default(obj):
+    if isinstance(obj, np.ndarray):
+        a = obj
+        if a.dtype.kind not in "fiub":
+            raise BadInput(f"cannot send an array of dtype {a.dtype} (numbers and booleans only)")
+        a = np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<"))
+        return {"__nd__": True, "dtype": a.dtype.str, "shape": list(a.shape), "data": a.tobytes()}
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, (set, frozenset)):
+        return sorted(obj)
+    raise TypeError(f"cannot encode {type(obj).__name__}")
+
+
+def _decode_array(d: dict):
+    dtype, shape, data = d.get("dtype"), d.get("shape"), d.get("data")
+    if dtype not in WIRE_DTYPES:
+        raise BadInput(f"array dtype {dtype!r} is not accepted (one of {sorted(WIRE_DTYPES)})")
+    if not (isinstance(shape, list) and all(isinstance(n, int) and n >= 0 for n in shape)) or len(shape) > 8:
+        raise BadInput(f"array shape {shape!r} is not a list of at most 8 non-negative integers")
+    if not isinstance(data, bytes):
+        raise BadInput("array data must be bytes")
+    dt = np.dtype(dtype)
+    if len(data) != math.prod(shape) * dt.itemsize:
+        raise BadInput(f"array data has {len(data)} bytes, shape {shape} of {dtype} needs {math.prod(shape) * dt.itemsize}")
+    return np.frombuffer(data, dtype=dt).reshape(shape)
+
+
+def _object_hook(d: dict):
+    if d.get("__nd__") is True:
+        return _decode_array(d)
+    return d
+
+
+def pack(obj) -> bytes:
+    """Encode a message (maps, lists, strings, numbers, numpy arrays) as msgpack bytes."""
+    return msgpack.packb(obj, default=_default, use_bin_type=True)
+
+
+def unpack(payload: bytes, max_size: int = DEFAULT_MAX_PAYLOAD):
+    """Decode msgpack bytes; arrays come back read-only. Raises :class:`BadInput` on anything
+    that is not a well-formed message within ``max_size`` bytes."""
+    if len(payload) > max_size:
+        raise BadInput(f"payload of {len(payload)} bytes is over the limit of {max_size} bytes",
+                       size=len(payload), limit=max_size)
+    try:
+        return msgpack.unpackb(payload, object_hook=_object_hook, raw=False, strict_map_key=True,
+                               max_bin_len=max_size, max_str_len=max_size)
+    except BadInput:
+        raise
+    except Exception as e:  # msgpack raises several types (ExtraData, FormatError, ValueError, ...)
+        raise BadInput(f"payload is not valid msgpack ({type(e).__name__}: {e})") from None

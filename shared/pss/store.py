@@ -1,0 +1,136 @@
+"""Named spaces on disk: the PSS service's state, kept free of the bus.
+
+Every space is one ``<name>.npz`` in the store's folder, written atomically (temporary file,
+fsync, rename) by :meth:`ProtoSymbolSpace.save`, so a crash at any moment leaves either the
+old file or the new one. A build or add first writes ``<name>.pending.json``; the marker is
+removed once the new space is on disk. A marker found when the store opens belongs to an
+operation the previous process never finished: :meth:`interrupted` reports it until the space
+is built again or deleted.
+
+Readers never wait for writers: a space object is never modified in place, a write replaces
+it. Two writes to the same space at once are refused (``conflict``); writes to different
+spaces run side by side.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.pss.space import ProtoSymbolSpace
+
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+
+
+class Conflict(MirrorcoachError):
+    code = "conflict"
+
+
+def check_name(name: str) -> str:
+    if not isinstance(name, str) or not NAME_RE.fullmatch(name):
+        raise BadInput(f"{name!r} is not a valid space name (letters, digits, '_', '.', '-'; no '/' or leading '.')",
+                       field="space")
+    return name
+
+
+class SpaceStore:
+    """The spaces of one PSS service, in ``root``."""
+
+    def __init__(self, root):
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self._cache: dict[str, ProtoSymbolSpace] = {}
+        self._busy: set[str] = set()
+        self._lock = threading.Lock()
+        for tmp in self.root.glob(".*.npz.*"):  # half-written temporary files of a killed process
+            tmp.unlink(missing_ok=True)
+
+    # ------------------------------------------------------------------ paths
+    def path(self, name: str) -> Path:
+        return self.root / f"{check_name(name)}.npz"
+
+    def _marker(self, name: str) -> Path:
+        return self.root / f"{check_name(name)}.pending.json"
+
+    # ------------------------------------------------------------------ reading
+    def names(self) -> list[str]:
+        return sorted(p.stem for p in self.root.glob("*.npz") if NAME_RE.fullmatch(p.stem))
+
+    def exists(self, name: str) -> bool:
+        return self.path(name).exists()
+
+    def get(self, name: str) -> ProtoSymbolSpace:
+        with self._lock:
+            sp = self._cache.get(name)
+        if sp is not None:
+            return sp
+        p = self.path(name)
+        if not p.exists():
+            raise NotFound(f"no space named {name!r} (spaces: {', '.join(self.names()) or 'none'})", space=name)
+        sp = ProtoSymbolSpace.load(p)
+        sp.name = name
+        with self._lock:
+            return self._cache.setdefault(name, sp)
+
+    def interrupted(self) -> list[dict]:
+        out = []
+        for m in sorted(self.root.glob("*.pending.json")):
+            name = m.name[: -len(".pending.json")]
+            with self._lock:
+                if name in self._busy:
+                    continue
+            try:
+                info = json.loads(m.read_text())
+            except (OSError, ValueError):
+                info = {}
+            out.append({"space": name, "operation": str(info.get("operation", "build")),
+                        "started": float(info.get("started", m.stat().st_mtime))})
+        return out
+
+    # ------------------------------------------------------------------ writing
+    @contextmanager
+    def writing(self, name: str, operation: str):
+        """Hold the write slot of ``name`` with an on-disk marker; refuse a second writer."""
+        check_name(name)
+        with self._lock:
+            if name in self._busy:
+                raise Conflict(f"space {name!r} is being changed by another request; try again when it is done", space=name)
+            self._busy.add(name)
+        marker = self._marker(name)
+        try:
+            marker.write_text(json.dumps({"operation": operation, "started": time.time(), "pid": os.getpid()}))
+            yield
+        finally:
+            with self._lock:
+                self._busy.discard(name)
+
+    def commit(self, name: str, space: ProtoSymbolSpace) -> None:
+        """Write the space atomically, then publish it to readers and drop the marker."""
+        space.name = name
+        space.save(self.path(name))
+        with self._lock:
+            self._cache[name] = space
+        self._marker(name).unlink(missing_ok=True)
+
+    def abandon(self, name: str) -> None:
+        """A write that failed cleanly (bad input): nothing changed, the marker goes."""
+        self._marker(name).unlink(missing_ok=True)
+
+    def delete(self, name: str) -> bool:
+        with self._lock:
+            if name in self._busy:
+                raise Conflict(f"space {name!r} is being changed; delete it when that is done", space=name)
+            self._cache.pop(name, None)
+        existed = self.path(name).exists()
+        marker = self._marker(name)
+        if not existed and not marker.exists():
+            raise NotFound(f"no space named {name!r}", space=name)
+        self.path(name).unlink(missing_ok=True)
+        marker.unlink(missing_ok=True)
+        return existed
