@@ -5,6 +5,8 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 HDM05   ?= $(abspath ../shared/data/hdm05)
 OUT     ?= out
+# the local cluster's data, logs and pid files (see shared/bus/config.py for every variable)
+export MIRRORCOACH_HOME ?= $(CURDIR)/var
 
 .PHONY: install demo test bench reproduce up down status dashboard clean
 
@@ -20,14 +22,24 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/python -m shared.demo --out $(OUT)/demo
 
+up: $(STAMP)
+	$(BIN)/mirrorcoach up
+
+down: $(STAMP)
+	$(BIN)/mirrorcoach down
+
+status: $(STAMP)
+	-$(BIN)/mirrorcoach status
+
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
 bench: $(STAMP)
 	$(BIN)/python -m bench.run --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.bus --hdm05 $(HDM05) --out bench/results
 
-up down status dashboard reproduce:
-	@echo "'make $@' arrives with the cluster and the experiments (issues 3-7); today mirrorcoach is the library and its CLI."; exit 2
+dashboard reproduce:
+	@echo "'make $@' arrives with the experiments and the dashboard (issues 5-7)."; exit 2
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -1,10 +1,17 @@
-"""``make demo``: the Proto-symbol Space on real motion capture, end to end (library level).
+"""``make demo``: the Proto-symbol Space on real motion capture, on the running cluster.
 
-Builds a space from the bundled HDM05 clips of actors bd and bk (``data/hdm05``, works on a
-fresh clone), recognises the held-out clips of actor dg, generates an interpolated motion
-(half squat, half kick) and an emphatic one (eq. 4.3, alpha = 2: a target squat pushed away
-from another actor's squat) to BVH, estimates arm torques from motion alone (association,
-eq. 2.8), and says what it did and where the files are.
+Starts the local cluster if it is not running (``mirrorcoach up``: router + services on
+127.0.0.1), then, through the bus only:
+
+1. builds the space ``demo`` on the pss service from the bundled HDM05 clips of actors bd and
+   bk (``data/hdm05``, so it works on a fresh clone), with arm torques from the MuJoCo arm as
+   sensor channels;
+2. recognises the held-out clips of actor dg (motion only) and associates their torques
+   (eq. 2.6, 2.8);
+3. generates an interpolated motion (half squat, half kick) and an extrapolated, emphatic one
+   (eq. 4.3 with alpha = 2: a squat pushed away from another actor's squat) to BVH;
+
+says what it did, and stops the cluster again if it started it (``--keep-running`` leaves it up).
 """
 
 from __future__ import annotations
@@ -15,66 +22,97 @@ from pathlib import Path
 
 import numpy as np
 
+from schemas.common import clip_from_wire, clip_to_wire
 from shared.bodies.arm import arm_model, with_arm_torques
+from shared.bus.client import Client, Unavailable
+from shared.bus.config import Settings
+from shared.cluster import down, up
 from shared.io import find_clips, load_clip, save_clip
-from shared.pss.space import ProtoSymbolSpace
 
 BUNDLED = Path(__file__).resolve().parent.parent / "data" / "hdm05" / "amc"
+
+
+def _cluster_running(settings: Settings) -> bool:
+    try:
+        with Client(settings, connect_timeout_s=1.0) as c:
+            return "pss" in c.alive()
+    except Unavailable:
+        return False
+
+
+def run(client: Client, data: Path, out: Path) -> None:
+    t0 = time.perf_counter()
+    clips = [load_clip(f) for f in find_clips([data])]
+    train = [c for c in clips if "_dg_" not in c.name]
+    held_out = [c for c in clips if "_dg_" in c.name]
+    print(f"read {len(clips)} HDM05 clips from {data} ({len(train)} of actors bd/bk to learn, {len(held_out)} of dg held out)")
+
+    model = arm_model(body_mass=2.4)
+    info = client.request("pss", "build", {"space": "demo", "replace": True,
+                                           "clips": [clip_to_wire(with_arm_torques(c, model)) for c in train]})
+    print(f"pss built space 'demo': {info['n_proto_symbols']} proto-symbols, {info['params']['n_states']}-state HMMs, "
+          f"{info['n_features']} features (motion + 3 arm torques), stress-1 {info['stress1']:.3f}")
+
+    print("recognised the held-out clips (actor dg, motion only) and associated their arm torques (eq. 2.6, 2.8):")
+    correct = 0
+    for c in held_out:
+        a = client.request("pss", "associate", {"space": "demo", "clip": clip_to_wire(c), "missing": "sensor"})
+        correct += a["label"] == c.label
+        tau = clip_from_wire(a["aligned"])
+        tau = tau.select(tau.group("sensor"))
+        print(f"  {c.name:<45} -> {a['label']:<30} {'ok' if a['label'] == c.label else 'WRONG'}   "
+              f"estimated mean |torque| {np.abs(tau).mean():.3f} N m")
+    print(f"  {correct}/{len(held_out)} correct")
+
+    rows = info["proto_symbols"]
+    squat = next(r["name"] for r in rows if r["label"] == "squat1Reps" and "_bd_" in r["name"])
+    kick = next(r["name"] for r in rows if r["label"] == "kickLFront1Reps")
+    learner = next(r["name"] for r in rows if r["label"] == "squat1Reps" and "_bk_" in r["name"])
+
+    g = client.request("pss", "generate", {"space": "demo", "mix": {squat: 0.5, kick: 0.5}, "name": "interpolated_squat_kick"})
+    mid = clip_from_wire(g["clip"])
+    save_clip(mid, out / "interpolated_squat_kick.bvh")
+    r = client.request("pss", "recognize", {"space": "demo", "clips": [clip_to_wire(mid)], "top": len(rows)})
+    d = {n["name"]: n["distance"] for n in r["nearest"]}
+    pair = client.request("pss", "distance", {"space": "demo", "a": squat, "b": kick})["distance"]
+    print(f"generated the midpoint of {squat} and {kick} -> {out / 'interpolated_squat_kick.bvh'} "
+          f"(recognised between them: distances {d[squat]:.1f} / {d[kick]:.1f}; squat to kick {pair:.1f})")
+
+    alpha = 2.0
+    g = client.request("pss", "generate", {"space": "demo", "mix": {squat: 1 + alpha, learner: -alpha}, "name": "emphatic_squat"})
+    emph = clip_from_wire(g["clip"])
+    save_clip(emph, out / "emphatic_squat.bvh")
+    r = client.request("pss", "recognize", {"space": "demo", "clips": [clip_to_wire(emph)], "top": len(rows)})
+    d = {n["name"]: n["distance"] for n in r["nearest"]}
+    d_tp = client.request("pss", "distance", {"space": "demo", "a": squat, "b": learner})["distance"]
+    print(f"generated the emphatic motion x_t + {alpha:g} (x_t - x_p) (eq. 4.3), target {squat}, learner {learner} -> "
+          f"{out / 'emphatic_squat.bvh'} (distance to the learner {d[learner]:.1f} > the target's {d_tp:.1f})")
+    print(f"done in {time.perf_counter() - t0:.1f} s. BVH files open in Blender or any BVH viewer. "
+          "Data: HDM05 (CC BY-SA 3.0), see data/hdm05/SOURCE.md.")
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, default=BUNDLED, help="folder of AMC clips, one sub-folder per class")
     ap.add_argument("--out", type=Path, default=Path("out/demo"))
+    ap.add_argument("--keep-running", action="store_true", help="leave the cluster up afterwards")
     args = ap.parse_args(argv)
-    out = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    clips = [load_clip(f) for f in find_clips([args.data])]
-    train = [c for c in clips if "_dg_" not in c.name]
-    held_out = [c for c in clips if "_dg_" in c.name]
-    print(f"read {len(clips)} HDM05 clips from {args.data} ({len(train)} of actors bd/bk to learn, {len(held_out)} of dg held out)")
-
-    model = arm_model(body_mass=2.4)
-    space = ProtoSymbolSpace.build([with_arm_torques(c, model) for c in train], dim=3, name="demo")
-    path = space.save(out / "demo.space.npz")
-    i = space.info()
-    print(f"built the proto-symbol space: {i['n_proto_symbols']} proto-symbols, {space.params.n_states}-state HMMs, "
-          f"{i['n_features']} features (motion + 3 arm torques), stress-1 {i['stress1']:.3f} -> {path}")
-
-    print("recognised the held-out clips (actor dg) by their nearest proto-symbol (eq. 2.4, 2.6):")
-    correct = 0
-    for c in held_out:
-        a = space.associate(c, "sensor")  # held-out clips carry motion only: torques are estimated
-        r = a.recognition
-        correct += r.label == c.label
-        tau = a.aligned.select(space.features.sensor_channels)
-        print(f"  {c.name:<45} -> {r.label:<30} {'ok' if r.label == c.label else 'WRONG'}   "
-              f"estimated mean |torque| {np.abs(tau).mean():.3f} N m")
-    print(f"  {correct}/{len(held_out)} correct")
-
-    squat = next(s.name for s in space.symbols if s.label == "squat1Reps" and "_bd_" in s.name)
-    kick = next(s.name for s in space.symbols if s.label == "kickLFront1Reps")
-    learner = next(s.name for s in space.symbols if s.label == "squat1Reps" and "_bk_" in s.name)
-    mid = space.generate(weights=space.mix_weights({squat: 0.5, kick: 0.5}), name="interpolated_squat_kick")
-    save_clip(mid, out / "interpolated_squat_kick.bvh")
-    r = space.recognize(mid)
-    print(f"generated the midpoint of {squat} and {kick} -> {out / 'interpolated_squat_kick.bvh'} "
-          f"(recognised between them: distances {r.distances[space.symbol(squat)]:.2f} / {r.distances[space.symbol(kick)]:.2f}, "
-          f"squat to kick {space.distances[space.symbol(squat), space.symbol(kick)]:.2f})")
-    emph = space.generate(weights=space.emphatic_weights(squat, learner, 2.0), name="emphatic_squat")
-    save_clip(emph, out / "emphatic_squat.bvh")
-    r = space.recognize(emph)
-    d_tp = space.distances[space.symbol(squat), space.symbol(learner)]
-    print(f"generated the emphatic motion x_t + 2 (x_t - x_p) with target {squat} and learner {learner} -> "
-          f"{out / 'emphatic_squat.bvh'} (its distance to the learner {r.distances[space.symbol(learner)]:.2f} "
-          f"> target's {d_tp:.2f})")
-    mc = space.generate(weights=space.emphatic_weights(squat, learner, 2.0), method="monte_carlo", seed=1,
-                        name="emphatic_squat_monte_carlo")
-    save_clip(mc, out / "emphatic_squat_monte_carlo.bvh")
-    print(f"the same by Monte Carlo sampling (10 state paths x 30 outputs, seed 1) -> {out / 'emphatic_squat_monte_carlo.bvh'}")
-    print(f"done in {time.perf_counter() - t0:.1f} s. BVH files open in Blender or any BVH viewer. "
-          "Data: HDM05 (CC BY-SA 3.0), see data/hdm05/SOURCE.md.")
+    args.out.mkdir(parents=True, exist_ok=True)
+    settings = Settings()
+    started = False
+    if not _cluster_running(settings):
+        if up(settings) != 0:
+            return 1
+        started = True
+    try:
+        with Client(settings) as client:
+            run(client, args.data, args.out)
+    except Unavailable as e:
+        print(f"error: {e.message}")
+        return 1
+    finally:
+        if started and not args.keep_running:
+            down(settings)
     return 0
 
 
