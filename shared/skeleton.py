@@ -22,9 +22,12 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 ROT_DOFS = ("rx", "ry", "rz")
 TRANS_DOFS = ("tx", "ty", "tz")
@@ -97,6 +100,8 @@ class Skeleton:
     # ----------------------------------------------------------------- rotations
     def local_rotations(self, values: dict[str, np.ndarray], n_frames: int, joints=None) -> list[Rotation]:
         """Local rotation ``L_j = C_j M_j C_j^T`` of every joint (or of ``joints``) for every frame."""
+        from scipy.spatial.transform import Rotation  # imported here: it costs 0.2 s, reading a clip needs none
+
         out = []
         for j in self.joints if joints is None else joints:
             seq = j.euler
@@ -125,7 +130,7 @@ class Skeleton:
         n = data.shape[0]
         values = {c: data[:, i] for i, c in enumerate(channels)}
         local = self.local_rotations(values, n)
-        glob: list[Rotation] = []
+        glob = []
         pos = np.zeros((n, len(self.joints), 3))
         end_pos = []
         for i, j in enumerate(self.joints):
@@ -171,3 +176,21 @@ class Skeleton:
 
     def __eq__(self, other) -> bool:  # dataclass eq would compare arrays element-wise
         return isinstance(other, Skeleton) and self.to_json() == other.to_json()
+
+
+def euler_matrix(seq: str, angles_deg) -> np.ndarray:
+    """One rotation matrix from Euler angles in degrees, with scipy's convention (upper-case
+    ``seq``: intrinsic axes, lower-case: extrinsic), without importing scipy (ASF axes)."""
+    a = np.radians(np.asarray(angles_deg, dtype=float))
+    if len(seq) != len(a):
+        raise ValueError(f"{len(a)} angles for Euler sequence {seq!r}")
+    mats = []
+    for ax, t in zip(seq.lower(), a):
+        c, s = np.cos(t), np.sin(t)
+        mats.append({"x": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]),
+                     "y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
+                     "z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])}[ax])
+    out = np.eye(3)
+    for m in (mats if seq.isupper() else mats[::-1]):
+        out = out @ m
+    return out

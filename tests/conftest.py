@@ -45,3 +45,112 @@ def dev_space(dev_split):
 @pytest.fixture(scope="session")
 def bundled() -> Path:
     return BUNDLED_HDM05
+
+
+# ---------------------------------------------------------------------------- real processes
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def cluster_env(home: Path, **extra) -> dict:
+    """Environment of a private cluster: its own loopback port, prefix and home."""
+    env = dict(os.environ)
+    env.update({"MIRRORCOACH_ROUTER": f"tcp/127.0.0.1:{free_port()}", "MIRRORCOACH_HOME": str(home),
+                "MIRRORCOACH_PREFIX": f"t{os.getpid()}x{free_port()}", "MIRRORCOACH_TIMEOUT": "300"})
+    env.update({k: str(v) for k, v in extra.items()})
+    return env
+
+
+def settings_of(env: dict):
+    from shared.bus.config import Settings
+
+    return Settings(router=env["MIRRORCOACH_ROUTER"], prefix=env["MIRRORCOACH_PREFIX"],
+                    home=Path(env["MIRRORCOACH_HOME"]), timeout=float(env["MIRRORCOACH_TIMEOUT"]))
+
+
+class Processes:
+    """Real router and service processes of a test, stopped (SIGTERM, then SIGKILL) at the end."""
+
+    def __init__(self, env: dict):
+        self.env = env
+        self.procs: dict[str, "subprocess.Popen"] = {}
+        self.logs = Path(env["MIRRORCOACH_HOME"]) / "test-logs"
+        self.logs.mkdir(parents=True, exist_ok=True)
+
+    def start(self, name: str, module: str):
+        import subprocess
+        import sys
+
+        with open(self.logs / f"{name}.log", "ab") as out:
+            self.procs[name] = subprocess.Popen([sys.executable, "-m", module], env=self.env, stdout=out,
+                                                stderr=subprocess.STDOUT, cwd=REPO)
+        return self.procs[name]
+
+    def wait_alive(self, services: set[str], timeout: float = 120.0):
+        import time
+
+        from shared.bus.client import Client, Unavailable
+
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for n, p in self.procs.items():
+                if p.poll() is not None:
+                    raise AssertionError(f"{n} exited with {p.returncode}: {self.log(n)[-2000:]}")
+            try:
+                with Client(settings_of(self.env), connect_timeout_s=1.0) as c:
+                    if services <= c.alive(timeout=1.0):
+                        return
+            except Unavailable:
+                pass
+            time.sleep(0.2)
+        raise AssertionError(f"{services} not alive after {timeout} s")
+
+    def log(self, name: str) -> str:
+        return (self.logs / f"{name}.log").read_text(errors="replace")
+
+    def stop(self):
+        import subprocess
+
+        for p in reversed(list(self.procs.values())):
+            if p.poll() is None:
+                p.terminate()
+                try:
+                    p.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+
+
+@pytest.fixture(scope="module")
+def pss_service(tmp_path_factory):
+    """A real router and a real pss service process on a free loopback port; yields
+    (env, Processes). The payload limit is 8 MB so the over-size case is cheap to send."""
+    env = cluster_env(tmp_path_factory.mktemp("pss-home"), MIRRORCOACH_MAX_PAYLOAD=8_000_000)
+    procs = Processes(env)
+    procs.start("router", "shared.bus.router")
+    procs.start("pss", "services.pss")
+    try:
+        procs.wait_alive({"pss"})
+        yield env, procs
+    finally:
+        procs.stop()
+
+
+@pytest.fixture
+def client_of():
+    """``client_of(env)``: a Client of that cluster, closed at the end of the test."""
+    from shared.bus.client import Client
+
+    made = []
+
+    def make(env):
+        made.append(Client(settings_of(env)))
+        return made[-1]
+
+    yield make
+    for c in made:
+        c.close()

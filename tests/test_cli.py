@@ -14,7 +14,7 @@ SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "shared.cli.app", *map(str, args)], capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "shared.cli", *map(str, args)], capture_output=True, text=True, timeout=300)
 
 
 def test_clip_info_and_convert(bundled, tmp_path):
@@ -30,14 +30,14 @@ def test_clip_info_and_convert(bundled, tmp_path):
 
 def test_space_build_recognize_generate(bundled, tmp_path):
     space = tmp_path / "s.npz"
-    r = run("space", "build", space, bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps")
+    r = run("offline", "build", space, bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps")
     assert r.returncode == 0, r.stderr
     held = next((bundled / "amc/squat1Reps").glob("HDM_dg_*.amc"))
-    r = run("space", "recognize", space, held, "--json")
+    r = run("offline", "recognize", space, held, "--json")
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["label"] == "squat1Reps"
     names = [n["name"] for n in json.loads(r.stdout)["nearest"]]
-    r = run("space", "generate", space, "--mix", f"{names[0]}=3", "--mix", f"{names[1]}=-2", "--out", tmp_path / "e.bvh")
+    r = run("offline", "generate", space, "--mix", f"{names[0]}=3", "--mix", f"{names[1]}=-2", "--out", tmp_path / "e.bvh")
     assert r.returncode == 0, r.stderr
     assert np.all(np.isfinite(load_clip(tmp_path / "e.bvh").data))
 
@@ -47,10 +47,23 @@ def test_errors_are_one_line_without_traceback(bundled, tmp_path):
         ("clip", "info", tmp_path / "missing.amc"),
         ("clip", "convert", bundled / SQUAT, tmp_path / "no/such/dir/x.bvh"),
         ("clip", "convert", bundled / SQUAT, tmp_path / "x.txt"),
-        ("space", "recognize", tmp_path / "nospace.npz", bundled / SQUAT),
-        ("space", "generate", tmp_path / "nospace.npz", "--point", "a,b", "--out", tmp_path / "g.bvh"),
+        ("offline", "recognize", tmp_path / "nospace.npz", bundled / SQUAT),
+        ("offline", "generate", tmp_path / "nospace.npz", "--point", "a,b", "--out", tmp_path / "g.bvh"),
     ]
     for args in cases:
         r = run(*args)
         assert r.returncode == 2, (args, r.stderr)
         assert r.stderr.startswith("error: ") and "Traceback" not in r.stderr, (args, r.stderr)
+
+
+def test_schemas_prints_every_contract():
+    from schemas import CONTRACTS
+
+    r = run("schemas")
+    assert r.returncode == 0, r.stderr
+    for name, mod in CONTRACTS.items():
+        for verb in mod.ENDPOINTS:
+            assert f"## {name}/{verb}:" in r.stdout
+    assert "reply_err" in r.stdout and "bad_request" in r.stdout
+    r = run("schemas", "nosuch")
+    assert r.returncode == 2 and r.stderr.startswith("error: no service")

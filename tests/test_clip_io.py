@@ -152,3 +152,14 @@ def test_clip_rejects_inconsistent_shapes():
         Clip(np.zeros((3, 2)), ["a", "a"], 30)
     with pytest.raises(BadInput):
         Clip(np.zeros((3, 1)), ["a"], 0)
+
+
+@pytest.mark.parametrize("seq", ["XYZ", "ZYX", "xyz", "zxy", "YXZ"])
+def test_euler_matrix_matches_scipy(seq):
+    from scipy.spatial.transform import Rotation
+
+    from shared.skeleton import euler_matrix
+
+    angles = np.random.default_rng(len(seq) + ord(seq[0])).uniform(-180, 180, size=3)
+    np.testing.assert_allclose(euler_matrix(seq, angles), Rotation.from_euler(seq, angles, degrees=True).as_matrix(),
+                               atol=1e-12)

@@ -181,6 +181,21 @@ def test_out_of_sample_point_is_placed_without_moving_the_others():
         place_point(x, f[:-1])
 
 
+def test_out_of_sample_point_matches_scipy_minimisation_on_noisy_distances():
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(9)
+    x = rng.normal(size=(40, 3)) * 5
+    for trial in range(5):
+        f = np.abs(np.linalg.norm(x - rng.normal(size=3) * 3, axis=1) + rng.normal(scale=1.5, size=40))
+        p, stress = place_point(x, f)
+        assert stress == pytest.approx(raw_stress_point := float(np.sum((f - np.linalg.norm(x - p, axis=1)) ** 2)))
+        obj = lambda q: np.sum((f - np.linalg.norm(x - q, axis=1)) ** 2)  # noqa: E731
+        best = min((minimize(obj, s0, method="Nelder-Mead", options={"xatol": 1e-9, "fatol": 1e-12, "maxiter": 20000})
+                    for s0 in rng.normal(size=(8, 3)) * 5), key=lambda r: r.fun)
+        assert raw_stress_point <= best.fun * (1 + 1e-6) + 1e-9, trial
+
+
 def test_weights_interpolate_extrapolate_and_pick_proto_symbols():
     pts = np.array([[0.0, 0.0], [1.0, 0.0]])
     alpha = 2.0

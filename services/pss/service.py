@@ -30,10 +30,10 @@ def space_info(name: str, space: ProtoSymbolSpace) -> dict:
     return info
 
 
-def make_service(settings: Settings | None = None, workers: int = 8) -> Service:
+def make_service(settings: Settings | None = None) -> Service:
     settings = settings or Settings()
     store = SpaceStore(settings.data_dir("pss"))
-    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings, workers=workers)
+    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings, workers=settings.workers)
 
     def changed(name, change, space=None):
         svc.publish("space", {"space": name, "change": change,

@@ -8,6 +8,8 @@ variable                     default                     meaning
 ``MIRRORCOACH_HOME``         ``./var``                   data (``data/<service>``), logs, pid files
 ``MIRRORCOACH_MAX_PAYLOAD``  ``67108864`` (64 MiB)       largest request a service accepts, bytes
 ``MIRRORCOACH_TIMEOUT``      ``120``                     default request timeout of the CLI, seconds
+``MIRRORCOACH_WORKERS``      ``4``                       requests a service handles at once (more
+                                                         threads than cores only fight for the GIL)
 ===========================  ==========================  ===========================================
 
 The embedded default topology (DESIGN.md "Bus conventions"): one router-mode Zenoh session
@@ -35,6 +37,14 @@ def _env(name: str, default: str) -> str:
     return v or default
 
 
+def _env_num(name: str, default, kind=int):
+    raw = _env(name, str(default))
+    try:
+        return kind(raw)
+    except ValueError:
+        raise BadInput(f"{name}={raw!r} is not a number") from None
+
+
 def check_loopback(endpoint: str) -> str:
     """``tcp/127.0.0.1:7447`` -> itself; anything not on loopback is refused."""
     m = re.fullmatch(r"(tcp|udp)/\[?([^\]]+?)\]?:(\d{1,5})", endpoint)
@@ -57,11 +67,14 @@ class Settings:
     router: str = field(default_factory=lambda: _env("MIRRORCOACH_ROUTER", "tcp/127.0.0.1:7447"))
     prefix: str = field(default_factory=lambda: _env("MIRRORCOACH_PREFIX", "mc"))
     home: Path = field(default_factory=lambda: Path(_env("MIRRORCOACH_HOME", "var")).absolute())
-    max_payload: int = field(default_factory=lambda: int(_env("MIRRORCOACH_MAX_PAYLOAD", str(DEFAULT_MAX_PAYLOAD))))
-    timeout: float = field(default_factory=lambda: float(_env("MIRRORCOACH_TIMEOUT", "120")))
+    max_payload: int = field(default_factory=lambda: _env_num("MIRRORCOACH_MAX_PAYLOAD", DEFAULT_MAX_PAYLOAD))
+    timeout: float = field(default_factory=lambda: _env_num("MIRRORCOACH_TIMEOUT", 120.0, float))
+    workers: int = field(default_factory=lambda: _env_num("MIRRORCOACH_WORKERS", 4))
 
     def __post_init__(self):
         check_loopback(self.router)
+        if not 1 <= self.workers <= 64:
+            raise BadInput(f"MIRRORCOACH_WORKERS must be 1..64, got {self.workers}")
         if not re.fullmatch(r"[A-Za-z0-9_-]{1,32}", self.prefix):
             raise BadInput(f"MIRRORCOACH_PREFIX {self.prefix!r} must be 1-32 letters, digits, '_' or '-'")
 

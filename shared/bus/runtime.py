@@ -53,19 +53,19 @@ class Service:
         The service's name (``pss``, ``simulator``, ...): its key segment and liveliness token.
     endpoints : dict verb -> :class:`schemas.base.Endpoint`
     events : dict topic -> :class:`schemas.base.Message`, optional
-    workers : int
-        Size of the worker pool (concurrent requests).
+    workers : int, optional
+        Size of the worker pool (concurrent requests); default ``MIRRORCOACH_WORKERS`` (4).
     """
 
     def __init__(self, name: str, endpoints: dict[str, Endpoint], events: dict[str, Message] | None = None,
-                 settings: Settings | None = None, workers: int = 8, stop_grace_s: float = 30.0):
+                 settings: Settings | None = None, workers: int | None = None, stop_grace_s: float = 30.0):
         self.name = name
         self.endpoints = endpoints
         self.events = events or {}
         self.settings = settings or Settings()
         self.handlers: dict[str, Callable[[dict], dict]] = {}
         self.on_stop: list[Callable[[], None]] = []
-        self.workers = workers
+        self.workers = workers or self.settings.workers
         self.stop_grace_s = stop_grace_s
         self._stop = threading.Event()
         self._pool: ThreadPoolExecutor | None = None

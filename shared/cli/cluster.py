@@ -136,11 +136,18 @@ def space_recognize(name: str = typer.Argument(..., help="Space name."),
                     timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
                     as_json: bool = typer.Option(False, "--json", help="label, point, nearest as JSON.")):
     """Recognise a motion as a point of the space (eq. 2.6) and list its nearest proto-symbols."""
+    import os
+    import time
+
+    t_body = time.perf_counter()
     from shared.io import load_clip
 
-    reps = [_wire(load_clip(p, skeleton=skeleton)) for p in clips]
+    reps = [_wire(load_clip(p, skeleton=skeleton), with_skeleton=False) for p in clips]  # the space has its own
     with _client() as c:
         r = c.request("pss", "recognize", {"space": name, "clips": reps, "top": top}, timeout=timeout)
+    if os.environ.get("MIRRORCOACH_TIMING"):  # for bench/bus.py: the command's own time, start-up excluded
+        typer.echo(f"timing: command {1e3 * (time.perf_counter() - t_body):.2f} ms, library {1e3 * r['seconds']:.2f} ms",
+                   err=True)
     if as_json:
         typer.echo(json.dumps(_jsonable(r)))
         return

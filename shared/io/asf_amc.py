@@ -12,11 +12,10 @@ import re
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from shared.clip import Clip
 from shared.errors import ClipFormatError
-from shared.skeleton import Joint, Skeleton
+from shared.skeleton import Joint, Skeleton, euler_matrix
 
 INCH_M = 0.0254
 _DOF_MAP = {"rx": "rx", "ry": "ry", "rz": "rz", "tx": "tx", "ty": "ty", "tz": "tz", "l": None}
@@ -159,12 +158,12 @@ def read_asf(path) -> Skeleton:
     index = {}
     for name in order:
         if name == "root":
-            pre = Rotation.from_euler(root["axis"], np.asarray(root["orientation"]) * scale, degrees=True).as_matrix()
+            pre = euler_matrix(root["axis"], np.asarray(root["orientation"]) * scale)
             j = Joint(name="root", parent=-1, offset=np.asarray(root["position"], float), dofs=list(root["order"]),
                       euler=root["axis"], pre=pre)
         else:
             b = bones[name]
-            pre = Rotation.from_euler(b["axis_order"], np.asarray(b["axis"]) * scale, degrees=True).as_matrix()
+            pre = euler_matrix(b["axis_order"], np.asarray(b["axis"]) * scale)
             limits = {}
             if len(b["limits"]) == len(b["dof"]):
                 limits = {d: lim for d, lim in zip(b["dof"], b["limits"])}

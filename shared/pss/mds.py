@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from shared.errors import BadInput
@@ -87,6 +88,46 @@ def smacof(f: np.ndarray, dim: int, *, init: np.ndarray | None = None, max_iter:
     return Embedding(x, stress, float(np.sqrt(stress / total)), it, converged)
 
 
+@numba.njit(cache=True, nogil=True)
+def _stress_and_update(points, f, x):
+    """Stress ``sum_i (f_i - |x - x_i|)^2`` at ``x`` and the Guttman update
+    ``mean_i (x_i + f_i (x - x_i) / |x - x_i|)``."""
+    n, dim = points.shape
+    stress = 0.0
+    new = np.zeros(dim)
+    for i in range(n):
+        d = 0.0
+        for c in range(dim):
+            d += (x[c] - points[i, c]) ** 2
+        d = np.sqrt(d)
+        stress += (f[i] - d) ** 2
+        for c in range(dim):
+            u = (x[c] - points[i, c]) / d if d > 1e-12 else 0.0
+            new[c] += points[i, c] + f[i] * u
+    return stress, new / n
+
+
+@numba.njit(cache=True, nogil=True)
+def _guttman_point(points, f, starts, max_iter, eps):
+    """Guttman iterations for one free point from every start, until the stress stops
+    falling by ``eps`` (relative); the best point of each start and its stress."""
+    x = starts.copy()
+    s = np.empty(len(starts))
+    for k in range(len(starts)):
+        xk = starts[k].copy()
+        sk, new = _stress_and_update(points, f, xk)
+        for _ in range(max_iter):
+            sc, new_c = _stress_and_update(points, f, new)
+            done = sk - sc < eps * (1.0 + sc)
+            if sc <= sk:
+                xk, sk, new = new, sc, new_c
+            if done:
+                break
+        x[k] = xk
+        s[k] = sk
+    return x, s
+
+
 def place_point(points: np.ndarray, f: np.ndarray, *, max_iter: int = 300, eps: float = 1e-9) -> tuple[np.ndarray, float]:
     """Out-of-sample embedding (eq. 2.6): the point ``x`` minimising
     ``sum_i (f_i - |x - x_i|)^2`` with the space's points ``x_i`` fixed.
@@ -113,21 +154,6 @@ def place_point(points: np.ndarray, f: np.ndarray, *, max_iter: int = 300, eps: 
     starts = [nearest + 1e-3 * spread * rng.standard_normal(dim), centroid,
               2 * centroid - nearest, centroid + 0.5 * (centroid - points.mean(axis=0))]
 
-    x = np.stack(starts)  # (S, dim): every start iterated together
-
-    def stress_of(x):
-        d = np.linalg.norm(x[:, None, :] - points[None], axis=2)
-        return np.sum((f - d) ** 2, axis=1), d
-
-    s, d = stress_of(x)
-    for _ in range(max_iter):
-        diff = x[:, None, :] - points[None]
-        unit = np.where(d[..., None] > 1e-12, diff / np.maximum(d, 1e-12)[..., None], 0.0)
-        x = np.mean(points[None] + f[None, :, None] * unit, axis=1)
-        s_new, d = stress_of(x)
-        done = np.all(s - s_new < eps * (1.0 + s))
-        s = s_new
-        if done:
-            break
+    x, s = _guttman_point(np.ascontiguousarray(points), np.ascontiguousarray(f), np.stack(starts), max_iter, eps)
     b = int(np.argmin(s))
     return x[b], float(s[b])

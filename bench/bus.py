@@ -1,0 +1,203 @@
+"""``make bench`` (bus part): what the bus adds on top of the library (issue 3 targets).
+
+On a private cluster (free loopback port, temporary home) started with ``shared.cluster.up``:
+
+* request overhead for a 100 KB payload, (a) raw Zenoh get/reply through the router and
+  (b) the full service stack (msgpack codec, contract validation, worker pool, reply
+  validation) on an ``echo`` service built from the same runtime (target <= 1 ms median);
+* recognition through the CLI end to end (``mirrorcoach space recognize``, a subprocess per
+  call): the command's own time (it prints it with ``MIRRORCOACH_TIMING=1``: reading the clip,
+  opening the session, the request, the reply) minus the library's time reported by the
+  service (target <= 150 ms); the rest of the wall time is start-up and exit (interpreter,
+  imports, typer's argument parsing), reported separately;
+* 20 concurrent recognitions on one space: throughput and 95th-percentile latency.
+
+Writes ``bench/results/bus.json`` and ``bench/results/bus.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from schemas.base import Array, Endpoint, F, Map, Message
+
+ECHO = {"echo": Endpoint("echo", Message("bench.echo", Map({"blob": F(Array(shape=(None,)))})),
+                         Message("bench.echo.reply", Map({"blob": F(Array(shape=(None,)))})), "return the blob")}
+
+
+def echo_service() -> int:
+    """``python -m bench.bus --echo-service``: a service with one verb, for the overhead."""
+    from shared.bus.runtime import Service
+
+    svc = Service("echo", ECHO)
+    svc.handler("echo")(lambda req: {"blob": req["blob"]})
+    return svc.run()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stats(ts: list[float]) -> dict:
+    a = 1e3 * np.asarray(ts)
+    return {"median_ms": float(np.median(a)), "p95_ms": float(np.percentile(a, 95)), "n": len(a)}
+
+
+def raw_zenoh_roundtrip(settings, n=300, size=100_000) -> dict:
+    import zenoh
+
+    from shared.bus.config import client_config
+
+    payload = os.urandom(size)
+    srv = zenoh.open(client_config(settings))
+    q = srv.declare_queryable(settings.key("rawecho", "x"), lambda query: (query.reply(query.key_expr, query.payload), query.drop()))
+    cli = zenoh.open(client_config(settings))
+    time.sleep(0.5)
+    ts = []
+    for i in range(n + 20):
+        t0 = time.perf_counter()
+        got = [r.ok.payload.to_bytes() for r in cli.get(settings.key("rawecho", "x"), payload=payload, timeout=5)]
+        if i >= 20:
+            ts.append(time.perf_counter() - t0)
+        assert got and len(got[0]) == size
+    q.undeclare()
+    cli.close()
+    srv.close()
+    return _stats(ts)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--hdm05", type=Path, required=True)
+    ap.add_argument("--out", type=Path, default=Path("bench/results"))
+    ap.add_argument("--echo-service", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.echo_service:
+        return echo_service()
+    args.out.mkdir(parents=True, exist_ok=True)
+    home = Path(tempfile.mkdtemp(prefix="mc-bench-"))
+    os.environ.update({"MIRRORCOACH_ROUTER": f"tcp/127.0.0.1:{_free_port()}", "MIRRORCOACH_HOME": str(home),
+                       "MIRRORCOACH_PREFIX": "bench"})
+    from schemas.common import clip_to_wire
+    from shared.bus.client import Client
+    from shared.bus.config import Settings
+    from shared.cluster import down, up
+    from shared.io import find_clips, load_clip
+
+    s = Settings()
+    if up(s) != 0:
+        return 1
+    echo = subprocess.Popen([sys.executable, "-m", "bench.bus", "--hdm05", str(args.hdm05), "--echo-service"],
+                            stderr=subprocess.DEVNULL)
+    res: dict = {}
+    try:
+        with Client(s) as c:
+            deadline = time.monotonic() + 60
+            while "echo" not in c.alive() and time.monotonic() < deadline:
+                time.sleep(0.1)
+            # ---- 100 KB request overhead
+            res["raw_zenoh_100KB"] = raw_zenoh_roundtrip(s)
+            blob = np.random.default_rng(0).normal(size=12_500)  # 100,000 bytes
+            ts = []
+            for i in range(320):
+                t0 = time.perf_counter()
+                r = c.request("echo", "echo", {"blob": blob})
+                if i >= 20:
+                    ts.append(time.perf_counter() - t0)
+            assert np.array_equal(r["blob"], blob)
+            res["service_stack_100KB"] = _stats(ts)
+            print(f"100 KB request: raw zenoh {res['raw_zenoh_100KB']['median_ms']:.2f} ms, "
+                  f"full service stack {res['service_stack_100KB']['median_ms']:.2f} ms (median)")
+
+            # ---- a space of the dev clips, recognition through the CLI
+            files = find_clips([args.hdm05 / "amc"])
+            train = [load_clip(f) for f in files if "_dg_" not in f.name]
+            probe_file = next(f for f in files if "_dg_" in f.name and "squat1Reps" in f.name)
+            c.request("pss", "build", {"space": "bench", "clips": [clip_to_wire(x.resample(30)) for x in train]})
+            env = dict(os.environ)
+            cmd = [sys.executable, "-m", "shared.cli"]
+            env["MIRRORCOACH_TIMING"] = "1"
+            walls, cmds, libs = [], [], []
+            for _ in range(12):
+                t0 = time.perf_counter()
+                out = subprocess.run(cmd + ["space", "recognize", "bench", str(probe_file), "--json"], env=env,
+                                     capture_output=True, check=True, text=True)
+                walls.append(time.perf_counter() - t0)
+                m = re.search(r"timing: command ([0-9.]+) ms, library ([0-9.]+) ms", out.stderr)
+                cmds.append(float(m.group(1)) / 1e3)
+                libs.append(float(m.group(2)) / 1e3)
+            ee, cm, lb = (statistics.median(v[2:]) for v in (walls, cmds, libs))
+            t0 = time.perf_counter()
+            load_clip(probe_file)
+            amc = time.perf_counter() - t0
+            res["cli_recognize"] = {"startup_ms": 1e3 * (ee - cm), "wall_ms": 1e3 * ee, "command_ms": 1e3 * cm,
+                                    "library_ms": 1e3 * lb, "over_library_ms": 1e3 * (cm - lb), "amc_read_ms": 1e3 * amc,
+                                    "space_clips": len(train)}
+            print(f"CLI recognition: wall {1e3 * ee:.0f} ms = start-up and exit {1e3 * (ee - cm):.0f} + command {1e3 * cm:.0f} "
+                  f"(library {1e3 * lb:.0f} + {1e3 * (cm - lb):.0f} ms over the library; reading the AMC alone: {1e3 * amc:.0f} ms)")
+
+            # ---- 20 concurrent recognitions on one space
+            probe = clip_to_wire(load_clip(probe_file), with_skeleton=False)
+            lat: list[float] = []
+            lock = threading.Lock()
+
+            def one(_):
+                t0 = time.perf_counter()
+                c.request("pss", "recognize", {"space": "bench", "clips": [probe]})
+                with lock:
+                    lat.append(time.perf_counter() - t0)
+
+            one(0)
+            lat.clear()
+            rounds, walls = 5, []
+            with ThreadPoolExecutor(20) as pool:
+                for _ in range(rounds):
+                    t0 = time.perf_counter()
+                    list(pool.map(one, range(20)))
+                    walls.append(time.perf_counter() - t0)
+            res["concurrent_20"] = {**_stats(lat), "throughput_per_s": 20 * rounds / sum(walls),
+                                    "round_wall_ms": 1e3 * statistics.median(walls)}
+            print(f"20 concurrent recognitions: {res['concurrent_20']['throughput_per_s']:.0f} /s, "
+                  f"latency median {res['concurrent_20']['median_ms']:.0f} ms, p95 {res['concurrent_20']['p95_ms']:.0f} ms")
+    finally:
+        echo.terminate()
+        echo.wait(timeout=30)
+        down(s)
+
+    (args.out / "bus.json").write_text(json.dumps(res, indent=2))
+    cr, cc = res["cli_recognize"], res["concurrent_20"]
+    md = [
+        "# Bus benchmark (`make bench`, bench/bus.py)", "",
+        "Private cluster on a free loopback port; medians after a warm-up.", "",
+        "| what | measured | target |", "|---|---|---|",
+        f"| 100 KB get/reply, raw Zenoh through the router | {res['raw_zenoh_100KB']['median_ms']:.2f} ms (p95 {res['raw_zenoh_100KB']['p95_ms']:.2f}) | - |",
+        f"| 100 KB request, full service stack (codec, contract, pool) | {res['service_stack_100KB']['median_ms']:.2f} ms (p95 {res['service_stack_100KB']['p95_ms']:.2f}) | <= 1 ms |",
+        f"| CLI recognition over the library's time (start-up excluded) | {cr['over_library_ms']:.0f} ms | <= 150 ms |",
+        f"| CLI start-up and exit (interpreter, imports, typer parsing) | {cr['startup_ms']:.0f} ms | reported |",
+        f"| CLI recognition: wall / command / library | {cr['wall_ms']:.0f} / {cr['command_ms']:.0f} / {cr['library_ms']:.0f} ms | - |",
+        f"| reading the AMC clip in the CLI (part of the overhead) | {cr['amc_read_ms']:.0f} ms | - |",
+        f"| 20 concurrent recognitions ({cr['space_clips']}-clip space) | {cc['throughput_per_s']:.0f} /s, p95 {cc['p95_ms']:.0f} ms, median {cc['median_ms']:.0f} ms | reported |",
+    ]
+    (args.out / "bus.md").write_text("\n".join(md) + "\n")
+    print(f"wrote {args.out / 'bus.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

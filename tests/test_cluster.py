@@ -1,0 +1,155 @@
+"""End to end on a real local cluster: ``mirrorcoach up`` (supervisor, router, pss), the CLI
+as a user runs it, a crash in the middle of a build, ``mirrorcoach down``."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from schemas.common import clip_to_wire
+from tests.conftest import REPO, cluster_env, settings_of
+
+
+def cli(env, *args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "shared.cli", *map(str, args)], capture_output=True, text=True,
+                          env=env, cwd=REPO, timeout=timeout)
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    env = cluster_env(tmp_path / "home")
+    try:
+        r = cli(env, "up", "--wait", "120")
+        assert r.returncode == 0, r.stdout + r.stderr
+        yield env
+    finally:
+        r = cli(env, "down")
+        assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
+    env = cluster
+    st = cli(env, "status", "--json")
+    assert st.returncode == 0, st.stderr
+    assert {r["name"]: r["alive"] for r in json.loads(st.stdout)} == {"supervisor": True, "router": True, "pss": True}
+
+    amc = bundled / "amc"
+    train = [p for p in sorted(amc.glob("*/*.amc")) if "_dg_" not in p.name]
+    r = cli(env, "space", "build", "moves", *train, "--json")
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["n_proto_symbols"] == len(train) and len(info["labels"]) == 4
+
+    held = next((amc / "squat1Reps").glob("HDM_dg_*.amc"))
+    r = cli(env, "space", "recognize", "moves", held, "--json")
+    assert r.returncode == 0, r.stderr
+    rec = json.loads(r.stdout)
+    assert rec["label"] == "squat1Reps" and len(rec["point"]) == 3 and rec["nearest"][0]["label"] == "squat1Reps"
+
+    squat = next(p["name"] for p in info["proto_symbols"] if p["label"] == "squat1Reps")
+    kick = next(p["name"] for p in info["proto_symbols"] if p["label"] == "kickLFront1Reps")
+    for out, mix in ((tmp_path / "mid.bvh", [f"{squat}=0.5", f"{kick}=0.5"]), (tmp_path / "emph.bvh", [f"{squat}=3", f"{kick}=-2"])):
+        r = cli(env, "space", "generate", "moves", *sum((["--mix", m] for m in mix), []), "--out", out)
+        assert r.returncode == 0, r.stderr
+        from shared.io import load_clip
+
+        assert load_clip(out).n_frames > 10
+    r = cli(env, "space", "generate", "moves", "--point", ",".join(map(str, rec["point"])), "--out", tmp_path / "p.bvh")
+    assert r.returncode == 0, r.stderr
+
+    r = cli(env, "space", "list")
+    assert r.returncode == 0 and "moves" in r.stdout
+    r = cli(env, "space", "show", "moves")
+    assert r.returncode == 0 and squat in r.stdout
+    # errors are one line, exit 2, no traceback
+    for args in (("space", "show", "nothere"), ("space", "build", "../x", train[0]), ("space", "generate", "moves", "--out", tmp_path / "x.bvh")):
+        r = cli(env, *args)
+        assert r.returncode == 2 and r.stderr.startswith("error: ") and "Traceback" not in r.stderr, (args, r.stderr)
+    r = cli(env, "space", "delete", "moves")
+    assert r.returncode == 0
+    assert "no spaces" in cli(env, "space", "list").stdout
+
+
+def test_cli_says_when_the_cluster_is_not_running(tmp_path, bundled):
+    env = cluster_env(tmp_path / "home")
+    r = cli(env, "space", "list")
+    assert r.returncode == 2 and "not running" in r.stderr and "make up" in r.stderr
+    r = cli(env, "status")
+    assert r.returncode == 1 and "DOWN" in r.stdout
+
+
+def _sha(p: Path) -> str:
+    return hashlib.sha256(p.read_bytes()).hexdigest()
+
+
+def test_sigkill_during_a_build_leaves_other_spaces_intact(cluster, dev_split, bundled):
+    from shared.bus.client import Client, RemoteError, Unavailable
+    from shared.io import find_clips, load_clip
+
+    env = cluster
+    s = settings_of(env)
+    data = s.data_dir("pss")
+    small = [load_clip(f) for f in find_clips([bundled / "amc"]) if "_dg_" not in f.name]
+    probe = next(load_clip(f) for f in find_clips([bundled / "amc"]) if "_dg_" in f.name)
+    with Client(s) as c:
+        c.request("pss", "build", {"space": "keep", "clips": [clip_to_wire(x) for x in small]})
+        before = _sha(data / "keep.npz")
+        point = c.request("pss", "recognize", {"space": "keep", "clips": [clip_to_wire(probe)]})["point"]
+
+    big = [clip_to_wire(x.resample(30)) for x in dev_split[0][::3]]
+    outcome = {}
+
+    def build():
+        try:
+            with Client(s) as c2:
+                outcome["reply"] = c2.request("pss", "build", {"space": "doomed", "clips": big, "covariance_type": "full"})
+        except (RemoteError, Unavailable) as e:
+            outcome["error"] = e
+
+    t = threading.Thread(target=build)
+    t.start()
+    marker = data / "doomed.pending.json"
+    deadline = time.monotonic() + 60
+    while not marker.exists() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert marker.exists(), "the build never started"
+    pid = int((s.run_dir / "pss.pid").read_text())
+    os.kill(pid, signal.SIGKILL)
+    t.join(timeout=120)
+    assert not t.is_alive(), "the client of the killed build hung"
+    assert "error" in outcome and outcome["error"].code == "unavailable", outcome
+
+    # the supervisor restarts pss; then list and recognize work, 'keep' is untouched
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        new = (s.run_dir / "pss.pid").read_text()
+        if int(new) != pid:
+            break
+        time.sleep(0.1)
+    assert int((s.run_dir / "pss.pid").read_text()) != pid, "pss was not restarted"
+    with Client(s) as c:
+        deadline = time.monotonic() + 60
+        while "pss" not in c.alive() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        listed = c.request("pss", "list")
+        assert [x["space"] for x in listed["spaces"]] == ["keep"]
+        assert listed["interrupted"] == [{"space": "doomed", "operation": "build",
+                                          "started": listed["interrupted"][0]["started"]}]
+        again = c.request("pss", "recognize", {"space": "keep", "clips": [clip_to_wire(probe)]})
+        assert (again["point"] == point).all()
+        assert _sha(data / "keep.npz") == before
+        assert not list(data.glob(".*.npz.*")), "a half-written temporary file was left behind"
+        # building it again clears the report
+        c.request("pss", "build", {"space": "doomed", "clips": [clip_to_wire(x) for x in small[:3]]})
+        assert c.request("pss", "list")["interrupted"] == []
+    log = (s.log_dir / "supervisor.log").read_text()
+    assert "pss exited with code -9; restarting" in log

@@ -1,0 +1,115 @@
+"""The wire format, the contracts and the bus settings, without a bus."""
+
+from __future__ import annotations
+
+import msgpack
+import numpy as np
+import pytest
+
+from schemas import CONTRACTS
+from schemas.common import clip_from_wire, clip_to_wire
+from schemas.pss import BUILD, GENERATE, RECOGNIZE
+from shared.bus.config import Settings, check_loopback
+from shared.codec import pack, unpack
+from shared.errors import BadInput
+
+
+def _clip(frames=30, channels=3, **kw):
+    d = {"name": "c1", "label": "squat", "fps": 30.0, "channels": [f"j{i}.rx" for i in range(channels)],
+         "data": np.zeros((frames, channels))}
+    d.update(kw)
+    return d
+
+
+def test_codec_round_trip_keeps_dtype_shape_and_is_read_only():
+    msg = {"a": np.arange(12, dtype=np.float64).reshape(3, 4), "b": np.array([1, 2], dtype=np.int32),
+           "c": np.array([True, False]), "s": "x", "n": [1, 2.5, None], "g": np.float32(1.5)}
+    out = unpack(pack(msg))
+    for k in "abc":
+        assert out[k].dtype == msg[k].dtype and out[k].shape == msg[k].shape and np.array_equal(out[k], msg[k])
+        assert not out[k].flags.writeable
+    assert out["s"] == "x" and out["n"] == [1, 2.5, None] and out["g"] == 1.5
+    big_endian = np.arange(5, dtype=">f8")
+    assert np.array_equal(unpack(pack({"x": big_endian}))["x"], big_endian)
+
+
+@pytest.mark.parametrize("payload, match", [
+    (b"\xc1\x00\x01", "not valid msgpack"),
+    (msgpack.packb({"__nd__": True, "dtype": "|O", "shape": [1], "data": b"x"}), "dtype"),
+    (msgpack.packb({"__nd__": True, "dtype": "<f8", "shape": [3], "data": b"\x00" * 16}), "needs 24"),
+    (msgpack.packb({"__nd__": True, "dtype": "<f8", "shape": [-1], "data": b""}), "shape"),
+    (b"\x01" * 20, "not valid msgpack"),  # trailing data
+])
+def test_codec_refuses_malformed_payloads(payload, match):
+    with pytest.raises(BadInput, match=match):
+        unpack(payload)
+
+
+def test_codec_size_limit_is_checked_before_parsing():
+    with pytest.raises(BadInput, match="over the limit") as e:
+        unpack(pack({"x": np.zeros(1000)}), max_size=1000)
+    assert e.value.details["limit"] == 1000
+    with pytest.raises(BadInput, match="object"):
+        pack({"x": np.array(["a"], dtype=object)})
+
+
+def test_contract_fills_defaults_and_converts_int_arrays():
+    req = BUILD.request.validate({"space": "s1", "clips": [_clip(data=np.zeros((30, 3), dtype=np.int64))]})
+    assert req["dim"] == 3 and req["replace"] is False and req["n_states"] is None
+    assert req["clips"][0]["data"].dtype == np.float64 and req["clips"][0]["sensor"] == []
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"space": "../etc"}, "space"), ({"space": "a/b"}, "space"), ({"space": ".hidden"}, "space"),
+    ({"clips": []}, "clips"), ({"clips": [_clip(frames=1)]}, "clips[0].data"),
+    ({"clips": [_clip(frames=0)]}, "clips[0].data"),
+    ({"clips": [_clip(data=np.full((30, 3), np.nan))]}, "clips[0].data"),
+    ({"clips": [_clip(data=np.zeros((30, 4)))]}, "clips[0].data"),
+    ({"clips": [_clip(fps=float("inf"))]}, "clips[0].fps"),
+    ({"clips": [_clip(fps="30")]}, "clips[0].fps"),
+    ({"clips": [_clip(channels=2, data=np.zeros((30, 2)), sensor=["tau.x"])]}, "clips[0].sensor"),
+    ({"dim": 0}, "dim"), ({"dim": True}, "dim"), ({"extra": 1}, ""), ({"v": 2}, "v"),
+])
+def test_contract_names_the_bad_field(change, field):
+    msg = {"space": "s1", "clips": [_clip()], **change}
+    with pytest.raises(BadInput) as e:
+        BUILD.request.validate(msg)
+    assert e.value.details["field"] == field, e.value.message
+
+
+def test_generate_needs_exactly_one_of_point_and_mix():
+    with pytest.raises(BadInput, match="exactly one"):
+        GENERATE.request.validate({"space": "s"})
+    with pytest.raises(BadInput, match="exactly one"):
+        GENERATE.request.validate({"space": "s", "point": np.zeros(3), "mix": {"a": 1.0}})
+    assert GENERATE.request.validate({"space": "s", "mix": {"a": 1.0}})["method"] == "expected"
+
+
+def test_every_contract_is_readable_and_complete():
+    for name, mod in CONTRACTS.items():
+        assert mod.ENDPOINTS, name
+        for verb, ep in mod.ENDPOINTS.items():
+            text = ep.request.describe() + ep.reply.describe()
+            assert ep.verb == verb and ep.doc and f"{name}.{verb}" in text
+    assert "space: string matching" in RECOGNIZE.request.describe()
+
+
+def test_clip_wire_round_trip(bundled):
+    from shared.io import load_clip
+
+    c = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc")
+    back = clip_from_wire(unpack(pack(clip_to_wire(c))))
+    assert back.channels == c.channels and back.fps == c.fps and back.label == c.label
+    assert np.array_equal(back.data, c.data) and back.skeleton == c.skeleton
+    with pytest.raises(BadInput, match="skeleton"):
+        clip_from_wire({**clip_to_wire(c), "skeleton": "{not json"})
+
+
+def test_settings_accept_loopback_only():
+    assert check_loopback("tcp/127.0.0.1:7447") and check_loopback("tcp/[::1]:7447") and check_loopback("tcp/localhost:1")
+    for bad in ("tcp/0.0.0.0:7447", "tcp/192.168.1.4:7447", "tcp/example.com:7447", "7447", "tcp/127.0.0.1:70000"):
+        with pytest.raises(BadInput):
+            check_loopback(bad)
+    with pytest.raises(BadInput, match="PREFIX"):
+        Settings(prefix="a/b")
+    assert Settings(prefix="mc2").key("pss", "build") == "mc2/pss/build"

@@ -1,0 +1,213 @@
+"""Contract, bad-input and concurrency tests of the real pss service process.
+
+The service runs as its own process against a private router on a free loopback port
+(fixture ``pss_service``); every request goes over Zenoh and every reply is checked against
+the same contract the service imports (``schemas/pss.py``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+
+import msgpack
+import numpy as np
+import pytest
+
+from schemas import pss as contract
+from schemas.common import ERROR, clip_to_wire
+from shared.bus.client import RemoteError
+from shared.codec import pack
+
+
+@pytest.fixture(scope="module")
+def clips(bundled):
+    from shared.bodies.arm import arm_model, with_arm_torques
+    from shared.io import find_clips, load_clip
+
+    model = arm_model(body_mass=2.4)
+    all_clips = [load_clip(f) for f in find_clips([bundled / "amc"])]
+    train = [with_arm_torques(c, model) for c in all_clips if "_dg_" not in c.name]
+    test = [with_arm_torques(c, model) for c in all_clips if "_dg_" in c.name]
+    motion_only = [c for c in all_clips if "_dg_" in c.name]
+    return train, test, motion_only
+
+
+def _checked(endpoint, reply):
+    """The reply matches the contract (validated independently of the service)."""
+    return endpoint.reply.validate(reply)
+
+
+def _state(env):
+    """What is on the service's disk: file name -> sha256."""
+    from pathlib import Path
+
+    root = Path(env["MIRRORCOACH_HOME"]) / "data" / "pss"
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(root.iterdir())}
+
+
+@pytest.fixture(scope="module")
+def built(pss_service, clips):
+    """Space 'base' built once from the bundled bd/bk clips with arm torques."""
+    from shared.bus.client import Client
+
+    from tests.conftest import settings_of
+
+    env, _ = pss_service
+    with Client(settings_of(env)) as c:
+        info = c.request("pss", "build", {"space": "base", "clips": [clip_to_wire(x) for x in clips[0]], "replace": True})
+    return info
+
+
+def test_every_verb_answers_within_its_contract(pss_service, clips, built, client_of):
+    env, _ = pss_service
+    c = client_of(env)
+    train, test, motion_only = clips
+    info = _checked(contract.BUILD, built)
+    assert info["n_proto_symbols"] == len(train) and len(info["labels"]) == 4
+    assert info["points"].shape == (len(train), 3) and info["sensor_channels"]
+
+    events = []
+    c.subscribe("events/pss/space", lambda key, msg: events.append(msg))
+    time.sleep(0.3)
+
+    # recognize: every held-out clip (motion only, no skeleton sent) by its class
+    for clip in test:
+        r = _checked(contract.RECOGNIZE, c.request("pss", "recognize", {"space": "base", "clips": [clip_to_wire(clip, False)]}))
+        assert r["label"] == clip.label and r["point"].shape == (3,) and len(r["nearest"]) == 5
+        assert [n["distance"] for n in r["nearest"]] == sorted(n["distance"] for n in r["nearest"])
+
+    names = [p["name"] for p in info["proto_symbols"]]
+    # generate from a point and from a mix
+    g = _checked(contract.GENERATE, c.request("pss", "generate", {"space": "base", "point": info["points"][0]}))
+    assert g["clip"]["data"].shape[0] > 10 and np.isclose(g["weights"].sum(), 1.0)
+    g2 = _checked(contract.GENERATE, c.request("pss", "generate", {"space": "base", "mix": {names[0]: 3.0, names[1]: -2.0},
+                                                                   "method": "monte_carlo", "seed": 3}))
+    assert g2["weights"][0] == pytest.approx(3.0) and g2["clip"]["skeleton"]
+
+    # associate both ways
+    m = motion_only[0]
+    a = _checked(contract.ASSOCIATE, c.request("pss", "associate", {"space": "base", "clip": clip_to_wire(m)}))
+    assert a["label"] == m.label and a["aligned"]["data"].shape[0] == m.resample(30).n_frames
+    assert a["aligned"]["sensor"] == info["sensor_channels"]
+    part = test[0].frames(0, int(0.8 * test[0].n_frames))
+    f = _checked(contract.ASSOCIATE, c.request("pss", "associate", {"space": "base", "clip": clip_to_wire(part),
+                                                                    "missing": "frames"}))
+    assert 0 < f["progress"] <= 1 and f["aligned"] is None
+
+    d = _checked(contract.DISTANCE, c.request("pss", "distance", {"space": "base", "a": names[0], "b": names[1]}))
+    assert d["distance"] > 0
+    assert c.request("pss", "distance", {"space": "base", "a": names[0], "b": names[0]})["distance"] == 0
+
+    # add, info, list, delete on a copy
+    _checked(contract.BUILD, c.request("pss", "build", {"space": "copy", "clips": [clip_to_wire(x) for x in train[:4]]}))
+    added = _checked(contract.ADD, c.request("pss", "add", {"space": "copy", "clips": [clip_to_wire(train[5])]}))
+    assert added["n_proto_symbols"] == 5
+    assert _checked(contract.INFO_EP, c.request("pss", "info", {"space": "copy"}))["n_proto_symbols"] == 5
+    listed = _checked(contract.LIST, c.request("pss", "list"))
+    assert {s["space"] for s in listed["spaces"]} >= {"base", "copy"} and listed["interrupted"] == []
+    assert _checked(contract.DELETE, c.request("pss", "delete", {"space": "copy"}))["deleted"] is True
+    assert "copy" not in {s["space"] for s in c.request("pss", "list")["spaces"]}
+
+    deadline = time.monotonic() + 5
+    while len(events) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    changes = [(e["space"], e["change"]) for e in events]
+    assert changes == [("copy", "built"), ("copy", "added"), ("copy", "deleted")]
+    for e in events:
+        contract.EVENTS["space"].validate(e)
+
+
+def _bad_cases(clip, other_clip):
+    """(name, verb, raw payload, expected code): the bad-input list of the issue."""
+    w = clip_to_wire(clip)
+    nan = dict(w, data=np.where(np.arange(w["data"].size).reshape(w["data"].shape) == 7, np.nan, w["data"]))
+    inf = dict(w, data=np.full(w["data"].shape, np.inf))
+    one = dict(w, data=w["data"][:1])
+    empty = dict(w, data=w["data"][:0])
+    short = dict(w, data=w["data"][:20])  # 20 frames at 120 fps -> 5 frames at 30 fps
+    mismatch = dict(w, channels=w["channels"][:-1])
+    foreign = dict(w, channels=[f"x{i}.rx" for i in range(len(w["channels"]))])
+    big = {"space": "base", "clips": [dict(w, data=np.zeros((20_000, 62)))]}  # ~10 MB > 8 MB limit
+    return [
+        ("not msgpack", "recognize", b"\xc1\xc1\xc1garbage", "bad_request"),
+        ("not a map", "recognize", pack([1, 2, 3]), "bad_request"),
+        ("missing field", "recognize", pack({"space": "base"}), "bad_request"),
+        ("wrong type", "recognize", pack({"space": "base", "clips": "squat"}), "bad_request"),
+        ("wrong type in clip", "recognize", pack({"space": "base", "clips": [dict(w, fps="fast")]}), "bad_request"),
+        ("NaN", "recognize", pack({"space": "base", "clips": [nan]}), "bad_request"),
+        ("Inf", "build", pack({"space": "new1", "clips": [inf]}), "bad_request"),
+        ("empty clip", "build", pack({"space": "new2", "clips": [empty]}), "bad_request"),
+        ("one-frame clip", "recognize", pack({"space": "base", "clips": [one]}), "bad_request"),
+        ("fewer frames than states", "build", pack({"space": "new3", "clips": [short], "n_states": 12}), "bad_request"),
+        ("fewer frames than states (recognize)", "recognize", pack({"space": "base", "clips": [short]}), "bad_request"),
+        ("channel count mismatch", "recognize", pack({"space": "base", "clips": [mismatch]}), "bad_request"),
+        ("channels the space lacks", "recognize", pack({"space": "base", "clips": [foreign]}), "bad_request"),
+        ("point of the wrong dimension", "generate", pack({"space": "base", "point": np.zeros(5)}), "bad_request"),
+        ("mix not summing to 1", "generate", pack({"space": "base", "mix": {other_clip: 2.0}}), "bad_request"),
+        ("unknown proto-symbol", "generate", pack({"space": "base", "mix": {"nobody": 1.0}}), "not_found"),
+        ("unknown space", "recognize", pack({"space": "nowhere", "clips": [w]}), "not_found"),
+        ("unknown space (delete)", "delete", pack({"space": "nowhere"}), "not_found"),
+        ("name with ../", "build", pack({"space": "../base", "clips": [w]}), "bad_request"),
+        ("name with /", "info", pack({"space": "a/b"}), "bad_request"),
+        ("existing space without replace", "build", pack({"space": "base", "clips": [w]}), "conflict"),
+        ("unknown field", "info", pack({"space": "base", "spaec": 1}), "bad_request"),
+        ("future schema version", "info", pack({"v": 9, "space": "base"}), "bad_request"),
+        ("unknown verb", "explode", pack({}), "not_found"),
+        ("payload over the size limit", "add", pack(big), "bad_request"),
+    ]
+
+
+def test_bad_input_gets_a_clear_error_and_changes_nothing(pss_service, clips, built, client_of):
+    env, procs = pss_service
+    c = client_of(env)
+    before_list = c.request("pss", "list")
+    before_disk = _state(env)
+    for name, verb, payload, code in _bad_cases(clips[1][0], built["proto_symbols"][0]["name"]):
+        with pytest.raises(RemoteError) as e:
+            c.request_raw("pss", verb, payload, timeout=60)
+        err = ERROR.validate({"code": e.value.code, "message": e.value.message, "details": e.value.details})
+        assert err["code"] == code, (name, e.value.code, e.value.message)
+        assert e.value.message and "Traceback" not in e.value.message, name
+        assert procs.procs["pss"].poll() is None, f"the service died on: {name}"
+    assert c.request("pss", "list") == before_list
+    assert _state(env) == before_disk
+    assert "Traceback" not in procs.log("pss")
+
+
+def test_a_long_build_does_not_stall_recognition_on_another_space(pss_service, dev_split, clips, built, client_of):
+    env, _ = pss_service
+    c = client_of(env)
+    big = [clip_to_wire(x.resample(30)) for x in dev_split[0][::3]]  # full covariances: a build of seconds
+    done = {}
+
+    def build():
+        from shared.bus.client import Client
+
+        from tests.conftest import settings_of
+
+        with Client(settings_of(env)) as c2:
+            c2.request("pss", "build", {"space": "big", "clips": big, "replace": True, "covariance_type": "full"})
+        done["build"] = time.monotonic()
+
+    t = threading.Thread(target=build)
+    t.start()
+    marker = __import__("pathlib").Path(env["MIRRORCOACH_HOME"]) / "data" / "pss" / "big.pending.json"
+    deadline = time.monotonic() + 60
+    while not marker.exists() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert marker.exists(), "the build never started"
+    latencies = []
+    for clip in clips[1]:
+        t0 = time.monotonic()
+        r = c.request("pss", "recognize", {"space": "base", "clips": [clip_to_wire(clip, False)]})
+        latencies.append(time.monotonic() - t0)
+        assert r["label"] == clip.label
+    answered = time.monotonic()
+    t.join(timeout=600)
+    assert "build" in done
+    print(f"\nrecognitions during a {len(big)}-clip build: {[round(1e3 * x) for x in latencies]} ms; "
+          f"build finished {done['build'] - answered:.1f} s after them")
+    assert answered < done["build"], "recognitions waited for the build"
+    assert c.request("pss", "info", {"space": "big"})["n_proto_symbols"] == len(big)
