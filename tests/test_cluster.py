@@ -34,6 +34,9 @@ def cluster(tmp_path):
     finally:
         r = cli(env, "down")
         assert r.returncode == 0, r.stdout + r.stderr
+    logs = Path(env["MIRRORCOACH_HOME"]) / "logs"
+    assert "service pss stopped" in (logs / "pss.log").read_text()  # SIGTERM: a clean stop, session closed
+    assert "router stopped" in (logs / "router.log").read_text()
 
 
 def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):

@@ -155,6 +155,13 @@ def _bad_cases(clip, other_clip):
         ("unknown field", "info", pack({"space": "base", "spaec": 1}), "bad_request"),
         ("future schema version", "info", pack({"v": 9, "space": "base"}), "bad_request"),
         ("unknown verb", "explode", pack({}), "not_found"),
+        ("associate without a clip", "associate", pack({"space": "base"}), "bad_request"),
+        ("associate, unknown kind", "associate", pack({"space": "base", "clip": w, "missing": "smell"}), "bad_request"),
+        ("distance to an unknown proto-symbol", "distance", pack({"space": "base", "a": other_clip, "b": "nobody"}), "not_found"),
+        ("distance, wrong type", "distance", pack({"space": "base", "a": 1, "b": 2}), "bad_request"),
+        ("list with a stray field", "list", pack({"space": "base"}), "bad_request"),
+        ("add to an unknown space", "add", pack({"space": "nowhere", "clips": [w]}), "not_found"),
+        ("add a name the space has", "add", pack({"space": "base", "clips": [dict(w, name=other_clip)]}), "bad_request"),
         ("payload over the size limit", "add", pack(big), "bad_request"),
     ]
 
