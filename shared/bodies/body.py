@@ -1,0 +1,212 @@
+"""A body in MuJoCo and what performing a motion with it feels like.
+
+:class:`Body` wraps a compiled ``mujoco.MjModel`` with the map from a clip's motion channels
+to its joints. :func:`perform` computes, for a motion clip:
+
+* joint torques by inverse dynamics (``mj_inverse``); positions are smoothed by a
+  Savitzky-Golay filter (cubic, window ``~0.1 s``, at least 5 frames), velocities and
+  accelerations are central differences of the smoothed positions computed with
+  ``mj_differentiatePos`` (so the free root's quaternion is differentiated correctly);
+  the free root's 6 generalised forces are the residual (unmodelled ground reaction) and are
+  not reported as torques;
+* the centre of gravity (``subtree_com`` of the world body) and its ground projection;
+* a feasibility report: joint-limit violations (per channel, frames outside the limits) and,
+  for bodies with feet, frames whose centre-of-gravity projection leaves the support area
+  (convex hull of the foot points in contact with the ground, plus a margin).
+
+The result is the clip with sensor channels ``tau.<joint>`` (N m) and ``cog.x|y|z`` (m, in
+the clip's own axes) plus the report.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from shared.clip import Clip
+from shared.errors import BadInput
+
+GRAVITY = 9.81
+
+
+@dataclass
+class DofMap:
+    """One motion channel driving one hinge of the model."""
+
+    channel: str  # e.g. "rhumerus.rx" or "shoulder_pitch"
+    qpos: int
+    dof: int
+    limits: tuple[float, float] | None = None  # degrees
+
+
+@dataclass
+class Body:
+    """A compiled MuJoCo body and how a clip drives it.
+
+    ``root`` names the clip's root joint when the body floats (a free joint fed by the root's
+    translation and rotation channels); ``feet`` lists bodies whose points make the support area.
+    """
+
+    name: str
+    kind: str  # "robot" or "human"
+    model: mujoco.MjModel
+    dofs: list[DofMap]
+    mass: float
+    skeleton: object | None = None
+    root: str | None = None
+    feet: list[str] = field(default_factory=list)
+    up_axis: int = 2
+
+    @property
+    def channels(self) -> list[str]:
+        return [d.channel for d in self.dofs]
+
+    def describe(self) -> dict:
+        return {"name": self.name, "kind": self.kind, "mass": float(self.mass), "channels": self.channels,
+                "n_bodies": int(self.model.nbody - 1), "floating": self.root is not None}
+
+
+def smooth_window(fps: float, n: int) -> int:
+    """Savitzky-Golay window: about 0.1 s, odd, at least 5 frames, at most the clip."""
+    w = max(5, int(round(0.1 * fps)) | 1)
+    return min(w, n if n % 2 else n - 1)
+
+
+def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
+    """Joint positions (T, nq) from the clip, in radians and metres."""
+    from scipy.signal import savgol_filter
+
+    m = body.model
+    missing = [c for c in body.channels if c not in clip.channels]
+    if missing:
+        raise BadInput(f"the motion lacks {len(missing)} of body {body.name!r}'s joint channels, e.g. {missing[:3]}",
+                       body=body.name)
+    n = clip.n_frames
+    if n < 5:
+        raise BadInput(f"a motion needs at least 5 frames to differentiate, got {n}")
+    w = smooth_window(clip.fps, n)
+    q = np.tile(m.qpos0, (n, 1))
+    for d in body.dofs:
+        q[:, d.qpos] = np.radians(savgol_filter(clip.column(d.channel), w, 3, mode="interp"))
+    if body.root is not None:
+        sk = body.skeleton
+        r = body.root
+        trans = np.stack([clip.column(f"{r}.t{a}") if f"{r}.t{a}" in clip.channels else np.zeros(n) for a in "xyz"], axis=1)
+        trans = savgol_filter(trans, w, 3, axis=0, mode="interp")
+        root_joint = sk.joints[sk.index(r)]
+        q[:, 0:3] = (root_joint.offset + trans) * sk.unit_m
+        values = {c: savgol_filter(clip.column(c), w, 3, mode="interp") for c in clip.channels if c.startswith(f"{r}.r")}
+        glob = sk.local_rotations(values, n, joints=[root_joint])[0]
+        from scipy.spatial.transform import Rotation
+
+        frame = glob * Rotation.from_matrix(root_joint.pre)  # the root body's frame: L_root C_root
+        xyzw = frame.as_quat()
+        q[:, 3:7] = np.column_stack([xyzw[:, 3], xyzw[:, :3]])
+    return q
+
+
+def _derivatives(model, q: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Velocities and accelerations (T, nv) by central differences (``mj_differentiatePos``)."""
+    n = len(q)
+    dt = 1.0 / fps
+    fwd = np.empty((n - 1, model.nv))
+    for t in range(n - 1):
+        mujoco.mj_differentiatePos(model, fwd[t], dt, q[t], q[t + 1])
+    v = np.empty((n, model.nv))
+    v[1:-1] = 0.5 * (fwd[:-1] + fwd[1:])
+    v[0], v[-1] = fwd[0], fwd[-1]
+    a = np.empty_like(v)
+    a[1:-1] = (fwd[1:] - fwd[:-1]) / dt
+    a[0], a[-1] = a[1], a[-2]
+    return v, a
+
+
+def inverse_dynamics(body: Body, q: np.ndarray, fps: float):
+    """(qvel, qacc, qfrc_inverse, centre of gravity (T, 3)) for a joint trajectory."""
+    m = body.model
+    v, a = _derivatives(m, q, fps)
+    data = mujoco.MjData(m)
+    tau = np.empty((len(q), m.nv))
+    cog = np.empty((len(q), 3))
+    for t in range(len(q)):
+        data.qpos[:] = q[t]
+        data.qvel[:] = v[t]
+        data.qacc[:] = a[t]
+        mujoco.mj_inverse(m, data)
+        tau[t] = data.qfrc_inverse
+        cog[t] = data.subtree_com[0]
+    return v, a, tau, cog
+
+
+def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 0.05) -> dict:
+    """Frames whose centre-of-gravity ground projection is outside the support area."""
+    if not body.feet:
+        return {"checked": False}
+    from scipy.spatial import ConvexHull, QhullError
+
+    m = body.model
+    data = mujoco.MjData(m)
+    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f) for f in body.feet]
+    up = body.up_axis
+    plane = [i for i in range(3) if i != up]
+    pts = np.empty((len(q), 2 * len(ids), 3))
+    for t in range(len(q)):
+        data.qpos[:] = q[t]
+        mujoco.mj_kinematics(m, data)
+        for k, b in enumerate(ids):
+            pts[t, 2 * k] = data.xpos[b]
+            pts[t, 2 * k + 1] = data.xipos[b] * 2 - data.xpos[b]  # far end of the segment
+    ground = pts[..., up].min()
+    outside, airborne, worst = 0, 0, 0.0
+    for t in range(len(q)):
+        contact = pts[t][pts[t][:, up] < ground + 0.05][:, plane]
+        c = cog[t, plane]
+        if len(contact) == 0:
+            airborne += 1
+            continue
+        try:
+            hull = ConvexHull(contact)
+            dist = float(np.max(hull.equations[:, :2] @ c + hull.equations[:, 2]))
+        except (QhullError, ValueError):  # fewer than 3 points or collinear: distance to the segment
+            a, b = contact.min(axis=0), contact.max(axis=0)
+            ab = b - a
+            s = np.clip(np.dot(c - a, ab) / max(np.dot(ab, ab), 1e-12), 0, 1)
+            dist = float(np.linalg.norm(c - (a + s * ab)))
+        if dist > margin:
+            outside += 1
+            worst = max(worst, dist - margin)
+    return {"checked": True, "frames_outside_support": outside, "frames_airborne": airborne,
+            "max_distance_outside_m": worst, "margin_m": margin}
+
+
+def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
+    """The clip performed by ``body``: torques, centre of gravity and a feasibility report."""
+    q = _qpos_trajectory(body, clip)
+    _, _, tau, cog = inverse_dynamics(body, q, clip.fps)
+    limits = {}
+    for d in body.dofs:
+        if d.limits is None:
+            continue
+        x = clip.column(d.channel)
+        lo, hi = d.limits
+        bad = int(np.sum((x < lo - 1.0) | (x > hi + 1.0)))
+        if bad:
+            limits[d.channel] = {"frames": bad, "min": float(x.min()), "max": float(x.max()), "limits": [lo, hi]}
+    support = _support_report(body, q, cog)
+    report = {"body": body.name, "mass": float(body.mass), "frames": clip.n_frames,
+              "joint_limit_violations": limits, "support": support,
+              "feasible": not limits and not (support.get("checked") and support["frames_outside_support"] > 0)}
+    names = [f"tau.{d.channel}" for d in body.dofs] + ["cog.x", "cog.y", "cog.z"]
+    values = np.column_stack([tau[:, [d.dof for d in body.dofs]], cog])
+    base = clip.select(clip.group("motion")) if clip.group("motion") else clip.data
+    motion = clip.with_data(base, channels=clip.group("motion") or list(clip.channels),
+                            groups={"motion": clip.group("motion") or list(clip.channels)})
+    return motion.add_channels(names, values, "sensor"), report
+
+
+def check_mass(mass: float) -> float:
+    if not (isinstance(mass, (int, float)) and np.isfinite(mass) and 0.1 <= mass <= 500):
+        raise BadInput(f"body mass must be between 0.1 and 500 kg, got {mass}", field="mass")
+    return float(mass)

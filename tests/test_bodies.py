@@ -1,0 +1,119 @@
+"""MuJoCo bodies: the chapter-3 robots and human bodies from the HDM05 skeletons."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from shared.bodies.body import _derivatives, _qpos_trajectory, perform
+from shared.bodies.human import human_body
+from shared.bodies.robot import robot, small_humanoid
+from shared.clip import Clip
+from shared.errors import BadInput, NotFound
+
+
+def _robot_motion(n=61, fps=30.0):
+    t = np.linspace(0, 2, n)
+    data = np.column_stack([60 * np.sin(t), 20 * np.sin(2 * t), -40 - 30 * np.cos(t), 30 + 20 * np.sin(t)])
+    return Clip(data, ["shoulder_pitch", "shoulder_roll", "elbow", "knee"], fps, name="m")
+
+
+def _torques(clip):
+    return clip.select([c for c in clip.group("sensor") if c.startswith("tau.")])
+
+
+def test_the_other_robot_feels_exactly_twice_the_selfs_torques():
+    self_, other = robot("self"), robot("other")
+    assert (self_.mass, other.mass) == pytest.approx((2.4, 4.8))
+    still = Clip(np.tile([45.0, 10.0, -60.0, 30.0], (20, 1)), _robot_motion().channels, 30.0, name="still")
+    g_self, g_other = _torques(perform(self_, still)[0]), _torques(perform(other, still)[0])
+    assert np.abs(g_self).max() > 0.05  # gravity torques are there
+    np.testing.assert_allclose(g_other, 2 * g_self, rtol=1e-9, atol=1e-12)
+    moving = _robot_motion()
+    np.testing.assert_allclose(_torques(perform(other, moving)[0]), 2 * _torques(perform(self_, moving)[0]), rtol=1e-9, atol=1e-12)
+
+
+def _replay_accelerations(body, clip):
+    """Feed the inverse-dynamics forces back through mj_forward: the accelerations come back."""
+    m = body.model
+    q = _qpos_trajectory(body, clip)
+    v, a = _derivatives(m, q, clip.fps)
+    d = mujoco.MjData(m)
+    worst = 0.0
+    for t in range(0, len(q), 7):
+        d.qpos[:], d.qvel[:], d.qacc[:] = q[t], v[t], a[t]
+        mujoco.mj_inverse(m, d)
+        f = d.qfrc_inverse.copy()
+        d.qacc[:] = 0
+        d.qfrc_applied[:] = f
+        mujoco.mj_forward(m, d)
+        worst = max(worst, float(np.abs(d.qacc - a[t]).max() / (1 + np.abs(a[t]).max())))
+        d.qfrc_applied[:] = 0
+    return worst
+
+
+def test_inverse_dynamics_reproduces_the_accelerations(bundled):
+    from shared.io import load_clip
+
+    assert _replay_accelerations(robot("self"), _robot_motion()) < 1e-8
+    clip = load_clip(bundled / "amc/kickLFront1Reps/HDM_bd_kickLFront1Reps_001_120.amc")
+    assert _replay_accelerations(human_body(clip.skeleton), clip) < 1e-8
+
+
+def test_mujoco_kinematics_of_a_human_body_match_the_skeleton(bundled):
+    from shared.io import load_clip
+
+    clip = load_clip(bundled / "amc/rotateArmsBothBackward1Reps/HDM_bd_rotateArmsBothBackward1Reps_001_120.amc")
+    body = human_body(clip.skeleton)
+    q = _qpos_trajectory(body, clip)
+    ours = clip.skeleton.forward_kinematics(clip.data, clip.channels, ends=False)
+    ids = [mujoco.mj_name2id(body.model, mujoco.mjtObj.mjOBJ_BODY, j.name) for j in clip.skeleton.joints]
+    d = mujoco.MjData(body.model)
+    worst = 0.0
+    for t in range(10, clip.n_frames - 10, 10):  # away from the smoothing filter's ends
+        d.qpos[:] = q[t]
+        mujoco.mj_kinematics(body.model, d)
+        worst = max(worst, float(np.abs(d.xpos[ids] - ours[t]).max()))
+    assert worst < 0.01, f"{worst:.4f} m"  # the positions are smoothed (~0.1 s window) before differentiation
+
+
+@pytest.mark.parametrize("actor", ["bd", "bk", "dg"])
+def test_a_human_body_per_hdm05_actor_performs_every_dev_clip(hdm05, dev_clips, actor):
+    from shared.io import read_asf
+
+    sk = read_asf(hdm05 / "asf" / f"HDM_{actor}.asf")
+    body = human_body(sk, mass=70.0)
+    assert body.mass == pytest.approx(70.0, rel=0.01)
+    assert sum(sk.joints[sk.index(f)].name in body.feet for f in body.feet) == 4
+    clips = [c for c in dev_clips if f"_{actor}_" in c.name]
+    assert len(clips) > 40
+    peak = []
+    for c in clips:
+        out, report = perform(body, c)
+        tau = _torques(out)
+        assert tau.shape == (c.n_frames, len(body.dofs)) and np.all(np.isfinite(tau))
+        cog = out.select(["cog.x", "cog.y", "cog.z"])
+        assert 0.6 < cog[0, 1] < 1.3, c.name  # standing at the start: the centre of gravity is near the hips (y up)
+        assert cog[:, 1].min() > 0.0, c.name  # never below the floor, even lying down
+        assert report["support"]["checked"]
+        peak.append(np.abs(tau).max())
+    # a 70 kg person's joint torques: tens to a few hundred N m, not thousands
+    assert 20 < np.median(peak) < 600, np.median(peak)
+
+
+def test_bodies_refuse_bad_input(bundled):
+    from shared.io import load_clip
+
+    with pytest.raises(NotFound):
+        robot("nobody")
+    for mass in (0.0, -1.0, 1e6, float("nan")):
+        with pytest.raises(BadInput, match="mass"):
+            small_humanoid(mass)
+    clip = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc")
+    with pytest.raises(BadInput, match="lacks"):
+        perform(robot("self"), clip)  # a human clip on the robot: wrong joints
+    with pytest.raises(BadInput, match="at least 5 frames"):
+        perform(robot("self"), _robot_motion().frames(0, 4))
+    with pytest.raises(BadInput, match="mass"):
+        human_body(clip.skeleton, mass=0.01)
