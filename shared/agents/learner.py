@@ -1,0 +1,207 @@
+"""Simulated learners (thesis ch. 4-6, SPEC section 6). **A simulation, not a person.**
+
+The thesis coached people. We coach simulated learners whose behaviour is a small, documented
+model, chosen so that the effects the thesis reports can appear or fail to appear; nothing
+below is fitted to human data.
+
+State. A learner holds its *motor memory* ``m``: its current version of the target motion,
+as joint-angle trajectories of the target's motion channels on a normalised time axis of
+``N_PHASE`` samples. It starts at the target plus a *personal deviation*: on one or two body
+parts (arms, legs, trunk) it moves with a reduced amplitude ``s`` (0.5-0.8 of the target's
+range about its mean) and a constant offset ``o`` (up to 8 degrees).
+
+Imitation. Shown a demonstration ``D`` (any clip with the target's channels, resampled to the
+phase axis) with an adverb, the learner updates ``m <- m + gamma_eff * P(D - m)`` where
+
+* ``P`` is perception: per channel, a difference whose RMS is below the *perception
+  threshold* ``tau`` degrees is not noticed, larger ones are shrunk by ``tau`` (soft threshold).
+  This is why showing the target again helps little once the error is small;
+* ``gamma_eff = min(gamma * a(adverb) * (1 + o_s * x), 1)`` with ``gamma`` the *learning gain*,
+  ``a`` the adverb factor (``1 + sens * (A - 1)``, ``A`` = 1.10 / 1.20 / 1.35 for "a little
+  more" / "more" / "much more"; "more like this" counts as "more"; ``sens`` the learner's
+  sensitivity to words) and the *overshoot* term: ``x`` is how exaggerated the
+  demonstration looks, the RMS of ``D - R`` over the RMS of ``R - m``, with ``R`` the first
+  motion the learner was shown (taken to be the target; so ``x`` is about ``alpha`` for an
+  emphatic motion ``x_t + alpha (x_t - x_p)``, 0 for the target, at most 5), and ``o_s`` the
+  learner's overshoot susceptibility. A moderately emphasised demonstration therefore moves
+  the learner further than the target alone; a strongly emphasised one makes it overshoot
+  past the target, and the error grows again.
+
+Attempts. Each trial returns 5 repetitions: the memory played at the learner's tempo
+(duration factor ``tempo``) plus smooth motor noise (Gaussian, ``sigma`` degrees, low-passed
+over ~0.2 s), at the target's frame rate.
+
+Every learner is drawn from :func:`population` with a seed; its parameters are documented in
+:class:`LearnerParams` and readable through :meth:`SimulatedLearner.reveal`.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from shared.clip import Clip
+from shared.errors import BadInput
+
+N_PHASE = 100
+REPETITIONS = 5
+ADVERB_FACTOR = {None: 1.0, "": 1.0, "a little more": 1.10, "more": 1.20, "much more": 1.35, "more like this": 1.20}
+ADVERBS = tuple(a for a in ADVERB_FACTOR if a)
+
+BODY_PARTS = {
+    "arms": r"(clavicle|humerus|radius|wrist|hand|fingers|thumb|shoulder|elbow|arm|collar)",
+    "legs": r"(hipjoint|femur|tibia|foot|toes|knee|leg|thigh|shin|ankle)",
+    "trunk": r"(root|lowerback|upperback|thorax|neck|head|spine|chest|hips|pelvis)",
+}
+
+
+def body_part(channel: str) -> str:
+    """Which body part a motion channel belongs to (arms, legs, trunk)."""
+    joint = channel.split(".")[0].lower()
+    for part, pat in BODY_PARTS.items():
+        if re.search(pat, joint):
+            return part
+    return "trunk"
+
+
+@dataclass
+class LearnerParams:
+    """A learner's hidden parameters (see the module docstring for their roles)."""
+
+    gain: float = 0.3  # gamma: share of a perceived difference taken up per trial
+    threshold: float = 3.0  # tau: perception threshold, degrees RMS per channel
+    overshoot: float = 0.3  # o_s: susceptibility to exaggerated demonstrations
+    noise: float = 1.0  # sigma: motor noise, degrees
+    tempo: float = 1.0  # duration of the learner's attempts relative to the target
+    adverb_sensitivity: float = 1.0  # sens
+    deviation: dict = field(default_factory=lambda: {"legs": {"scale": 0.6, "offset": 0.0}})
+    seed: int = 0
+
+    def check(self) -> "LearnerParams":
+        for name, lo, hi in (("gain", 0.0, 1.0), ("threshold", 0.0, 90.0), ("overshoot", 0.0, 5.0),
+                             ("noise", 0.0, 30.0), ("tempo", 0.5, 2.0), ("adverb_sensitivity", 0.0, 5.0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and lo <= v <= hi):
+                raise BadInput(f"learner {name} must be in [{lo}, {hi}], got {v}", field=name)
+        for part, dev in self.deviation.items():
+            if part not in BODY_PARTS or not {"scale", "offset"} <= set(dev):
+                raise BadInput(f"deviation must map arms/legs/trunk to {{scale, offset}}, got {part!r}", field="deviation")
+        return self
+
+
+def population(n: int, seed: int = 0) -> list[LearnerParams]:
+    """``n`` learners drawn reproducibly: learner ``i`` uses ``default_rng([seed, i])``.
+
+    gain U(0.15, 0.45); threshold U(1.5, 6) deg; overshoot U(0.1, 0.6); noise U(0.3, 1.5) deg;
+    tempo U(0.9, 1.1); adverb sensitivity U(0.5, 1.5); deviation on 1 or 2 random body parts
+    with amplitude scale U(0.5, 0.8) and offset U(-8, 8) deg.
+    """
+    if not 1 <= n <= 10_000:
+        raise BadInput(f"population size must be 1..10000, got {n}")
+    out = []
+    for i in range(n):
+        r = np.random.default_rng([seed, i])
+        parts = list(r.choice(list(BODY_PARTS), size=int(r.integers(1, 3)), replace=False))
+        out.append(LearnerParams(
+            gain=float(r.uniform(0.15, 0.45)), threshold=float(r.uniform(1.5, 6.0)),
+            overshoot=float(r.uniform(0.1, 0.6)), noise=float(r.uniform(0.3, 1.5)), tempo=float(r.uniform(0.9, 1.1)),
+            adverb_sensitivity=float(r.uniform(0.5, 1.5)),
+            deviation={p: {"scale": float(r.uniform(0.5, 0.8)), "offset": float(r.uniform(-8, 8))} for p in parts},
+            seed=int(r.integers(0, 2**31 - 1))))
+    return out
+
+
+def to_phase(clip: Clip, channels: list[str], n: int = N_PHASE) -> np.ndarray:
+    """The clip's ``channels`` resampled to ``n`` samples of normalised time (n x C)."""
+    missing = [c for c in channels if c not in clip.channels]
+    if missing:
+        raise BadInput(f"the demonstration lacks {len(missing)} of the target's channels, e.g. {missing[:3]}")
+    x = clip.select(channels)
+    if len(x) < 2:
+        raise BadInput("a demonstration needs at least 2 frames")
+    src = np.linspace(0, 1, len(x))
+    dst = np.linspace(0, 1, n)
+    return np.column_stack([np.interp(dst, src, x[:, c]) for c in range(x.shape[1])])
+
+
+class SimulatedLearner:
+    """A learner of one target motion (see module docstring)."""
+
+    def __init__(self, name: str, target: Clip, params: LearnerParams | None = None, memory: np.ndarray | None = None,
+                 trials: int = 0, reference: np.ndarray | None = None):
+        self.name = name
+        self.params = (params or LearnerParams()).check()
+        self.target = target
+        self.channels = target.group("motion") or list(target.channels)
+        self.target_phase = to_phase(target, self.channels)
+        self.memory = self._initial() if memory is None else np.asarray(memory, float)
+        self.trials = trials
+        self.reference = None if reference is None else np.asarray(reference, float)
+
+    def _initial(self) -> np.ndarray:
+        m = self.target_phase.copy()
+        mean = m.mean(axis=0)
+        for c, ch in enumerate(self.channels):
+            dev = self.params.deviation.get(body_part(ch))
+            if dev is not None and not ch.split(".")[-1].startswith("t"):  # rotations only
+                m[:, c] = mean[c] + dev["scale"] * (m[:, c] - mean[c]) + dev["offset"]
+        return m
+
+    # ------------------------------------------------------------------ the model
+    def perceive(self, diff: np.ndarray) -> np.ndarray:
+        """Soft threshold per channel on the RMS of the difference (degrees)."""
+        rms = np.sqrt(np.mean(diff**2, axis=0))
+        keep = np.where(rms > self.params.threshold, 1.0 - self.params.threshold / np.maximum(rms, 1e-12), 0.0)
+        return diff * keep
+
+    def imitate(self, demonstration: Clip, adverb: str | None = None) -> list[Clip]:
+        """Watch ``demonstration`` (told ``adverb``), update the motor memory, and return the
+        next attempt: ``REPETITIONS`` clips."""
+        if adverb not in ADVERB_FACTOR:
+            raise BadInput(f"unknown adverb {adverb!r}; one of: {', '.join(ADVERBS)} (or none)", field="adverb")
+        p = self.params
+        demo = to_phase(demonstration, self.channels)
+        if self.reference is None:  # the first motion shown is taken to be the target
+            self.reference = demo
+        diff = self.perceive(demo - self.memory)
+        own = float(np.sqrt(np.mean((self.reference - self.memory) ** 2)))
+        shown = float(np.sqrt(np.mean((demo - self.reference) ** 2)))
+        exaggeration = min(shown / max(own, 1e-9), 5.0)
+        a = 1.0 + p.adverb_sensitivity * (ADVERB_FACTOR[adverb] - 1.0)
+        gain = min(p.gain * a * (1.0 + p.overshoot * exaggeration), 1.0)  # never past what it saw
+        self.memory = self.memory + gain * diff
+        self.trials += 1
+        return self.attempts()
+
+    def attempts(self) -> list[Clip]:
+        """``REPETITIONS`` performances of the current memory (motor noise, own tempo)."""
+        p = self.params
+        rng = np.random.default_rng([p.seed, self.trials])
+        t = self.target
+        n = max(5, int(round(t.n_frames * p.tempo)))
+        src = np.linspace(0, 1, N_PHASE)
+        dst = np.linspace(0, 1, n)
+        base = np.column_stack([np.interp(dst, src, self.memory[:, c]) for c in range(self.memory.shape[1])])
+        width = max(1, int(round(0.2 * t.fps)))
+        kernel = np.hanning(2 * width + 1)
+        kernel /= np.sqrt(np.sum(kernel**2))
+        out = []
+        for r in range(REPETITIONS):
+            white = rng.standard_normal((n + 2 * width, base.shape[1]))
+            smooth = np.column_stack([np.convolve(white[:, c], kernel, mode="valid") for c in range(base.shape[1])])
+            data = t.data[np.linspace(0, t.n_frames - 1, n).round().astype(int)].copy()
+            idx = [t.channels.index(c) for c in self.channels]
+            data[:, idx] = base + p.noise * smooth[:n]
+            out.append(Clip(data, list(t.channels), t.fps, t.skeleton, {g: list(v) for g, v in t.groups.items()},
+                            name=f"{self.name}_trial{self.trials}_rep{r + 1}", label=t.label))
+        return out
+
+    def error(self) -> float:
+        """RMS difference (degrees) between the motor memory and the target: the truth a
+        coach never sees, for evaluation."""
+        return float(np.sqrt(np.mean((self.memory - self.target_phase) ** 2)))
+
+    def reveal(self) -> dict:
+        return {"name": self.name, "trials": self.trials, "error_deg": self.error(), **asdict(self.params)}
