@@ -37,6 +37,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m bench.run --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.bus --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.sim --hdm05 $(HDM05) --out bench/results
 
 dashboard reproduce:
 	@echo "'make $@' arrives with the experiments and the dashboard (issues 5-7)."; exit 2

@@ -4,7 +4,7 @@ On a private cluster (free loopback port, temporary home) started with ``shared.
 
 * request overhead for a 100 KB payload, (a) raw Zenoh get/reply through the router and
   (b) the full service stack (msgpack codec, contract validation, worker pool, reply
-  validation) on an ``echo`` service built from the same runtime (target <= 1 ms median);
+  validation) on the ``echo`` service of ``bench/echo.py`` (target <= 1 ms median);
 * recognition through the CLI end to end (``mirrorcoach space recognize``, a subprocess per
   call): the command's own time (it prints it with ``MIRRORCOACH_TIMING=1``: reading the clip,
   opening the session, the request, the reply) minus the library's time reported by the
@@ -17,47 +17,18 @@ Writes ``bench/results/bus.json`` and ``bench/results/bus.md``.
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import re
-import socket
 import statistics
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import numpy as np
 
-from schemas.base import Array, Endpoint, F, Map, Message
-
-ECHO = {"echo": Endpoint("echo", Message("bench.echo", Map({"blob": F(Array(shape=(None,)))})),
-                         Message("bench.echo.reply", Map({"blob": F(Array(shape=(None,)))})), "return the blob")}
-
-
-def echo_service() -> int:
-    """``python -m bench.bus --echo-service``: a service with one verb, for the overhead."""
-    from shared.bus.runtime import Service
-
-    svc = Service("echo", ECHO)
-    svc.handler("echo")(lambda req: {"blob": req["blob"]})
-    return svc.run()
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _stats(ts: list[float]) -> dict:
-    a = 1e3 * np.asarray(ts)
-    return {"median_ms": float(np.median(a)), "p95_ms": float(np.percentile(a, 95)), "n": len(a)}
-
+from bench.common import parse_args, private_cluster, stats, write_results
 
 def raw_zenoh_roundtrip(settings, n=300, size=100_000) -> dict:
     import zenoh
@@ -79,35 +50,20 @@ def raw_zenoh_roundtrip(settings, n=300, size=100_000) -> dict:
     q.undeclare()
     cli.close()
     srv.close()
-    return _stats(ts)
+    return stats(ts)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--hdm05", type=Path, required=True)
-    ap.add_argument("--out", type=Path, default=Path("bench/results"))
-    ap.add_argument("--echo-service", action="store_true", help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
-    if args.echo_service:
-        return echo_service()
-    args.out.mkdir(parents=True, exist_ok=True)
-    home = Path(tempfile.mkdtemp(prefix="mc-bench-"))
-    os.environ.update({"MIRRORCOACH_ROUTER": f"tcp/127.0.0.1:{_free_port()}", "MIRRORCOACH_HOME": str(home),
-                       "MIRRORCOACH_PREFIX": "bench"})
+    args = parse_args(__doc__, argv)
     from schemas.common import clip_to_wire
     from shared.bus.client import Client
-    from shared.bus.config import Settings
-    from shared.cluster import down, up
     from shared.io import find_clips, load_clip
 
-    s = Settings()
-    if up(s) != 0:
-        return 1
-    echo = subprocess.Popen([sys.executable, "-m", "bench.bus", "--hdm05", str(args.hdm05), "--echo-service"],
-                            stderr=subprocess.DEVNULL)
     res: dict = {}
-    try:
-        with Client(s) as c:
+    with private_cluster("bench") as s, Client(s) as c:
+        echo = subprocess.Popen([sys.executable, "-m", "bench.echo"],
+                                stderr=subprocess.DEVNULL)
+        try:
             deadline = time.monotonic() + 60
             while "echo" not in c.alive() and time.monotonic() < deadline:
                 time.sleep(0.1)
@@ -121,7 +77,7 @@ def main(argv=None) -> int:
                 if i >= 20:
                     ts.append(time.perf_counter() - t0)
             assert np.array_equal(r["blob"], blob)
-            res["service_stack_100KB"] = _stats(ts)
+            res["service_stack_100KB"] = stats(ts)
             print(f"100 KB request: raw zenoh {res['raw_zenoh_100KB']['median_ms']:.2f} ms, "
                   f"full service stack {res['service_stack_100KB']['median_ms']:.2f} ms (median)")
 
@@ -171,16 +127,14 @@ def main(argv=None) -> int:
                     t0 = time.perf_counter()
                     list(pool.map(one, range(20)))
                     walls.append(time.perf_counter() - t0)
-            res["concurrent_20"] = {**_stats(lat), "throughput_per_s": 20 * rounds / sum(walls),
+            res["concurrent_20"] = {**stats(lat), "throughput_per_s": 20 * rounds / sum(walls),
                                     "round_wall_ms": 1e3 * statistics.median(walls)}
             print(f"20 concurrent recognitions: {res['concurrent_20']['throughput_per_s']:.0f} /s, "
                   f"latency median {res['concurrent_20']['median_ms']:.0f} ms, p95 {res['concurrent_20']['p95_ms']:.0f} ms")
-    finally:
-        echo.terminate()
-        echo.wait(timeout=30)
-        down(s)
+        finally:
+            echo.terminate()
+            echo.wait(timeout=30)
 
-    (args.out / "bus.json").write_text(json.dumps(res, indent=2))
     cr, cc = res["cli_recognize"], res["concurrent_20"]
     md = [
         "# Bus benchmark (`make bench`, bench/bus.py)", "",
@@ -194,8 +148,7 @@ def main(argv=None) -> int:
         f"| reading the AMC clip in the CLI (part of the overhead) | {cr['amc_read_ms']:.0f} ms | - |",
         f"| 20 concurrent recognitions ({cr['space_clips']}-clip space) | {cc['throughput_per_s']:.0f} /s, p95 {cc['p95_ms']:.0f} ms, median {cc['median_ms']:.0f} ms | reported |",
     ]
-    (args.out / "bus.md").write_text("\n".join(md) + "\n")
-    print(f"wrote {args.out / 'bus.md'}")
+    write_results(args.out, "bus", res, md)
     return 0
 
 

@@ -12,15 +12,13 @@ Writes ``bench/results/pss.json`` and ``bench/results/pss.md``.
 
 from __future__ import annotations
 
-import argparse
-import json
 import platform
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
 
+from bench.common import parse_args, write_results
 from shared.io import find_clips, load_clip
 from shared.pss.hmm import fit_hmm
 from shared.pss.space import ProtoSymbolSpace
@@ -44,11 +42,7 @@ def _stretch(clip, factor):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--hdm05", type=Path, required=True)
-    ap.add_argument("--out", type=Path, default=Path("bench/results"))
-    args = ap.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
+    args = parse_args(__doc__, argv)
     clips = [load_clip(f) for f in find_clips([args.hdm05 / "amc"])]
     res: dict = {"machine": {"python": platform.python_version(), "cpu": platform.processor() or platform.machine()}}
 
@@ -94,7 +88,6 @@ def main(argv=None) -> int:
         growth["channels"].append({"n": d, "train_ms": _time(lambda: fit_hmm([x] * 5, 15), 5)["median_ms"]})
     res["growth"] = growth
 
-    (args.out / "pss.json").write_text(json.dumps(res, indent=2))
     lines = [
         "# PSS core benchmark (`make bench`)", "",
         f"Python {res['machine']['python']}, 2-core machine. Medians of repeated runs after a warm-up.", "",
@@ -111,7 +104,7 @@ def main(argv=None) -> int:
         "| features (5 repetitions, 15 states) | training (ms) |", "|---|---|",
         *[f"| {g['n']} | {g['train_ms']:.1f} |" for g in growth["channels"]], "",
     ]
-    (args.out / "pss.md").write_text("\n".join(lines))
+    write_results(args.out, "pss", res, lines)
     print("\n".join(lines))
     return 0
 

@@ -4,6 +4,6 @@
 ``mirrorcoach schemas`` prints them.
 """
 
-from schemas import pss
+from schemas import pss, simulator
 
-CONTRACTS = {"pss": pss}
+CONTRACTS = {"pss": pss, "simulator": simulator}

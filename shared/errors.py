@@ -29,6 +29,12 @@ class NotFound(MirrorcoachError):
     code = "not_found"
 
 
+class Unavailable(MirrorcoachError):
+    """Something needed is not running or did not answer in time."""
+
+    code = "unavailable"
+
+
 class ClipFormatError(BadInput):
     """A clip or skeleton file cannot be read; names the file and, where known, the line."""
 

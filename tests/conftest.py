@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -77,7 +78,7 @@ class Processes:
 
     def __init__(self, env: dict):
         self.env = env
-        self.procs: dict[str, "subprocess.Popen"] = {}
+        self.procs: dict[str, subprocess.Popen] = {}
         self.logs = Path(env["MIRRORCOACH_HOME"]) / "test-logs"
         self.logs.mkdir(parents=True, exist_ok=True)
 
@@ -125,19 +126,30 @@ class Processes:
                     p.wait()
 
 
+def _serve(tmp_path_factory, services: dict[str, str], **env_extra):
+    env = cluster_env(tmp_path_factory.mktemp("home"), **env_extra)
+    procs = Processes(env)
+    procs.start("router", "shared.bus.router")
+    for name, module in services.items():
+        procs.start(name, module)
+    try:
+        procs.wait_alive(set(services))
+        yield env, procs
+    finally:
+        procs.stop()
+
+
 @pytest.fixture(scope="module")
 def pss_service(tmp_path_factory):
     """A real router and a real pss service process on a free loopback port; yields
     (env, Processes). The payload limit is 8 MB so the over-size case is cheap to send."""
-    env = cluster_env(tmp_path_factory.mktemp("pss-home"), MIRRORCOACH_MAX_PAYLOAD=8_000_000)
-    procs = Processes(env)
-    procs.start("router", "shared.bus.router")
-    procs.start("pss", "services.pss")
-    try:
-        procs.wait_alive({"pss"})
-        yield env, procs
-    finally:
-        procs.stop()
+    yield from _serve(tmp_path_factory, {"pss": "services.pss"}, MIRRORCOACH_MAX_PAYLOAD=8_000_000)
+
+
+@pytest.fixture(scope="module")
+def simulator_service(tmp_path_factory):
+    """A real router and a real simulator service process; yields (env, Processes)."""
+    yield from _serve(tmp_path_factory, {"simulator": "services.simulator"})
 
 
 @pytest.fixture

@@ -117,3 +117,18 @@ def test_bodies_refuse_bad_input(bundled):
         perform(robot("self"), _robot_motion().frames(0, 4))
     with pytest.raises(BadInput, match="mass"):
         human_body(clip.skeleton, mass=0.01)
+
+
+def test_a_body_from_the_bvh_skeleton_agrees_with_the_asf_one(bundled, tmp_path):
+    from shared.io import load_clip, save_clip
+
+    amc = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc")
+    save_clip(amc, tmp_path / "s.bvh")
+    bvh = load_clip(tmp_path / "s.bvh")
+    pa, _ = perform(human_body(amc.skeleton), amc)
+    pb, _ = perform(human_body(bvh.skeleton), bvh)
+    cog = ["cog.x", "cog.y", "cog.z"]
+    assert np.abs(pa.select(cog) - pb.select(cog)).max() < 1e-3  # same masses, same kinematics
+    # joints with the same degrees of freedom feel the same torques
+    for ch in ("tau.lowerback.rx", "tau.ltibia.rx"):
+        assert np.abs(pa.column(ch)).max() == pytest.approx(np.abs(pb.column(ch)).max(), rel=0.1), ch

@@ -13,6 +13,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from schemas.common import clip_to_wire
@@ -43,7 +44,8 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     env = cluster
     st = cli(env, "status", "--json")
     assert st.returncode == 0, st.stderr
-    assert {r["name"]: r["alive"] for r in json.loads(st.stdout)} == {"supervisor": True, "router": True, "pss": True}
+    assert {r["name"]: r["alive"] for r in json.loads(st.stdout)} == {"supervisor": True, "router": True, "pss": True,
+                                                                      "simulator": True}
 
     amc = bundled / "amc"
     train = [p for p in sorted(amc.glob("*/*.amc")) if "_dg_" not in p.name]
@@ -80,6 +82,42 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     r = cli(env, "space", "delete", "moves")
     assert r.returncode == 0
     assert "no spaces" in cli(env, "space", "list").stdout
+
+
+def test_simulator_cli_on_the_cluster(cluster, bundled, tmp_path):
+    from shared.io import load_clip
+
+    env = cluster
+    amc = bundled / "amc/kickLFront1Reps/HDM_bd_kickLFront1Reps_001_120.amc"
+    r = cli(env, "sim", "perform", bundled / "asf/HDM_bd.asf", amc, "--out", tmp_path / "k.npz", "--json")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert rep["body"]["kind"] == "human" and "feasible" in rep["report"]
+    performed = load_clip(tmp_path / "k.npz")
+    assert "tau.lfemur.rx" in performed.group("sensor") and "cog.y" in performed.group("sensor")
+    r = cli(env, "sim", "perform", "self", amc, "--out", tmp_path / "k.bvh")
+    assert r.returncode == 2 and ".npz" in r.stderr
+
+    # a person in the other's seat: one CLI asks, another answers
+    motion = tmp_path / "raise.npz"
+    from shared.clip import Clip
+    from shared.io import save_clip
+
+    t = np.linspace(0, 3, 90)
+    save_clip(Clip(np.column_stack([60 * (1 - np.cos(t)), 10 * np.sin(t), -30 - 20 * np.sin(2 * t), 0 * t]),
+                   ["shoulder_pitch", "shoulder_roll", "elbow", "knee"], 30.0, name="raise"), motion)
+    assert cli(env, "other", "create", "alice", "--person").returncode == 0
+    asker = subprocess.Popen([sys.executable, "-m", "shared.cli", "other", "ask", "alice", str(motion), "--timeout", "60"],
+                             env=env, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        r = cli(env, "other", "answer", "alice", "--answer", "bit heavy", "--wait", "30", "--folder", tmp_path / "q")
+        assert r.returncode == 0 and "sent: bit heavy" in r.stdout, r.stdout + r.stderr
+        out, err = asker.communicate(timeout=60)
+    finally:
+        if asker.poll() is None:
+            asker.kill()
+    assert asker.returncode == 0 and out.strip() == "bit heavy", err
+    assert list((tmp_path / "q").glob("*_1.npz"))
 
 
 def test_cli_says_when_the_cluster_is_not_running(tmp_path, bundled):

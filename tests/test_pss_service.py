@@ -11,7 +11,6 @@ import hashlib
 import threading
 import time
 
-import msgpack
 import numpy as np
 import pytest
 

@@ -15,11 +15,9 @@ import time
 
 from shared.bus.config import Settings, client_config
 from shared.codec import pack, unpack
-from shared.errors import MirrorcoachError
+from shared.errors import MirrorcoachError, Unavailable
 
-
-class Unavailable(MirrorcoachError):
-    code = "unavailable"
+__all__ = ["Client", "RemoteError", "Unavailable"]
 
 
 class RemoteError(MirrorcoachError):

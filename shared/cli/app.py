@@ -186,7 +186,8 @@ def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
     typer.echo(f"wrote {out} ({clip.n_frames} frames at {clip.fps:g} fps)")
 
 
-from shared.cli import cluster as _cluster  # noqa: E402  (registers the cluster commands on app)
+from shared.cli import agents as _agents  # noqa: E402,F401  (registers the simulator commands on app)
+from shared.cli import cluster as _cluster  # noqa: E402,F401  (registers the cluster commands on app)
 
 
 def main() -> None:

@@ -15,8 +15,6 @@ loading it gives identical points, distances and generations. Every random step 
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +23,7 @@ import numpy as np
 
 from shared.clip import Clip
 from shared.errors import BadInput, NotFound
+from shared.io.atomic import atomic_write
 from shared.pss.distance import distances_to, distance_matrix
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
@@ -354,11 +353,11 @@ class ProtoSymbolSpace:
         groups = ("motion", "sensor") if set(self.features.sensor_channels) <= set(clip.channels) and self.features.sensor_channels else ("motion",)
         seq = self._sequences(clip, groups)[0]
         models = self.models if groups == ("motion", "sensor") else [m.marginal(self.features.feature_indices("motion")) for m in self.models]
-        best, best_ll, best_prog = None, -np.inf, None
+        best_ll, best_prog = -np.inf, None
         for m in models:
             ll = m.log_likelihood_of([seq], end_in_last=False)
             if ll > best_ll:
-                best_ll, best, best_prog = ll, m, m.progress(seq)
+                best_ll, best_prog = ll, m.progress(seq)
         k = int(np.argmax(best_prog)) + 1
         k = int(np.clip(k, 1, min(p.n_states, len(seq))))
         hmm = fit_hmm([seq], k, covariance_type=p.covariance_type, var_floor=p.var_floor, backend=p.backend, n_iter=p.n_iter)
@@ -393,17 +392,7 @@ class ProtoSymbolSpace:
             "points": self.points,
             "header": np.array(json.dumps(header)),
         }
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez(f, **arrays)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write(path, lambda f: np.savez(f, **arrays))
         return path
 
     @classmethod

@@ -1,0 +1,64 @@
+"""Helpers of the benchmarks: timing statistics and a private local cluster."""
+
+from __future__ import annotations
+
+import os
+import socket
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+
+def stats(ts: list[float]) -> dict:
+    """Median and 95th percentile in milliseconds of durations in seconds."""
+    a = 1e3 * np.asarray(ts)
+    return {"median_ms": float(np.median(a)), "p95_ms": float(np.percentile(a, 95)), "n": len(a)}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def private_cluster(prefix: str):
+    """``mirrorcoach up`` on a free loopback port with a temporary home; yields the Settings."""
+    home = Path(tempfile.mkdtemp(prefix=f"mc-bench-{prefix}-"))
+    os.environ.update({"MIRRORCOACH_ROUTER": f"tcp/127.0.0.1:{_free_port()}", "MIRRORCOACH_HOME": str(home),
+                       "MIRRORCOACH_PREFIX": prefix})
+    from shared.bus.config import Settings
+    from shared.cluster import down, up
+
+    s = Settings()
+    if up(s) != 0:
+        raise SystemExit(f"the benchmark cluster did not start; see {s.log_dir}")
+    try:
+        yield s
+    finally:
+        down(s)
+
+
+def parse_args(doc: str, argv=None, extra=None):
+    """``--hdm05`` (required) and ``--out`` (default ``bench/results``, created)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--hdm05", type=Path, required=True)
+    ap.add_argument("--out", type=Path, default=Path("bench/results"))
+    if extra is not None:
+        extra(ap)
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    return args
+
+
+def write_results(out: Path, name: str, res: dict, markdown: list[str]) -> None:
+    """``<name>.json`` and ``<name>.md`` in ``out``."""
+    import json
+
+    (out / f"{name}.json").write_text(json.dumps(res, indent=2))
+    (out / f"{name}.md").write_text("\n".join(markdown) + "\n")
+    print(f"wrote {out / f'{name}.md'}")

@@ -1,0 +1,204 @@
+"""The simulator service: MuJoCo bodies, others and learners (contract: ``schemas/simulator.py``).
+
+State (others, learners) lives in an :class:`AgentStore` under
+``$MIRRORCOACH_HOME/data/simulator``. A person in an other's seat is served like a simulated
+one: ``other_ask`` waits (bounded by the request's ``timeout``) until ``other_answer`` brings
+the person's answer, so the asker never needs to know who answers. Pending questions live in
+memory: a restart drops them and the asker gets ``unavailable``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import uuid
+from collections import OrderedDict
+from dataclasses import asdict
+
+from schemas import simulator as contract
+from schemas.common import clip_from_wire, clip_to_wire
+from shared.agents.learner import LearnerParams, SimulatedLearner, population
+from shared.agents.store import AgentStore, PersonOther
+from shared.bodies.body import perform
+from shared.bodies.human import human_body
+from shared.bodies.robot import ROBOTS, robot
+from shared.bus.config import Settings
+from shared.bus.runtime import Service
+from shared.errors import BadInput, NotFound, Unavailable
+from shared.skeleton import Skeleton
+from shared.symbols import COMPARISONS, WORDS
+
+
+class _Bodies:
+    """Compiled bodies by (robot name or skeleton hash, mass); the last 16 human bodies kept."""
+
+    def __init__(self):
+        self.cache: OrderedDict = OrderedDict()
+        self.lock = threading.Lock()
+
+    def get(self, body: str | None, skeleton: str | None, mass: float | None):
+        key = (body, None if skeleton is None else hashlib.sha256(skeleton.encode()).hexdigest(), mass)
+        with self.lock:
+            if key in self.cache:
+                self.cache.move_to_end(key)
+                return self.cache[key]
+        if body is not None:
+            b = robot(body, mass)
+        else:
+            try:
+                sk = Skeleton.from_json(skeleton)
+            except (ValueError, KeyError, TypeError) as e:
+                raise BadInput(f"perform: the skeleton is not valid skeleton JSON ({type(e).__name__}: {e})",
+                               field="skeleton") from None
+            b = human_body(sk, 70.0 if mass is None else mass)
+        with self.lock:
+            self.cache[key] = b
+            while len(self.cache) > 16:
+                self.cache.popitem(last=False)
+        return b
+
+
+def _person_answer(answer: str, kind: str, d: int) -> str:
+    a = " ".join(answer.strip().lower().split())
+    accepted = list(COMPARISONS) if kind == "compare" else list(WORDS[d])
+    if a not in accepted:
+        raise BadInput(f"{answer!r} is not an accepted answer; accepted: {', '.join(accepted)}", field="answer")
+    return a
+
+
+def make_service(settings: Settings | None = None) -> Service:
+    settings = settings or Settings()
+    store = AgentStore(settings.data_dir("simulator"))
+    bodies = _Bodies()
+    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
+    locks: dict[str, threading.Lock] = {}
+    locks_guard = threading.Lock()
+    pending: dict[str, dict] = {}
+    pending_guard = threading.Lock()
+
+    def lock_of(key: str) -> threading.Lock:
+        with locks_guard:
+            return locks.setdefault(key, threading.Lock())
+
+    @svc.handler("bodies")
+    def list_bodies(req):
+        return {"robots": [robot(n).describe() for n in ROBOTS]}
+
+    @svc.handler("perform")
+    def do_perform(req):
+        b = bodies.get(req["body"], req["skeleton"], req["mass"])
+        clip = clip_from_wire(req["clip"], getattr(b, "skeleton", None))
+        out, report = perform(b, clip)
+        svc.publish("performed", {"body": b.name, "frames": out.n_frames, "feasible": bool(report["feasible"])})
+        return {"clip": clip_to_wire(out, with_skeleton=False), "report": report, "body": b.describe()}
+
+    # ------------------------------------------------------------------ others
+    @svc.handler("other_create")
+    def other_create(req):
+        kind, _ = store.add_other(req["other"], req["kind"], req["params"] or {}, req["replace"])
+        return {"other": req["other"], "kind": kind}
+
+    @svc.handler("other_ask")
+    def other_ask(req):
+        kind, other = store.other(req["other"])
+        clips = [clip_from_wire(c) for c in req["clips"]]
+        want = 1 if req["kind"] == "open" else 2
+        if len(clips) != want:
+            raise BadInput(f"an {req['kind']} question needs {want} motion(s), got {len(clips)}", field="clips")
+        if kind == "person":
+            answer = ask_person(req, other)
+        else:
+            with lock_of(f"other:{req['other']}"):
+                answer = other.answer_open(clips[0]) if want == 1 else other.answer_compare(*clips)
+                store.save_other(req["other"])
+        svc.publish("answered", {"other": req["other"], "kind": req["kind"], "answer": answer})
+        return {"other": req["other"], "answer": answer}
+
+    def ask_person(req, other: PersonOther) -> str:
+        qid = uuid.uuid4().hex[:12]
+        accepted = list(COMPARISONS) if req["kind"] == "compare" else list(WORDS[other.d])
+        entry = {"question": qid, "other": req["other"], "kind": req["kind"], "text": req["text"],
+                 "clips": req["clips"], "accepted": accepted, "event": threading.Event(), "answer": None}
+        with pending_guard:
+            pending[qid] = entry
+        try:
+            if not entry["event"].wait(req["timeout"]):
+                raise Unavailable(f"{req['other']} (a person) did not answer within {req['timeout']:g} s "
+                                  "(answer with `mirrorcoach other answer`)", other=req["other"])
+        finally:
+            with pending_guard:
+                pending.pop(qid, None)
+        other.asked += 1
+        store.save_other(req["other"])
+        return entry["answer"]
+
+    @svc.handler("other_pending")
+    def other_pending(req):
+        with pending_guard:
+            rows = [e for e in pending.values() if req["other"] in (None, e["other"]) and e["answer"] is None]
+            return {"questions": [{k: e[k] for k in ("question", "other", "kind", "text", "clips", "accepted")}
+                                  for e in rows]}
+
+    @svc.handler("other_answer")
+    def other_answer(req):
+        with pending_guard:
+            e = pending.get(req["question"])
+            if e is None or e["answer"] is not None:
+                raise NotFound(f"no pending question {req['question']!r} (answered, timed out or never asked)",
+                               question=req["question"])
+            _, other = store.other(e["other"])
+            d = getattr(other, "d", 4)
+            e["answer"] = _person_answer(req["answer"], e["kind"], d)
+            e["event"].set()
+            return {"question": req["question"], "answer": e["answer"]}
+
+    @svc.handler("other_reveal")
+    def other_reveal(req):
+        kind, other = store.other(req["other"])
+        r = other.reveal()
+        return {"other": req["other"], "kind": kind, "asked": int(r.pop("asked")),
+                "params": {k: v for k, v in r.items() if k != "name"}}
+
+    # ------------------------------------------------------------------ learners
+    @svc.handler("learner_create")
+    def learner_create(req):
+        target = clip_from_wire(req["target"])
+        params = population(req["index"] + 1, req["population_seed"])[req["index"]]
+        if req["params"]:
+            merged = {**asdict(params), **{k: v for k, v in req["params"].items() if v is not None}}
+            params = LearnerParams(**merged)
+        learner = SimulatedLearner(req["learner"], target, params)
+        store.add_learner(req["learner"], learner, req["replace"])
+        return {"learner": req["learner"], "channels": learner.channels}
+
+    @svc.handler("learner_imitate")
+    def learner_imitate(req):
+        learner = store.learner(req["learner"])
+        demo = clip_from_wire(req["demonstration"], learner.target.skeleton)
+        with lock_of(f"learner:{req['learner']}"):
+            attempts = learner.imitate(demo, req["adverb"])
+            store.save_learner(req["learner"])
+            trial = learner.trials
+        svc.publish("imitated", {"learner": req["learner"], "trial": trial})
+        return {"learner": req["learner"], "trial": trial,
+                "attempts": [clip_to_wire(a, with_skeleton=False) for a in attempts]}
+
+    @svc.handler("learner_reveal")
+    def learner_reveal(req):
+        r = store.learner(req["learner"]).reveal()
+        return {"learner": req["learner"], "trials": int(r.pop("trials")), "error_deg": float(r.pop("error_deg")),
+                "params": {k: v for k, v in r.items() if k != "name"}}
+
+    @svc.handler("list")
+    def list_all(req):
+        with store.lock:
+            return {"others": [{"other": n, "kind": k} for n, (k, _) in sorted(store.others.items())],
+                    "learners": [{"learner": n, "trials": lr.trials} for n, lr in sorted(store.learners.items())]}
+
+    @svc.handler("delete")
+    def delete(req):
+        return {"deleted": store.delete(req["other"], req["learner"])}
+
+    svc.store = store
+    return svc
+

@@ -1,0 +1,149 @@
+"""The simulator's agents on disk (bus-free): others as JSON, learners as NPZ, atomic writes.
+
+``others/<name>.json``: ``{"kind": "simulated"|"person", ...}``; a person's seat keeps only
+its density ``d``. ``learners/<name>.npz``: the target clip, the parameters, the motor memory,
+the reference and the trial count, so a restarted simulator continues every learner where it was.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import threading
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from shared.agents.learner import LearnerParams, SimulatedLearner
+from shared.agents.other import OtherParams, SimulatedOther
+from shared.clip import Clip
+from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.io.atomic import atomic_write
+from shared.skeleton import Skeleton
+from shared.symbols import WORDS
+
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+
+
+class Conflict(MirrorcoachError):
+    code = "conflict"
+
+
+class PersonOther:
+    """A person in the other's seat: answers come from the CLI (``mirrorcoach other answer``)."""
+
+    def __init__(self, name: str, d: int = 4):
+        if d not in WORDS:
+            raise BadInput(f"density d must be one of {sorted(WORDS)}, got {d}", field="d")
+        self.name, self.d, self.asked = name, d, 0
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "asked": self.asked, "params": {"d": self.d}}
+
+    def reveal(self) -> dict:
+        return {"name": self.name, "asked": self.asked, "d": self.d}
+
+
+def _check(name: str) -> str:
+    if not NAME_RE.fullmatch(name or ""):
+        raise BadInput(f"{name!r} is not a valid name (letters, digits, '_', '.', '-')")
+    return name
+
+
+class AgentStore:
+    def __init__(self, root):
+        self.root = Path(root)
+        (self.root / "others").mkdir(parents=True, exist_ok=True)
+        (self.root / "learners").mkdir(parents=True, exist_ok=True)
+        self.lock = threading.RLock()
+        self.others: dict[str, tuple[str, object]] = {}
+        self.learners: dict[str, SimulatedLearner] = {}
+        for p in sorted((self.root / "others").glob("*.json")):
+            d = json.loads(p.read_text())
+            kind = d.get("kind", "simulated")
+            obj = SimulatedOther.from_dict(d) if kind == "simulated" else PersonOther(d["name"], int(d["params"]["d"]))
+            obj.asked = int(d.get("asked", 0))
+            self.others[p.stem] = (kind, obj)
+        for p in sorted((self.root / "learners").glob("*.npz")):
+            self.learners[p.stem] = self._load_learner(p)
+
+    # ------------------------------------------------------------------ others
+    def add_other(self, name: str, kind: str, params: dict, replace: bool = False):
+        _check(name)
+        with self.lock:
+            if name in self.others and not replace:
+                raise Conflict(f"other {name!r} exists; delete it or create with replace", other=name)
+            if kind == "person":
+                obj = PersonOther(name, int(params.get("d", 4)))
+            else:
+                obj = SimulatedOther(name, OtherParams(**{k: v for k, v in params.items() if v is not None}))
+            self.others[name] = (kind, obj)
+            self.save_other(name)
+        return kind, obj
+
+    def other(self, name: str):
+        with self.lock:
+            if name not in self.others:
+                raise NotFound(f"no other named {name!r} (others: {', '.join(sorted(self.others)) or 'none'})", other=name)
+            return self.others[name]
+
+    def save_other(self, name: str) -> None:
+        kind, obj = self.others[name]
+        text = json.dumps({"kind": kind, **obj.to_dict()}).encode()
+        atomic_write(self.root / "others" / f"{_check(name)}.json", lambda f: f.write(text))
+
+    # ------------------------------------------------------------------ learners
+    def add_learner(self, name: str, learner: SimulatedLearner, replace: bool = False) -> None:
+        _check(name)
+        with self.lock:
+            if name in self.learners and not replace:
+                raise Conflict(f"learner {name!r} exists; delete it or create with replace", learner=name)
+            self.learners[name] = learner
+            self.save_learner(name)
+
+    def learner(self, name: str) -> SimulatedLearner:
+        with self.lock:
+            if name not in self.learners:
+                raise NotFound(f"no learner named {name!r} (learners: {', '.join(sorted(self.learners)) or 'none'})",
+                               learner=name)
+            return self.learners[name]
+
+    def save_learner(self, name: str) -> None:
+        lr = self.learners[name]
+        t = lr.target
+        header = {"name": lr.name, "trials": lr.trials, "params": asdict(lr.params), "channels": t.channels,
+                  "fps": t.fps, "groups": t.groups, "label": t.label, "target_name": t.name,
+                  "skeleton": None if t.skeleton is None else t.skeleton.to_json()}
+        arrays = {"target": t.data, "memory": lr.memory, "header": np.array(json.dumps(header))}
+        if lr.reference is not None:
+            arrays["reference"] = lr.reference
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        atomic_write(self.root / "learners" / f"{_check(name)}.npz", lambda f: f.write(buf.getvalue()))
+
+    @staticmethod
+    def _load_learner(path: Path) -> SimulatedLearner:
+        with np.load(path, allow_pickle=False) as z:
+            h = json.loads(str(z["header"]))
+            sk = Skeleton.from_json(h["skeleton"]) if h["skeleton"] else None
+            target = Clip(z["target"], h["channels"], h["fps"], sk, h["groups"], name=h["target_name"], label=h["label"])
+            ref = z["reference"] if "reference" in z.files else None
+            return SimulatedLearner(h["name"], target, LearnerParams(**h["params"]), memory=z["memory"],
+                                    trials=int(h["trials"]), reference=ref)
+
+    # ------------------------------------------------------------------ both
+    def delete(self, other: str | None = None, learner: str | None = None) -> str:
+        if (other is None) == (learner is None):
+            raise BadInput("delete: give exactly one of other and learner")
+        with self.lock:
+            if other is not None:
+                self.other(other)
+                del self.others[other]
+                (self.root / "others" / f"{_check(other)}.json").unlink(missing_ok=True)
+                return other
+            self.learner(learner)
+            del self.learners[learner]
+            (self.root / "learners" / f"{_check(learner)}.npz").unlink(missing_ok=True)
+            return learner

@@ -1,0 +1,215 @@
+"""CLI commands of the simulator service: ``sim perform``, ``other ...`` (a person can take
+an other's seat), ``learner ...``."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from shared.cli.app import SKELETON_HELP, _fail, app
+from shared.cli.cluster import _client, _jsonable, _wire
+
+sim_app = typer.Typer(help="MuJoCo bodies on the simulator service (needs `make up`).", no_args_is_help=True)
+other_app = typer.Typer(help="Others of chapter 3: simulated agents, or a person answering here.", no_args_is_help=True)
+learner_app = typer.Typer(help="Simulated learners of chapters 4-6 (a simulation, not people).", no_args_is_help=True)
+app.add_typer(sim_app, name="sim")
+app.add_typer(other_app, name="other")
+app.add_typer(learner_app, name="learner")
+
+
+def _body_request(body: str) -> dict:
+    """A robot's name, or a skeleton file (ASF/BVH) to build a human body from."""
+    p = Path(body)
+    if p.suffix.lower() in (".asf", ".bvh"):
+        from shared.io import read_asf, read_bvh
+
+        if not p.is_file():
+            _fail(f"{body}: no such skeleton file")
+        sk = read_asf(p) if p.suffix.lower() == ".asf" else read_bvh(p).skeleton
+        return {"skeleton": sk.to_json()}
+    return {"body": body}
+
+
+@sim_app.command("perform")
+def sim_perform(body: str = typer.Argument(..., help="A robot's name (self, other) or a skeleton file (.asf, .bvh) for a human body."),
+                clip: Path = typer.Argument(..., help="The motion (.amc, .bvh, .npz)."),
+                out: Path = typer.Option(..., "--out", help="Output .npz: the motion plus tau.<joint> and cog.x|y|z channels."),
+                mass: Optional[float] = typer.Option(None, help="Body mass in kg (robots: their own; humans: 70)."),
+                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                as_json: bool = typer.Option(False, "--json", help="Print the feasibility report as JSON.")):
+    """Perform a motion with a body: joint torques (inverse dynamics), centre of gravity, feasibility."""
+    from schemas.common import clip_from_wire
+    from shared.io import load_clip, save_clip
+
+    if out.suffix.lower() != ".npz":
+        _fail("--out must be a .npz file (BVH and AMC hold motion only; NPZ keeps the torque channels' names)")
+    req = {**_body_request(body), "clip": _wire(load_clip(clip, skeleton=skeleton), with_skeleton=False)}
+    if mass is not None:
+        req["mass"] = mass
+    with _client() as c:
+        r = c.request("simulator", "perform", req)
+    performed = clip_from_wire(r["clip"])
+    save_clip(performed, out)
+    rep = r["report"]
+    if as_json:
+        typer.echo(json.dumps(_jsonable({"file": str(out), "body": r["body"], "report": rep})))
+        return
+    sensors = performed.group("sensor")
+    typer.echo(f"wrote {out}: {performed.n_frames} frames, {len(sensors)} sensor channels "
+               f"({sensors[0]} ... {sensors[-1]}) for {r['body']['name']} ({r['body']['mass']:.1f} kg)")
+    lim = rep["joint_limit_violations"]
+    typer.echo(f"feasible: {'yes' if rep['feasible'] else 'no'}; joint limits exceeded on {len(lim)} channel(s)"
+               + (f" ({', '.join(list(lim)[:4])})" if lim else "")
+               + (f"; centre of gravity outside the support on {rep['support']['frames_outside_support']} frame(s)"
+                  if rep["support"].get("checked") else ""))
+
+
+# ---------------------------------------------------------------------------- others
+@other_app.command("create")
+def other_create(name: str = typer.Argument(..., help="Name of the other."),
+                 person: bool = typer.Option(False, "--person", help="A person answers (with `mirrorcoach other answer`)."),
+                 mass: float = typer.Option(4.8, help="Body mass, kg (simulated others)."),
+                 rule: str = typer.Option("eq3.8", help="Conversion rule: eq3.8, f1, f2, f3, f4."),
+                 d: int = typer.Option(4, help="Density of words: 2, 4, 6 or 8."),
+                 noise: float = typer.Option(0.0, help="Probability an answer is one bin off."),
+                 seed: int = typer.Option(0, help="Seed of the answer noise."),
+                 replace: bool = typer.Option(False, "--replace")):
+    """Create an other: a simulated agent with hidden parameters, or a person's seat."""
+    params = {"d": d} if person else {"mass": mass, "rule": rule, "d": d, "noise": noise, "seed": seed}
+    with _client() as c:
+        r = c.request("simulator", "other_create", {"other": name, "kind": "person" if person else "simulated",
+                                                    "params": params, "replace": replace})
+    typer.echo(f"created other {r['other']} ({r['kind']})")
+
+
+@other_app.command("ask")
+def other_ask(name: str = typer.Argument(..., help="Name of the other."),
+              clips: list[Path] = typer.Argument(..., help="One motion (open question) or two (which felt heavier?)."),
+              skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+              timeout: float = typer.Option(300.0, help="Seconds to wait for a person's answer.")):
+    """Ask an other how heavy a motion felt, or which of two motions felt heavier."""
+    from shared.io import load_clip
+
+    if len(clips) not in (1, 2):
+        _fail("give one motion (open question) or two (comparative question)")
+    kind = "open" if len(clips) == 1 else "compare"
+    text = "How heavy did that feel?" if kind == "open" else "Which felt heavier, the first or the second?"
+    req = {"other": name, "kind": kind, "text": text, "timeout": timeout,
+           "clips": [_wire(load_clip(p, skeleton=skeleton)) for p in clips]}
+    with _client() as c:
+        r = c.request("simulator", "other_ask", req, timeout=timeout + 30)
+    typer.echo(r["answer"])
+
+
+@other_app.command("answer")
+def other_answer(name: Optional[str] = typer.Argument(None, help="Only this other's questions (default: all)."),
+                 folder: Path = typer.Option(Path("questions"), help="Where the motions are written (BVH, or NPZ for robot joint angles)."),
+                 wait: float = typer.Option(0.0, help="Seconds to wait for a question if none is pending."),
+                 answer: Optional[str] = typer.Option(None, help="Answer without a prompt (for scripts)."),
+                 max_questions: int = typer.Option(100, help="Stop after this many questions.")):
+    """Take an other's seat: see each pending question and its motion(s) as files, type the answer."""
+    from schemas.common import clip_from_wire
+    from shared.io import save_clip
+
+    deadline = time.monotonic() + max(wait, 0.0)
+    answered = 0
+    with _client() as c:
+        while answered < max_questions:
+            qs = c.request("simulator", "other_pending", {"other": name} if name else {}, timeout=30)["questions"]
+            if not qs:
+                if time.monotonic() >= deadline:
+                    break
+                time.sleep(0.5)
+                continue
+            q = qs[0]
+            folder.mkdir(parents=True, exist_ok=True)
+            paths = []
+            for i, w in enumerate(q["clips"], 1):
+                motion = clip_from_wire(w)
+                # BVH where the motion has a skeleton to draw; a robot's joint angles go to NPZ
+                p = folder / f"{q['question']}_{i}.{'bvh' if motion.skeleton is not None else 'npz'}"
+                save_clip(motion, p)
+                paths.append(p)
+            typer.echo(f"[{q['other']}] {q['text'] or ('How heavy did that feel?' if q['kind'] == 'open' else 'Which felt heavier?')}")
+            for p in paths:
+                typer.echo(f"  motion: {p}")
+            typer.echo(f"  answers: {', '.join(q['accepted'])}")
+            while True:
+                given = answer if answer is not None else typer.prompt("answer")
+                try:
+                    r = c.request("simulator", "other_answer", {"question": q["question"], "answer": given}, timeout=30)
+                    typer.echo(f"  sent: {r['answer']}")
+                    break
+                except Exception as e:  # an answer outside the accepted words: say so and ask again
+                    if answer is not None or not sys.stdin.isatty() or getattr(e, "code", "") != "bad_request":
+                        raise
+                    typer.echo(f"  {getattr(e, 'message', e)}")
+            answered += 1
+    typer.echo(f"answered {answered} question(s)" if answered else "no pending questions")
+
+
+@other_app.command("reveal")
+def other_reveal(name: str = typer.Argument(...)):
+    """Show an other's hidden parameters (for evaluation; the estimator never asks this)."""
+    with _client() as c:
+        typer.echo(json.dumps(_jsonable(c.request("simulator", "other_reveal", {"other": name}))))
+
+
+@app.command("agents")
+def agents_list(as_json: bool = typer.Option(False, "--json")):
+    """Every other and learner on the simulator."""
+    with _client() as c:
+        r = c.request("simulator", "list")
+    if as_json:
+        typer.echo(json.dumps(_jsonable(r)))
+        return
+    for o in r["others"]:
+        typer.echo(f"other    {o['other']:<24} {o['kind']}")
+    for lr in r["learners"]:
+        typer.echo(f"learner  {lr['learner']:<24} {lr['trials']} trial(s)")
+    if not r["others"] and not r["learners"]:
+        typer.echo("no agents")
+
+
+# ---------------------------------------------------------------------------- learners
+@learner_app.command("create")
+def learner_create(name: str = typer.Argument(...), target: Path = typer.Argument(..., help="The target motion."),
+                   population_seed: int = typer.Option(0, help="Which seeded population."),
+                   index: int = typer.Option(0, help="Which learner of the population."),
+                   skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                   replace: bool = typer.Option(False, "--replace")):
+    """Create a simulated learner of a target motion."""
+    from shared.io import load_clip
+
+    with _client() as c:
+        r = c.request("simulator", "learner_create", {"learner": name, "target": _wire(load_clip(target, skeleton=skeleton)),
+                                                      "population_seed": population_seed, "index": index,
+                                                      "replace": replace})
+    typer.echo(f"created learner {r['learner']} ({len(r['channels'])} channels)")
+
+
+@learner_app.command("imitate")
+def learner_imitate(name: str = typer.Argument(...), demonstration: Path = typer.Argument(..., help="The motion shown."),
+                    adverb: Optional[str] = typer.Option(None, help="a little more | more | much more | more like this"),
+                    out: Path = typer.Option(Path("."), help="Folder for the 5 attempts (BVH)."),
+                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+    """Show a learner a motion; write its next attempt (5 repetitions) as BVH."""
+    from schemas.common import clip_from_wire
+    from shared.io import load_clip, save_clip
+
+    demo = load_clip(demonstration, skeleton=skeleton)
+    req = {"learner": name, "demonstration": _wire(demo)}
+    if adverb:
+        req["adverb"] = adverb
+    with _client() as c:
+        r = c.request("simulator", "learner_imitate", req)
+    out.mkdir(parents=True, exist_ok=True)
+    for a in r["attempts"]:
+        clip = clip_from_wire(a, demo.skeleton)
+        save_clip(clip, out / f"{clip.name}.bvh")
+    typer.echo(f"trial {r['trial']}: wrote {len(r['attempts'])} attempts to {out}")
