@@ -88,3 +88,41 @@ def compare(g1: float, g2: float, jnd: float = 0.05) -> str:
     if abs(g1 - g2) <= jnd * max(abs(g1), abs(g2), 1e-12):
         return "equal"
     return ">" if g1 > g2 else "<"
+
+
+_FILLERS = ("it felt ", "it was ", "felt ", "that was ", "it's ", "its ", "quite ")
+_SYNONYMS = {"a bit ": "bit ", "a little ": "bit ", "slightly ": "bit ", "little bit ": "bit ", "a little bit ": "bit ",
+             "bit of a ": "bit ", "really ": "very ", "super ": "extremely "}
+_COMPARE = {">": ">", "<": "<", "=": "equal", "equal": "equal", "same": "equal", "the same": "equal", "equally": "equal",
+            "first": ">", "the first": ">", "the first one": ">", "first one": ">",
+            "second": "<", "the second": "<", "the second one": "<", "second one": "<"}
+
+
+def parse_answer(text: str, kind: str, d: int = 4) -> str:
+    """The canonical answer in a person's (or agent's) words: a Table 3.1 word at density ``d``
+    for an open question, ``'>'``, ``'<'`` or ``'equal'`` for a comparative one. Accepts case,
+    spacing and punctuation variants and a few phrasings ("a bit heavy", "it felt light",
+    "the first", "same"); anything else is a :class:`BadInput` listing the accepted answers."""
+    if not isinstance(text, str):
+        raise BadInput("an answer must be text")
+    t = " ".join("".join(ch if ch.isalnum() or ch in "<>= " else " " for ch in text.lower()).split())
+    if kind == "compare":
+        if t in _COMPARE:
+            return _COMPARE[t]
+        raise BadInput(f"{text!r} is not an answer to 'which felt heavier?'; accepted: > (the first), < (the second), "
+                       "equal (the same)", field="answer")
+    if kind != "open":
+        raise BadInput(f"unknown question kind {kind!r}")
+    if d not in WORDS:
+        raise BadInput(f"density d must be one of {sorted(WORDS)}, got {d}")
+    t = t + " "
+    for f in _FILLERS:
+        if t.startswith(f):
+            t = t[len(f):]
+    for a, b in sorted(_SYNONYMS.items(), key=lambda kv: -len(kv[0])):
+        if t.startswith(a):
+            t = b + t[len(a):]
+    t = t.strip()
+    if t in WORDS[d]:
+        return t
+    raise BadInput(f"{text!r} is not one of the {d} words; accepted: {', '.join(WORDS[d])}", field="answer")

@@ -26,7 +26,7 @@ from shared.bus.config import Settings
 from shared.bus.runtime import Service
 from shared.errors import BadInput, NotFound, Unavailable
 from shared.skeleton import Skeleton
-from shared.symbols import COMPARISONS, WORDS
+from shared.symbols import COMPARISONS, WORDS, parse_answer
 
 
 class _Bodies:
@@ -56,14 +56,6 @@ class _Bodies:
             while len(self.cache) > 16:
                 self.cache.popitem(last=False)
         return b
-
-
-def _person_answer(answer: str, kind: str, d: int) -> str:
-    a = " ".join(answer.strip().lower().split())
-    accepted = list(COMPARISONS) if kind == "compare" else list(WORDS[d])
-    if a not in accepted:
-        raise BadInput(f"{answer!r} is not an accepted answer; accepted: {', '.join(accepted)}", field="answer")
-    return a
 
 
 def make_service(settings: Settings | None = None) -> Service:
@@ -148,7 +140,7 @@ def make_service(settings: Settings | None = None) -> Service:
                                question=req["question"])
             _, other = store.other(e["other"])
             d = getattr(other, "d", 4)
-            e["answer"] = _person_answer(req["answer"], e["kind"], d)
+            e["answer"] = parse_answer(req["answer"], e["kind"], d)
             e["event"].set()
             return {"question": req["question"], "answer": e["answer"]}
 

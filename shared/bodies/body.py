@@ -3,6 +3,7 @@
 :class:`Body` wraps a compiled ``mujoco.MjModel`` with the map from a clip's motion channels
 to its joints. :func:`perform` computes, for a motion clip:
 
+* (a robot holds the joints a motion does not name at 0; a human body needs every channel)
 * joint torques by inverse dynamics (``mj_inverse``); positions are smoothed by a
   Savitzky-Golay filter (cubic, window ``~0.1 s``, at least 5 frames), velocities and
   accelerations are central differences of the smoothed positions computed with
@@ -80,7 +81,8 @@ def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
 
     m = body.model
     missing = [c for c in body.channels if c not in clip.channels]
-    if missing:
+    held = body.kind == "robot" and len(missing) < len(body.channels)  # a robot holds unnamed joints at 0
+    if missing and not held:
         raise BadInput(f"the motion lacks {len(missing)} of body {body.name!r}'s joint channels, e.g. {missing[:3]}",
                        body=body.name)
     n = clip.n_frames
@@ -89,7 +91,8 @@ def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
     w = smooth_window(clip.fps, n)
     q = np.tile(m.qpos0, (n, 1))
     for d in body.dofs:
-        q[:, d.qpos] = np.radians(savgol_filter(clip.column(d.channel), w, 3, mode="interp"))
+        if d.channel in clip.channels:
+            q[:, d.qpos] = np.radians(savgol_filter(clip.column(d.channel), w, 3, mode="interp"))
     if body.root is not None:
         sk = body.skeleton
         r = body.root
@@ -187,7 +190,7 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
     _, _, tau, cog = inverse_dynamics(body, q, clip.fps)
     limits = {}
     for d in body.dofs:
-        if d.limits is None:
+        if d.limits is None or d.channel not in clip.channels:
             continue
         x = clip.column(d.channel)
         lo, hi = d.limits

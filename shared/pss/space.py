@@ -305,7 +305,8 @@ class ProtoSymbolSpace:
             self._partial_scale[group] = num / den if den > 0 else 1.0
         return self._partial_scale[group]
 
-    def associate(self, clip: Clip, missing: str = "sensor", *, method: str = "expected", seed: int = 0) -> Association:
+    def associate(self, clip: Clip, missing: str = "sensor", *, method: str = "expected", seed: int = 0,
+                  weighting: str = "affine") -> Association:
         """Eq. 2.8: the whole pattern from a partial one.
 
         ``missing="sensor"``: the clip has the motion channels only; recognition uses the
@@ -316,14 +317,18 @@ class ProtoSymbolSpace:
         ``missing="frames"``: the clip is the start of a motion; how far it reaches is read
         from the state posterior of its last frame under the best-fitting proto-symbol, and
         the clip is compared with that many first states of every proto-symbol.
+
+        ``weighting``: how the point becomes proto-symbol weights: ``"affine"`` (exact, may
+        extrapolate) or ``"inverse_distance"`` (convex: the estimate stays among the known
+        patterns, which is steadier for motions outside the space's hull; ch. 3 uses it).
         """
         if missing == "sensor":
-            return self._associate_channels(clip, method, seed)
+            return self._associate_channels(clip, method, seed, weighting)
         if missing == "frames":
-            return self._associate_frames(clip, method, seed)
+            return self._associate_frames(clip, method, seed, weighting)
         raise BadInput(f"missing must be 'sensor' or 'frames', got {missing!r}")
 
-    def _associate_channels(self, clip, method, seed) -> Association:
+    def _associate_channels(self, clip, method, seed, weighting="affine") -> Association:
         if not self.features.sensor_channels:
             raise BadInput(f"space {self.name!r} has no sensor channels to associate")
         midx = self.features.feature_indices("motion")
@@ -333,7 +338,7 @@ class ProtoSymbolSpace:
                       n_iter=p.n_iter)
         f = distances_to(hmm, [m.marginal(midx) for m in self.models]) * self._marginal_scale("motion")
         rec = self._place(hmm, f)
-        c = self.weights(rec.point)
+        c = self.weights(rec.point, method=weighting)
         model = self.synthesize(c)
         whole = self.features.decode(generate(model, method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
         # the missing channels on the observed frames: E[s_t] = sum_i gamma_t(i) mu_i^S
@@ -348,7 +353,7 @@ class ProtoSymbolSpace:
                        name=f"{clip.name}-associated", label=rec.label)
         return Association(rec, c, whole, aligned)
 
-    def _associate_frames(self, clip, method, seed) -> Association:
+    def _associate_frames(self, clip, method, seed, weighting="affine") -> Association:
         p = self.params
         groups = ("motion", "sensor") if set(self.features.sensor_channels) <= set(clip.channels) and self.features.sensor_channels else ("motion",)
         seq = self._sequences(clip, groups)[0]
@@ -365,7 +370,7 @@ class ProtoSymbolSpace:
         if groups == ("motion",) and self.features.sensor_channels:
             f = f * self._marginal_scale("motion")
         rec = self._place(hmm, f)
-        c = self.weights(rec.point)
+        c = self.weights(rec.point, method=weighting)
         whole = self.features.decode(generate(self.synthesize(c), method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
         return Association(rec, c, whole, None, progress=k / p.n_states)
 

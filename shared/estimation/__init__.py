@@ -1,0 +1,1 @@
+"""Chapter 3: estimating what another body feels, by sharing motions and asking questions."""

@@ -1,0 +1,270 @@
+"""Open questions: adaptive acquisition of the other's space (thesis 3.3, eq. 3.2-3.6, fig. 3.3).
+
+The algorithm is written against four *ports* so that it runs the same in a test (local
+objects) and on the cluster (the estimator service wires them to the bus):
+
+* ``perform_self(motion) -> torques`` the self performs a motion and feels its torques
+  (T x J, the language's joints);
+* ``ask_open(motion) -> k`` the other performs the motion and answers a word, as a bin k;
+* ``build(clips)`` rebuild the estimated space ``P_other_hat`` from the database (eq. 3.6);
+* ``associate(motion) -> torques`` ``S_hat = F_gen(F_recog(M))`` in ``P_other_hat`` (eq. 3.2),
+  the torques estimated on the motion's own frames.
+
+Two estimators are kept side by side:
+
+* **thesis** (the reference): each conversation set asks about every shared motion, rescales
+  the estimate by ``k_other / k_self`` (eq. 3.5) into the database and rebuilds the space;
+  any motion's torques are then ``associate(motion)``;
+* **interval** (beyond the thesis): every answer says the other's ``g`` lies in its bin,
+  ``g_max (k-1)/d <= F_conv(S_other) < g_max k/d``. Modelling the other's torques as the
+  self's scaled by one factor ``s`` (two bodies of the same layout and different mass feel
+  proportional torques, thesis 3.4.4), every answer bounds ``s``; the estimate is the middle
+  of the intersection of all bounds (the least-violating ``s`` when noisy answers contradict
+  each other), and any motion's torques are ``s * perform_self(motion)``. Each set also asks
+  about one *probe*: a shared motion at an amplitude chosen so that its answer bisects the
+  interval of ``s``. The error is no longer limited by a bin's width.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+import numpy as np
+
+from shared.clip import Clip
+from shared.errors import BadInput
+from shared.symbols import f_conv, f_div
+
+TORQUE_PREFIX = "tau."
+PROBE_AMPLITUDES = (0.25, 0.4, 0.55, 0.7, 0.85, 1.0, 1.15)
+
+
+@dataclass
+class Language:
+    """What the words mean, shared by self and other: density ``d``, the range ``[0, g_max]``
+    split into bins, ``tau_max``, the joints felt, and the conversion rule the self assumes
+    (eq. 3.8 unless identified otherwise)."""
+
+    d: int = 4
+    g_max: float = 1.0
+    tau_max: float = 1.0
+    joints: list[str] = field(default_factory=lambda: ["shoulder_pitch", "shoulder_roll", "elbow"])
+    rule: str = "eq3.8"
+    weights: list[float] | None = None
+
+    def g(self, tau: np.ndarray) -> float:
+        return f_conv(tau, self.rule, self.tau_max, self.weights)
+
+    def k(self, tau: np.ndarray) -> int:
+        return f_div(self.g(tau), self.d, self.g_max)
+
+    def bounds(self, k: int) -> tuple[float, float]:
+        """The g-interval of bin k (the first and last bins are open-ended)."""
+        lo = self.g_max * (k - 1) / self.d if k > 1 else 0.0
+        hi = self.g_max * k / self.d if k < self.d else np.inf
+        return lo, hi
+
+
+class Ports(Protocol):
+    def perform_self(self, motion: Clip) -> np.ndarray: ...
+    def ask_open(self, motion: Clip) -> int: ...
+    def build(self, clips: list[Clip]) -> None: ...
+    def associate(self, motion: Clip) -> np.ndarray: ...
+
+
+def with_torques(motion: Clip, tau: np.ndarray, joints: list[str]) -> Clip:
+    """The motion clip with sensor channels ``tau.<joint>`` (a database entry)."""
+    base = motion.with_data(motion.select(motion.group("motion") or motion.channels),
+                            channels=list(motion.group("motion") or motion.channels),
+                            groups={"motion": list(motion.group("motion") or motion.channels)})
+    return base.add_channels([TORQUE_PREFIX + j for j in joints], np.asarray(tau, float), "sensor")
+
+
+@dataclass
+class SetRecord:
+    """One conversation set: per shared motion the other's k, the self's k of its estimate,
+    and the rescaling ratio (eq. 3.5)."""
+
+    k_other: list[int]
+    k_self: list[int]
+    ratio: list[float]
+
+
+class OtherEstimate:
+    """The self's estimate of one other: ``D_other_hat`` and the answers so far."""
+
+    def __init__(self, language: Language, motions: list[Clip], probes: bool = True):
+        if not motions:
+            raise BadInput("the estimate needs at least one shared motion")
+        self.language = language
+        self.motions = motions
+        self.probes = probes
+        self.probes_asked: list[tuple[str, int]] = []
+        self._probe_cache: dict = {}
+        self.torques: list[np.ndarray] = []  # S_hat per shared motion (thesis estimator)
+        self.self_torques: list[np.ndarray] = []  # S_self per shared motion
+        self.sets: list[SetRecord] = []
+        self.answers: list[tuple[float, int]] = []  # (g of the self's own torques, k_other): the interval method
+
+    # ------------------------------------------------------------------ the thesis's loop
+    def start(self, ports: Ports) -> None:
+        """Step 1: ``D_other_hat = D_self``; build ``P_other_hat``."""
+        self.self_torques = [np.asarray(ports.perform_self(m), float) for m in self.motions]
+        self.torques = [t.copy() for t in self.self_torques]
+        ports.build(self.database())
+
+    def database(self) -> list[Clip]:
+        return [with_torques(m, t, self.language.joints) for m, t in zip(self.motions, self.torques)]
+
+    def conversation_set(self, ports: Ports) -> SetRecord:
+        """Steps 2-6 (eq. 3.2-3.6) for every shared motion, then rebuild the space."""
+        if not self.torques:
+            raise BadInput("start the estimate before a conversation set")
+        rec = SetRecord([], [], [])
+        new = []
+        for i, m in enumerate(self.motions):
+            k_other = int(ports.ask_open(m))
+            s_hat = np.asarray(ports.associate(m), float)
+            k_self = self.language.k(s_hat)
+            ratio = k_other / k_self
+            new.append(ratio * s_hat)  # eq. 3.5
+            rec.k_other.append(k_other)
+            rec.k_self.append(k_self)
+            rec.ratio.append(ratio)
+            self.answers.append((self.language.g(self.self_torques[i]), k_other))
+        self.torques = new
+        ports.build(self.database())  # eq. 3.6
+        if self.probes:
+            self.probe(ports)
+        self.sets.append(rec)
+        return rec
+
+    def probe(self, ports: Ports) -> tuple[str, int] | None:
+        """Beyond the thesis: ask about one more motion, a shared motion at a chosen amplitude,
+        whose answer splits the current interval of ``s`` about in half (a bisection: the
+        interval estimate's error halves with every set)."""
+        lo, hi = self.interval()
+        target = 0.5 * (lo + hi) if np.isfinite(hi) else max(2.0 * lo, 1.0)
+        best = None
+        for name, (motion, g_self) in self._probe_table(ports).items():
+            for j in range(1, self.language.d):
+                split = self.language.g_max * j / self.language.d / max(g_self, 1e-12)
+                if lo < split < hi and (best is None or abs(split - target) < best[0]):
+                    best = (abs(split - target), name, motion, g_self)
+        if best is None:
+            return None
+        _, name, motion, g_self = best
+        k = int(ports.ask_open(motion))
+        self.answers.append((g_self, k))
+        self.probes_asked.append((name, k))
+        return name, k
+
+    def _probe_table(self, ports: Ports) -> dict:
+        if not self._probe_cache:
+            for m in self.motions:
+                for f in PROBE_AMPLITUDES:
+                    pm = m.with_data(m.data * f, name=f"{m.name}_x{f:g}")
+                    self._probe_cache[pm.name] = (pm, self.language.g(np.asarray(ports.perform_self(pm), float)))
+        return self._probe_cache
+
+    # ------------------------------------------------------------------ the interval method
+    def _bounds(self) -> tuple[list[float], list[float]]:
+        lows, highs = [], []
+        for g_self, k in self.answers:
+            lo, hi = self.language.bounds(k)
+            g = max(g_self, 1e-12)
+            lows.append(lo / g)
+            highs.append(hi / g)
+        return lows, highs
+
+    def interval(self) -> tuple[float, float]:
+        """The values of ``s`` every answer so far allows (empty when answers contradict)."""
+        if not self.answers:
+            return 0.0, np.inf
+        lows, highs = self._bounds()
+        return max(lows), min(highs)
+
+    def consistent(self) -> bool:
+        lo, hi = self.interval()
+        return lo <= hi
+
+    def scale(self) -> float:
+        """``s`` with ``S_other ~ s * S_self``, from every answer so far (see module docstring).
+        Needs a rule homogeneous of degree 1 in the torques (eq. 3.8, f1-f4 all are)."""
+        if not self.answers:
+            return 1.0
+        lows, highs = self._bounds()
+        lo, hi = max(lows), min(highs)
+        if lo <= hi:
+            if np.isinf(hi):  # only "heavier than" bounds: the tightest lower bound plus half a bin
+                return lo + 0.5 * self.language.g_max / self.language.d / max(max(g for g, _ in self.answers), 1e-12)
+            return 0.5 * (lo + hi)
+        # contradictory answers (noise): the s that violates the bounds least (sum of distances)
+        cands = np.unique(np.r_[lows, [h for h in highs if np.isfinite(h)]])
+
+        def violation(x):
+            return sum(max(0.0, a - x) + max(0.0, x - b) for a, b in zip(lows, highs))
+
+        return float(min(cands, key=violation))
+
+    def estimate(self, motion: Clip, ports: Ports, method: str = "thesis") -> np.ndarray:
+        """The other's torques for any motion: ``associate`` in ``P_other_hat`` (thesis) or
+        ``s * perform_self`` (interval)."""
+        if method == "thesis":
+            return np.asarray(ports.associate(motion), float)
+        if method == "interval":
+            return self.scale() * np.asarray(ports.perform_self(motion), float)
+        raise BadInput(f"method must be 'thesis' or 'interval', got {method!r}")
+
+
+# ---------------------------------------------------------------------------- evaluation
+def evaluate(language: Language, true_torques: list[np.ndarray], estimated: list[np.ndarray],
+             true_language: Language | None = None) -> dict:
+    """Eq. 3.9 error ``mean |g - g_hat| / g``, the symbol match ratio and the symbol distance
+    ``mean |k - k_hat| / (d - 1)`` (eq. 3.10). ``g`` uses the other's true rule
+    (``true_language``, default the same as the self's)."""
+    truth = true_language or language
+    g = np.array([truth.g(t) for t in true_torques])
+    g_hat = np.array([truth.g(t) for t in estimated])
+    k = np.array([truth.k(t) for t in true_torques])
+    k_hat = np.array([truth.k(t) for t in estimated])
+    return {"error": float(np.mean(np.abs(g - g_hat) / np.maximum(g, 1e-12))),
+            "match": float(np.mean(k == k_hat)),
+            "distance": float(np.mean(np.abs(k - k_hat)) / (truth.d - 1))}
+
+
+class LocalPorts:
+    """Ports on local objects (no bus): the self's body, a simulated other, a local PSS."""
+
+    def __init__(self, language: Language, other, self_body=None, space_params: dict | None = None):
+        from shared.bodies.robot import robot
+
+        self.language = language
+        self.other = other
+        self.self_body = self_body or robot("self")
+        self.space = None
+        self.space_params = space_params or {}
+
+    def perform_self(self, motion: Clip) -> np.ndarray:
+        from shared.bodies.body import perform
+
+        out, _ = perform(self.self_body, motion)
+        return out.select([TORQUE_PREFIX + j for j in self.language.joints])
+
+    def ask_open(self, motion: Clip) -> int:
+        from shared.symbols import index_of
+
+        return index_of(self.other.answer_open(motion), self.language.d)
+
+    def build(self, clips: list[Clip]) -> None:
+        from shared.pss.space import ProtoSymbolSpace
+
+        self.space = ProtoSymbolSpace.build(clips, **self.space_params)
+
+    def associate(self, motion: Clip) -> np.ndarray:
+        a = self.space.associate(motion, "sensor", weighting="inverse_distance")
+        return a.aligned.select([TORQUE_PREFIX + j for j in self.language.joints])
+
+
+PortsFactory = Callable[[], Ports]
