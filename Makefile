@@ -39,8 +39,11 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.bus --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.sim --hdm05 $(HDM05) --out bench/results
 
-dashboard reproduce:
-	@echo "'make $@' arrives with the experiments and the dashboard (issues 5-7)."; exit 2
+reproduce: $(STAMP)
+	$(BIN)/mirrorcoach reproduce ch3 --out $(OUT)/reproduce
+
+dashboard:
+	@echo "'make $@' arrives with the dashboard (issue 7)."; exit 2
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

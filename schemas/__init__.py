@@ -4,6 +4,6 @@
 ``mirrorcoach schemas`` prints them.
 """
 
-from schemas import pss, simulator
+from schemas import dialogue, estimator, pss, simulator
 
-CONTRACTS = {"pss": pss, "simulator": simulator}
+CONTRACTS = {"pss": pss, "simulator": simulator, "dialogue": dialogue, "estimator": estimator}

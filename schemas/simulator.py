@@ -64,6 +64,8 @@ OTHER_PARAMS = Map({
     "noise": F(Float(0.0, 1.0), "probability an answer is one bin off", required=False, default=0.0),
     "jnd": F(Float(0.0, 1.0), "just-noticeable difference of comparisons (relative)", required=False, default=0.05),
     "seed": F(Int(0, 2**32 - 1), "seed of its answer noise", required=False, default=0),
+    "behaviour": F(Str(choices=("honest", "nonsense", "contradict", "silent")),
+                   "fault injection for robustness tests", required=False, default="honest"),
 })
 
 OTHER_CREATE = Endpoint(

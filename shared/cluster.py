@@ -199,6 +199,18 @@ def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> in
     return 1
 
 
+def running(settings: Settings, services: set[str] | None = None) -> bool:
+    """Whether the router answers and every service of the plan (or ``services``) is alive."""
+    from shared.bus.client import Client, Unavailable
+
+    want = services if services is not None else {p.name for p in load_plan() if p.name != "router"}
+    try:
+        with Client(settings, connect_timeout_s=1.0) as c:
+            return want <= c.alive()
+    except Unavailable:
+        return False
+
+
 def down(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> int:
     s = settings or Settings()
     sup = read_pid(s.run_dir / "supervisor.pid")

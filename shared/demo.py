@@ -26,18 +26,10 @@ from schemas.common import clip_from_wire, clip_to_wire
 from shared.bodies.arm import arm_model, with_arm_torques
 from shared.bus.client import Client, Unavailable
 from shared.bus.config import Settings
-from shared.cluster import down, up
+from shared.cluster import down, running, up
 from shared.io import find_clips, load_clip, save_clip
 
 BUNDLED = Path(__file__).resolve().parent.parent / "data" / "hdm05" / "amc"
-
-
-def _cluster_running(settings: Settings) -> bool:
-    try:
-        with Client(settings, connect_timeout_s=1.0) as c:
-            return "pss" in c.alive()
-    except Unavailable:
-        return False
 
 
 def run(client: Client, data: Path, out: Path) -> None:
@@ -100,7 +92,7 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     settings = Settings()
     started = False
-    if not _cluster_running(settings):
+    if not running(settings):
         if up(settings) != 0:
             return 1
         started = True

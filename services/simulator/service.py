@@ -99,6 +99,9 @@ def make_service(settings: Settings | None = None) -> Service:
             raise BadInput(f"an {req['kind']} question needs {want} motion(s), got {len(clips)}", field="clips")
         if kind == "person":
             answer = ask_person(req, other)
+        elif other.params.behaviour == "silent":  # fault injection: a bounded wait, then no answer
+            threading.Event().wait(min(req["timeout"], 600.0))
+            raise Unavailable(f"{req['other']} did not answer within {req['timeout']:g} s", other=req["other"])
         else:
             with lock_of(f"other:{req['other']}"):
                 answer = other.answer_open(clips[0]) if want == 1 else other.answer_compare(*clips)

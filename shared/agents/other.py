@@ -7,6 +7,8 @@ the torques of its ``joints`` and
 * answers an **open question** ("how heavy did that feel?") with a word of Table 3.1:
   ``k = F_div(F_conv(S))`` with its hidden rule, ``tau_max``, ``g_max`` and density ``d``;
   with answer noise ``p``, an answer is one bin off (up or down, at random) with probability ``p``;
+* for robustness tests it can misbehave (``behaviour``): answer ``nonsense``, ``contradict``
+  itself (a random word each time), or stay ``silent`` (the simulator never answers for it);
 * answers a **comparative question** about two motions with ``'>'``, ``'<'`` or ``'equal'``
   (eq. 3.11-3.12), equal within its just-noticeable difference ``jnd``.
 
@@ -28,6 +30,7 @@ from shared.errors import BadInput
 from shared.symbols import RULES, WORDS, compare, f_conv, f_div, word
 
 ARM = ["shoulder_pitch", "shoulder_roll", "elbow"]
+BEHAVIOURS = ("honest", "nonsense", "contradict", "silent")
 
 
 @dataclass
@@ -44,6 +47,7 @@ class OtherParams:
     noise: float = 0.0
     jnd: float = 0.05
     seed: int = 0
+    behaviour: str = "honest"  # fault injection for robustness tests: honest | nonsense | contradict | silent
 
     def check(self) -> "OtherParams":
         if self.rule not in RULES:
@@ -53,6 +57,8 @@ class OtherParams:
         unknown = [j for j in self.joints if j not in JOINTS]
         if unknown or not self.joints:
             raise BadInput(f"joints must be among {', '.join(JOINTS)}, got {self.joints}", field="joints")
+        if self.behaviour not in BEHAVIOURS:
+            raise BadInput(f"behaviour must be one of {', '.join(BEHAVIOURS)}, got {self.behaviour!r}", field="behaviour")
         if self.weights is not None and len(self.weights) != len(self.joints):
             raise BadInput(f"need one weight per joint ({len(self.joints)}), got {len(self.weights)}", field="weights")
         for name, v, lo, hi in (("noise", self.noise, 0.0, 1.0), ("jnd", self.jnd, 0.0, 1.0),
@@ -89,6 +95,10 @@ class SimulatedOther:
         p = self.params
         k = f_div(self.g(motion), p.d, p.g_max)
         rng = self._rng()
+        if p.behaviour == "nonsense":
+            return str(rng.choice(["purple", "I don't know", "banana", "42"]))
+        if p.behaviour == "contradict":  # a random word each time: its answers cannot all be true
+            return word(int(rng.integers(1, p.d + 1)), p.d)
         if p.noise > 0 and rng.random() < p.noise:
             k = int(np.clip(k + rng.choice([-1, 1]), 1, p.d))
         return word(k, p.d)
@@ -98,6 +108,10 @@ class SimulatedOther:
         p = self.params
         ans = compare(self.g(first), self.g(second), p.jnd)
         rng = self._rng()
+        if p.behaviour == "nonsense":
+            return "maybe"
+        if p.behaviour == "contradict":
+            return str(rng.choice([">", "<", "equal"]))
         if p.noise > 0 and rng.random() < p.noise:
             ans = str(rng.choice([a for a in (">", "<", "equal") if a != ans]))
         return ans

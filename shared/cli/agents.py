@@ -213,3 +213,135 @@ def learner_imitate(name: str = typer.Argument(...), demonstration: Path = typer
         clip = clip_from_wire(a, demo.skeleton)
         save_clip(clip, out / f"{clip.name}.bvh")
     typer.echo(f"trial {r['trial']}: wrote {len(r['attempts'])} attempts to {out}")
+
+
+# ---------------------------------------------------------------------------- dialogue and estimator
+dialogue_app = typer.Typer(help="Questions to others and their transcripts (dialogue service).", no_args_is_help=True)
+estimator_app = typer.Typer(help="Estimating what an other feels (estimator service, thesis ch. 3).", no_args_is_help=True)
+app.add_typer(dialogue_app, name="dialogue")
+app.add_typer(estimator_app, name="estimator")
+
+
+@dialogue_app.command("transcript")
+def dialogue_transcript(dialogue: str = typer.Argument(..., help="Dialogue id (an estimate's name)."),
+                        as_json: bool = typer.Option(False, "--json")):
+    """Every question and answer of a dialogue, in order."""
+    with _client() as c:
+        r = c.request("dialogue", "transcript", {"dialogue": dialogue})
+    if as_json:
+        typer.echo(json.dumps(_jsonable(r)))
+        return
+    for line in r["lines"]:
+        stamp = time.strftime("%H:%M:%S", time.localtime(line["t"]))
+        extra = f"  (k = {line['k']})" if line.get("k") else (f"  ({line['answer']})" if line.get("answer") else "")
+        flag = "  [not understood]" if line.get("understood") is False else ""
+        typer.echo(f"{stamp}  {line['speaker']:>10}: {line['text']}{extra}{flag}")
+
+
+@dialogue_app.command("list")
+def dialogue_list():
+    """Every dialogue and its length."""
+    with _client() as c:
+        for d in c.request("dialogue", "list")["dialogues"]:
+            typer.echo(f"{d['dialogue']:<24} {d['lines']} lines")
+
+
+def _print_estimate(info: dict) -> None:
+    hi = info.get("scale_high")
+    lang = info["language"]
+    typer.echo(f"estimate {info['estimate']} of {info['other']}: {info['sets_done']} set(s), d = {lang['d']}, rule "
+               f"{lang['rule']}; torque scale {info['scale']:.3f} (answers allow {info['scale_low']:.3f} .. "
+               f"{'inf' if hi is None else f'{hi:.3f}'}{'' if info['consistent'] else ', CONTRADICTORY'})")
+    for n in info["notes"][-3:]:
+        typer.echo(f"  note: {n}")
+
+
+@estimator_app.command("start")
+def estimator_start(name: str = typer.Argument(..., help="Estimate id."), other: str = typer.Argument(..., help="The other."),
+                    d: int = typer.Option(4, help="Density of the words: 2, 4, 6, 8."),
+                    g_max: float = typer.Option(0.6, help="Top of the g range the words split (shared language)."),
+                    knee: bool = typer.Option(False, "--knee", help="Also the right knee (needed to identify rules)."),
+                    replace: bool = typer.Option(False, "--replace")):
+    """Start estimating an other from the self's own experience (step 1)."""
+    joints = ["shoulder_pitch", "shoulder_roll", "elbow"] + (["knee"] if knee else [])
+    with _client() as c:
+        _print_estimate(c.request("estimator", "start", {"estimate": name, "other": other, "d": d, "g_max": g_max,
+                                                         "joints": joints, "replace": replace}))
+
+
+@estimator_app.command("converse")
+def estimator_converse(name: str = typer.Argument(...), sets: int = typer.Option(3, help="Conversation sets to run."),
+                       timeout: float = typer.Option(120.0, help="Seconds to wait for each answer.")):
+    """Run conversation sets with the other (eq. 3.2-3.6)."""
+    with _client() as c:
+        r = c.request("estimator", "converse", {"estimate": name, "sets": sets, "timeout": timeout},
+                      timeout=sets * 20 * (timeout + 10))
+    _print_estimate(r["info"])
+    if r.get("stopped"):
+        typer.echo(f"stopped: {r['stopped']}")
+
+
+@estimator_app.command("estimate")
+def estimator_estimate(name: str = typer.Argument(...), clip: Path = typer.Argument(..., help="A motion of the robot's joints."),
+                       method: str = typer.Option("interval", help="interval (beyond the thesis) or thesis (eq. 3.5)."),
+                       out: Optional[Path] = typer.Option(None, help="Write the motion with the estimated torques (.npz).")):
+    """How heavy the other would feel a motion, and its estimated torques."""
+    from schemas.common import clip_from_wire
+    from shared.io import load_clip, save_clip
+
+    with _client() as c:
+        r = c.request("estimator", "estimate", {"estimate": name, "clip": _wire(load_clip(clip)), "method": method})
+    typer.echo(f"{r['word']} (k = {r['k']}, g = {r['g']:.4f}, {method})")
+    if out is not None:
+        save_clip(clip_from_wire(r["clip"]), out)
+        typer.echo(f"wrote {out}")
+
+
+@estimator_app.command("identify")
+def estimator_identify(name: str = typer.Argument(...),
+                       candidates: str = typer.Option("thesis", help="thesis (f1-f4) or weighted (12 rules)."),
+                       method: str = typer.Option("auto", help="auto (pairs chosen to split the candidates) or thesis (m1/m2, m3/m4).")):
+    """Identify the other's conversion rule by comparative questions (thesis 3.4)."""
+    with _client() as c:
+        r = c.request("estimator", "identify_rule", {"estimate": name, "candidates": candidates, "method": method})
+    for q in r["questions"]:
+        typer.echo(f"  asked {q['pair']}: {q['answer']}")
+    typer.echo(f"rule: {r.get('rule') or 'not identified'} ({r['reason']})")
+
+
+@estimator_app.command("info")
+def estimator_info(name: str = typer.Argument(...), as_json: bool = typer.Option(False, "--json")):
+    """An estimate's state."""
+    with _client() as c:
+        r = c.request("estimator", "info", {"estimate": name})
+    typer.echo(json.dumps(_jsonable(r))) if as_json else _print_estimate(r)
+
+
+@app.command("reproduce")
+def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch3 (more arrive with the coach)."),
+              out: Path = typer.Option(Path("out/reproduce"), help="Folder for the reports and plots."),
+              sets: int = typer.Option(6, help="Conversation sets per curve (ch3).")):
+    """Rerun the thesis's experiments on the cluster (simulated agents) and write reports with plots."""
+    from shared.bus.client import Client
+    from shared.bus.config import Settings
+    from shared.cluster import down, running, up
+
+    known = {"ch3"}
+    unknown = [c for c in chapters if c not in known]
+    if unknown:
+        _fail(f"unknown chapter(s) {', '.join(unknown)}; available: {', '.join(sorted(known))}")
+    settings = Settings()
+    started = False
+    if not running(settings):
+        if up(settings, echo=typer.echo) != 0:
+            raise typer.Exit(1)
+        started = True
+    try:
+        with Client(settings) as c:
+            if "ch3" in chapters:
+                from shared.reproduce.ch3 import run
+
+                run(c, out / "ch3", sets=sets, echo=typer.echo)
+    finally:
+        if started:
+            down(settings, echo=typer.echo)

@@ -100,6 +100,8 @@ class OtherEstimate:
         self.language = language
         self.motions = motions
         self.probes = probes
+        self.other = ""  # the other's name, for the service
+        self.notes: list[str] = []  # what happened besides sets (rule identified, conversation stopped)
         self.probes_asked: list[tuple[str, int]] = []
         self._probe_cache: dict = {}
         self.torques: list[np.ndarray] = []  # S_hat per shared motion (thesis estimator)
@@ -167,6 +169,48 @@ class OtherEstimate:
                     pm = m.with_data(m.data * f, name=f"{m.name}_x{f:g}")
                     self._probe_cache[pm.name] = (pm, self.language.g(np.asarray(ports.perform_self(pm), float)))
         return self._probe_cache
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path) -> None:
+        """One ``.npz`` (JSON header + arrays), written atomically."""
+        import io
+        import json
+        from dataclasses import asdict
+
+        from shared.io.atomic import atomic_write
+
+        header = {"language": asdict(self.language), "probes": self.probes, "probes_asked": self.probes_asked,
+                  "other": self.other, "notes": self.notes,
+                  "answers": self.answers, "sets": [asdict(r) for r in self.sets],
+                  "motions": [{"name": m.name, "channels": m.channels, "fps": m.fps} for m in self.motions]}
+        arrays = {"header": np.array(json.dumps(header))}
+        for i, m in enumerate(self.motions):
+            arrays[f"motion{i}"] = m.data
+        for i, t in enumerate(self.torques):
+            arrays[f"torques{i}"] = t
+        for i, t in enumerate(self.self_torques):
+            arrays[f"self{i}"] = t
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        atomic_write(path, lambda f: f.write(buf.getvalue()))
+
+    @classmethod
+    def load(cls, path) -> "OtherEstimate":
+        import json
+
+        with np.load(path, allow_pickle=False) as z:
+            h = json.loads(str(z["header"]))
+            motions = [Clip(z[f"motion{i}"], m["channels"], m["fps"], name=m["name"], label=m["name"])
+                       for i, m in enumerate(h["motions"])]
+            est = cls(Language(**h["language"]), motions, probes=h["probes"])
+            est.torques = [z[f"torques{i}"] for i in range(len(motions)) if f"torques{i}" in z.files]
+            est.self_torques = [z[f"self{i}"] for i in range(len(motions)) if f"self{i}" in z.files]
+        est.other = h.get("other", "")
+        est.notes = list(h.get("notes", []))
+        est.answers = [(float(g), int(k)) for g, k in h["answers"]]
+        est.sets = [SetRecord(**r) for r in h["sets"]]
+        est.probes_asked = [(str(n), int(k)) for n, k in h["probes_asked"]]
+        return est
 
     # ------------------------------------------------------------------ the interval method
     def _bounds(self) -> tuple[list[float], list[float]]:

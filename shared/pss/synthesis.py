@@ -10,8 +10,9 @@ Three steps, each a choice the thesis leaves open, made and written down here:
    near proto-symbols carry the weight (least squares where ``x`` is outside the proto-symbols'
    affine hull). A point on a proto-symbol gets that proto-symbol alone; the external dividing
    point ``x_t + alpha (x_t - x_p)`` of two proto-symbols gets ``(1 + alpha, -alpha)``.
-   ``method="inverse_distance"`` is the original mimesis rule (inverse distances, nearest first
-   until 0.9 of the weight), which can only interpolate.
+   ``method="inverse_distance"`` is convex, weights ``(d_min / d_i)^4`` normalised (the
+   mimesis model's inverse-distance rule with the same locality), which can only interpolate;
+   chapter 3's association uses it, where a motion outside the hull must not be extrapolated.
 2. **Synthesis of an HMM** (``combine``): state means ``sum c_i mu_i``; covariances combined
    in the log domain, ``exp(sum c_i log Sigma_i)`` (log-Euclidean), which stays positive
    definite for any weights, including extrapolation, and returns ``Sigma`` itself when every
@@ -52,12 +53,10 @@ def point_weights(points: np.ndarray, x: np.ndarray, *, method: str = "affine", 
         c[np.argmin(d)] = 1.0
         return c
     if method == "inverse_distance":
-        order = np.argsort(d)
-        w = 1.0 / d[order]
-        w = w / w.sum()
-        keep = int(np.searchsorted(np.cumsum(w), 0.9) + 1)
-        c[order[:keep]] = w[:keep] / w[:keep].sum()
-        return c
+        # convex weights (d_min / d_i)^4, the same locality as the affine weights below: a
+        # point next to a proto-symbol takes (almost) only it, a point between several blends them
+        w = (d.min() / d) ** 4
+        return w / w.sum()
     if method != "affine":
         raise BadInput(f"unknown weighting {method!r} (affine or inverse_distance)")
     # exact reproduction sum c_i x_i = x, sum c_i = 1, with the locality-weighted smallest

@@ -1,0 +1,107 @@
+"""Contract of the estimator service (``services/estimator``): per other, the estimated
+database and space (built by pss), conversation sets, estimates, rule identification.
+
+Keys: ``<prefix>/estimator/<verb>``; progress on ``<prefix>/events/estimator/progress``.
+"""
+
+from __future__ import annotations
+
+from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, Message, Str
+from schemas.common import CLIP, name
+
+SERVICE = "estimator"
+ESTIMATE = name("estimate id (one per other being estimated)")
+JOINT = Str(choices=("shoulder_pitch", "shoulder_roll", "elbow", "knee"))
+
+INFO = Map({
+    "estimate": ESTIMATE, "other": F(Str(max_len=64)),
+    "language": F(AnyMap(), "d, g_max, tau_max, joints, rule, weights"),
+    "sets_done": F(Int(0), "completed conversation sets"),
+    "scale": F(Float(0.0), "interval estimator: S_other ~ scale * S_self"),
+    "scale_low": F(Float(0.0), "lowest scale every answer allows"),
+    "scale_high": F(Float(0.0), "highest scale every answer allows (absent: unbounded)", required=False),
+    "consistent": F(Bool(), "whether every answer so far can be true together"),
+    "answers": F(Int(0), "answers used by the interval estimator"),
+    "probes_asked": F(Int(0), "probe questions asked"),
+    "last_set": F(AnyMap(), "k_other, k_self and ratio per shared motion of the last set", required=False),
+    "notes": F(List(Str(max_len=1000), max_len=10_000), "rule identification, stops"),
+})
+
+START = Endpoint(
+    "start",
+    Message("estimator.start", Map({
+        "estimate": ESTIMATE, "other": F(Str(max_len=64), "the other to talk to (simulator name)"),
+        "d": F(Int(2, 8), "density of the words", required=False, default=4),
+        "g_max": F(Float(1e-6, 1e6), "top of the g range split into d bins (shared language)", required=False, default=0.6),
+        "tau_max": F(Float(1e-6, 1e6), "tau_MAX of eq. 3.8", required=False, default=1.0),
+        "joints": F(List(JOINT, min_len=1, max_len=4), "joints whose torques are estimated", required=False),
+        "rule": F(Str(choices=("eq3.8", "f1", "f2", "f3", "f4")), "the rule the self assumes", required=False,
+                  default="eq3.8"),
+        "probes": F(Bool(), "ask bisecting probe motions (interval estimator)", required=False, default=True),
+        "replace": F(Bool(), required=False, default=False),
+    })),
+    Message("estimator.start.reply", INFO),
+    "Start estimating an other: D_other_hat = D_self, build P_other_hat (step 1).",
+)
+
+CONVERSE = Endpoint(
+    "converse",
+    Message("estimator.converse", Map({
+        "estimate": ESTIMATE, "sets": F(Int(1, 50), "how many conversation sets", required=False, default=1),
+        "timeout": F(Float(1.0, 3600.0), "seconds to wait for each answer", required=False, default=120.0),
+    })),
+    Message("estimator.converse.reply", Map({
+        "info": F(INFO), "completed": F(Int(0), "sets completed by this request"),
+        "stopped": F(Str(max_len=1000), "why the conversation stopped early", required=False),
+    })),
+    "Run conversation sets (eq. 3.2-3.6); each completed set is saved before the next starts.",
+)
+
+ESTIMATE_EP = Endpoint(
+    "estimate",
+    Message("estimator.estimate", Map({
+        "estimate": ESTIMATE, "clip": F(CLIP, "any motion of the joints, known or not"),
+        "method": F(Str(choices=("thesis", "interval")), required=False, default="thesis"),
+    })),
+    Message("estimator.estimate.reply", Map({
+        "estimate": ESTIMATE, "method": F(Str(max_len=16)),
+        "clip": F(CLIP, "the motion with the estimated torques tau.<joint> as sensor channels"),
+        "g": F(Float(0.0), "F_conv of the estimate"), "k": F(Int(1, 8)), "word": F(Str(max_len=64)),
+    })),
+    "The other's estimated torques for a motion.",
+)
+
+IDENTIFY = Endpoint(
+    "identify_rule",
+    Message("estimator.identify_rule", Map({
+        "estimate": ESTIMATE,
+        "candidates": F(Str(choices=("thesis", "weighted")), "f1-f4, or f1-f4 with joint weights (12)",
+                        required=False, default="thesis"),
+        "method": F(Str(choices=("auto", "thesis")), "automatic pair choice, or the thesis's m1/m2, m3/m4",
+                    required=False, default="auto"),
+        "jnd": F(Float(0.0, 1.0), "the just-noticeable difference assumed", required=False, default=0.05),
+        "apply": F(Bool(), "use the identified rule in later conversation sets", required=False, default=True),
+        "timeout": F(Float(1.0, 3600.0), required=False, default=120.0),
+    })),
+    Message("estimator.identify_rule.reply", Map({
+        "estimate": ESTIMATE, "rule": F(Str(max_len=64), "the identified rule", required=False),
+        "questions": F(List(AnyMap(), max_len=100), "pair asked and answer, in order"),
+        "reason": F(Str(max_len=1000)), "design": F(AnyMap(), "m1-m4 design report (thesis method)", required=False),
+    })),
+    "Identify the other's conversion rule by comparative questions (3.4).",
+)
+
+INFO_EP = Endpoint("info", Message("estimator.info", Map({"estimate": ESTIMATE})), Message("estimator.info.reply", INFO),
+                   "An estimate's state.")
+LIST = Endpoint("list", Message("estimator.list", Map({})),
+                Message("estimator.list.reply", Map({"estimates": F(List(Map({"estimate": ESTIMATE, "other": F(Str(max_len=64)),
+                                                                               "sets_done": F(Int(0))}), max_len=10_000))})),
+                "Every estimate.")
+DELETE = Endpoint("delete", Message("estimator.delete", Map({"estimate": ESTIMATE})),
+                  Message("estimator.delete.reply", Map({"estimate": ESTIMATE, "deleted": F(Bool())})), "Delete an estimate.")
+
+ENDPOINTS = {e.verb: e for e in (START, CONVERSE, ESTIMATE_EP, IDENTIFY, INFO_EP, LIST, DELETE)}
+EVENTS = {"progress": Message("estimator.event.progress", Map({
+    "estimate": ESTIMATE, "set": F(Int(1)), "scale": F(Float(0.0)), "consistent": F(Bool()),
+    "k_other": F(List(Int(1, 8), max_len=100)), "k_self": F(List(Int(1, 8), max_len=100)),
+}), doc="after every completed conversation set")}

@@ -1,0 +1,284 @@
+"""The estimator service: learns what each other feels (contract: ``schemas/estimator.py``).
+
+It never trains a model itself: ``P_other_hat`` lives on the pss service (space
+``est-<estimate>``), the self's torques come from the simulator (body ``self``) and every
+question goes through the dialogue service. The chapter-3 algorithm is
+``shared.estimation`` run on :class:`BusPorts`.
+
+Every completed conversation set is saved (atomically) before the next one starts, so a kill
+loses at most the set in progress; ``converse`` first rebuilds the pss space from the saved
+database, so the space always matches the saved state. A conversation stops with a reason,
+keeping what was learnt, when the other does not answer, answers outside the words, or its
+answers contradict each other.
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+from dataclasses import asdict
+
+import numpy as np
+
+from schemas import estimator as contract
+from schemas.common import clip_from_wire, clip_to_wire
+from shared.bus.client import Client
+from shared.bus.config import Settings
+from shared.bus.runtime import Service
+from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.estimation.conversation import TORQUE_PREFIX, Language, OtherEstimate, with_torques
+from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
+from shared.estimation.rules import (THESIS_CANDIDATES, design_thesis_pairs, identify, identify_thesis, pair_pool,
+                                     weighted_candidates)
+from shared.pss.store import Conflict, check_name
+from shared.symbols import word
+
+
+class Stopped(MirrorcoachError):
+    """The conversation cannot go on (no answer, nonsense, contradiction)."""
+
+    code = "conflict"
+
+
+class BusPorts:
+    """The chapter-3 ports on the cluster (see ``shared.estimation.conversation``)."""
+
+    def __init__(self, client: Client, name: str, other: str, language: Language, timeout: float = 120.0):
+        self.c, self.name, self.other, self.language, self.timeout = client, name, other, language, timeout
+        self.space = f"est-{name}"
+
+    def _taus(self, wire: dict) -> np.ndarray:
+        clip = clip_from_wire(wire)
+        return clip.select([TORQUE_PREFIX + j for j in self.language.joints])
+
+    def perform_self(self, motion):
+        return self._taus(self.c.request("simulator", "perform", {"body": "self", "clip": clip_to_wire(motion)})["clip"])
+
+    def ask_open(self, motion) -> int:
+        try:
+            r = self.c.request("dialogue", "ask_open", {"dialogue": self.name, "other": self.other, "d": self.language.d,
+                                                        "clip": clip_to_wire(motion), "timeout": self.timeout},
+                               timeout=self.timeout + 60)
+        except MirrorcoachError as e:
+            raise Stopped(f"no answer about {motion.name}: {e.message}") from None
+        if not r["understood"]:
+            raise Stopped(f"the other's answer {r['raw']!r} about {motion.name} is not one of the words ({r['problem']})")
+        return int(r["k"])
+
+    def ask_compare(self, first, second) -> str:
+        try:
+            r = self.c.request("dialogue", "ask_compare", {"dialogue": self.name, "other": self.other,
+                                                           "clips": [clip_to_wire(first), clip_to_wire(second)],
+                                                           "timeout": self.timeout}, timeout=self.timeout + 60)
+        except MirrorcoachError as e:
+            raise Stopped(f"no answer comparing {first.name} and {second.name}: {e.message}") from None
+        if not r["understood"]:
+            raise Stopped(f"the other's answer {r['raw']!r} is not a comparison ({r['problem']})")
+        return r["answer"]
+
+    def build(self, clips) -> None:
+        self.c.request("pss", "build", {"space": self.space, "replace": True,
+                                        "clips": [clip_to_wire(c) for c in clips]})
+
+    def associate(self, motion) -> np.ndarray:
+        r = self.c.request("pss", "associate", {"space": self.space, "clip": clip_to_wire(motion), "missing": "sensor",
+                                                "weighting": "inverse_distance"})
+        return self._taus(r["aligned"])
+
+
+def info_of(name: str, est: OtherEstimate) -> dict:
+    lo, hi = est.interval()
+    out = {"estimate": name, "other": est.other, "language": asdict(est.language), "sets_done": len(est.sets),
+           "scale": float(est.scale()), "scale_low": float(lo), "scale_high": None if not np.isfinite(hi) else float(hi),
+           "consistent": bool(est.consistent()), "answers": len(est.answers), "probes_asked": len(est.probes_asked),
+           "notes": list(est.notes)}
+    if est.sets:
+        out["last_set"] = asdict(est.sets[-1])
+    return out
+
+
+_DESIGN: dict = {}  # the self's designed pairs and pair pool: they depend on the self's body only
+
+
+def _design_and_pool(ports: BusPorts):
+    if "design" not in _DESIGN:
+        design = design_thesis_pairs(ports.perform_self)
+        pool = pair_pool(unknown_motions(12, joints=ALL) + basic_motions(ALL), ports.perform_self,
+                         [(design["m1"], design["m2"]), (design["m3"], design["m4"])])
+        _DESIGN.update(design=design, pool=pool)
+    return _DESIGN["design"], _DESIGN["pool"]
+
+
+def make_service(settings: Settings | None = None) -> Service:
+    settings = settings or Settings()
+    root = settings.data_dir("estimator")
+    root.mkdir(parents=True, exist_ok=True)
+    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
+    guard = threading.Lock()
+    busy: set[str] = set()
+    client: dict = {}
+
+    def bus() -> Client:
+        with guard:
+            if "c" not in client:
+                client["c"] = Client(settings, connect_timeout_s=10.0)
+            return client["c"]
+
+    def path(name: str):
+        return root / f"{check_name(name)}.npz"
+
+    def load(name: str) -> OtherEstimate:
+        if not path(name).exists():
+            raise NotFound(f"no estimate named {name!r}", estimate=name)
+        return OtherEstimate.load(path(name))
+
+    class writing:
+        """One writer per estimate at a time."""
+
+        def __init__(self, name):
+            self.name = name
+
+        def __enter__(self):
+            with guard:
+                if self.name in busy:
+                    raise Conflict(f"estimate {self.name!r} is busy with another request", estimate=self.name)
+                busy.add(self.name)
+
+        def __exit__(self, *exc):
+            with guard:
+                busy.discard(self.name)
+
+    @svc.handler("start")
+    def start(req):
+        name = req["estimate"]
+        if path(name).exists() and not req["replace"]:
+            raise Conflict(f"estimate {name!r} exists; delete it or start with replace", estimate=name)
+        joints = req["joints"] or list(ARM)
+        lang = Language(d=req["d"], g_max=req["g_max"], tau_max=req["tau_max"], joints=joints, rule=req["rule"])
+        lang.k(np.zeros((2, len(joints))))  # validates d
+        est = OtherEstimate(lang, basic_motions(joints if "knee" in joints else ARM), probes=req["probes"])
+        est.other = req["other"]
+        with writing(name):
+            est.start(BusPorts(bus(), name, req["other"], lang))
+            est.save(path(name))
+        return info_of(name, est)
+
+    @svc.handler("converse")
+    def converse(req):
+        name = req["estimate"]
+        with writing(name):
+            est = load(name)
+            ports = BusPorts(bus(), name, est.other, est.language, req["timeout"])
+            ports.build(est.database())  # the space matches the saved state, whatever happened before
+            done, stopped = 0, None
+            for _ in range(req["sets"]):
+                work = copy.deepcopy(est)
+                was_consistent = work.consistent()
+                try:
+                    rec = work.conversation_set(ports)
+                except Stopped as e:
+                    stopped = e.message
+                    break
+                est = work
+                if was_consistent and not est.consistent():
+                    stopped = ("the other's answers contradict each other (no single scale fits them all); "
+                               "the estimate so far is kept")
+                est.save(path(name))
+                done += 1
+                svc.publish("progress", {"estimate": name, "set": len(est.sets), "scale": float(est.scale()),
+                                         "consistent": bool(est.consistent()), "k_other": rec.k_other,
+                                         "k_self": rec.k_self})
+                if stopped:
+                    break
+            if stopped:
+                est.notes.append(f"stopped after {len(est.sets)} set(s): {stopped}")
+                est.save(path(name))
+                ports.build(est.database())
+        out = {"info": info_of(name, est), "completed": done}
+        if stopped:
+            out["stopped"] = stopped
+        return out
+
+    @svc.handler("estimate")
+    def estimate(req):
+        name = req["estimate"]
+        est = load(name)
+        motion = clip_from_wire(req["clip"])
+        ports = BusPorts(bus(), name, est.other, est.language)
+        missing = [j for j in est.language.joints if j not in motion.channels]
+        if missing:
+            raise BadInput(f"the motion lacks the joints {missing} this estimate is about", field="clip")
+        tau = est.estimate(motion, ports, req["method"])
+        g = est.language.g(tau)
+        k = est.language.k(tau)
+        if len(tau) != motion.n_frames:  # the space's estimate is on its own frame rate
+            motion = motion.resample(len(tau) / max(motion.duration, 1e-9) if motion.duration > 0 else motion.fps)
+        out = with_torques(motion.frames(0, len(tau)), tau[: motion.n_frames], est.language.joints)
+        return {"estimate": name, "method": req["method"], "clip": clip_to_wire(out), "g": float(g), "k": int(k),
+                "word": word(k, est.language.d)}
+
+    @svc.handler("identify_rule")
+    def identify_rule(req):
+        name = req["estimate"]
+        with writing(name):
+            est = load(name)
+            lang4 = Language(**{**asdict(est.language), "joints": list(ALL)})
+            ports = BusPorts(bus(), name, est.other, lang4, req["timeout"])
+            design, pool = _design_and_pool(ports)
+            try:
+                if req["method"] == "thesis":
+                    if req["candidates"] != "thesis":
+                        raise BadInput("the thesis's pairs only separate f1-f4; use method auto for weighted candidates")
+                    r = identify_thesis(design, ports.ask_compare)
+                else:
+                    cands = THESIS_CANDIDATES if req["candidates"] == "thesis" else weighted_candidates()
+                    r = identify(cands, pool, ports.ask_compare, jnd=req["jnd"])
+            except Stopped as e:
+                r = {"rule": None, "questions": [], "reason": e.message}
+            rule = r["rule"]
+            if rule is not None and req["apply"]:
+                if rule.weights is not None and len(rule.weights) != len(est.language.joints):
+                    est.notes.append(f"identified {rule.name}, whose weights do not fit this estimate's joints; not applied")
+                else:
+                    est.language.rule = rule.rule
+                    est.language.weights = None if rule.weights is None else list(rule.weights)
+                    est.answers = []  # bounds were computed with the old rule: the interval starts again
+                    est.notes.append(f"identified rule {rule.name} in {len(r['questions'])} question(s); now used")
+                est.save(path(name))
+        out = {"estimate": name, "questions": [{"pair": q["pair"], "answer": q["answer"]} for q in r["questions"]],
+               "reason": r["reason"], "design": design["report"]}
+        if rule is not None:
+            out["rule"] = rule.name
+        return out
+
+    @svc.handler("info")
+    def info(req):
+        return info_of(req["estimate"], load(req["estimate"]))
+
+    @svc.handler("list")
+    def list_estimates(req):
+        rows = []
+        for p in sorted(root.glob("*.npz")):
+            est = OtherEstimate.load(p)
+            rows.append({"estimate": p.stem, "other": est.other, "sets_done": len(est.sets)})
+        return {"estimates": rows}
+
+    @svc.handler("delete")
+    def delete(req):
+        name = req["estimate"]
+        with writing(name):
+            if not path(name).exists():
+                raise NotFound(f"no estimate named {name!r}", estimate=name)
+            path(name).unlink()
+        try:
+            bus().request("pss", "delete", {"space": f"est-{name}"}, timeout=30)
+        except MirrorcoachError:
+            pass  # the space may never have been built
+        return {"estimate": name, "deleted": True}
+
+    def close_client():
+        if "c" in client:
+            client["c"].close()
+
+    svc.on_stop.append(close_client)
+    return svc

@@ -1,0 +1,1 @@
+"""Reruns of the thesis's experiments on the cluster, written up as reports (`mirrorcoach reproduce`)."""
