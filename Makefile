@@ -38,9 +38,10 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.run --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.bus --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.sim --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.ch3 --hdm05 $(HDM05) --out bench/results
 
 reproduce: $(STAMP)
-	$(BIN)/mirrorcoach reproduce ch3 --out $(OUT)/reproduce
+	$(BIN)/mirrorcoach reproduce ch3 --out reports
 
 dashboard:
 	@echo "'make $@' arrives with the dashboard (issue 7)."; exit 2

@@ -152,6 +152,13 @@ def simulator_service(tmp_path_factory):
     yield from _serve(tmp_path_factory, {"simulator": "services.simulator"})
 
 
+@pytest.fixture(scope="module")
+def chapter3_services(tmp_path_factory):
+    """Router, pss, simulator, dialogue and estimator as real processes; yields (env, Processes)."""
+    yield from _serve(tmp_path_factory, {"pss": "services.pss", "simulator": "services.simulator",
+                                         "dialogue": "services.dialogue", "estimator": "services.estimator"})
+
+
 @pytest.fixture
 def client_of():
     """``client_of(env)``: a Client of that cluster, closed at the end of the test."""

@@ -45,7 +45,8 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     st = cli(env, "status", "--json")
     assert st.returncode == 0, st.stderr
     assert {r["name"]: r["alive"] for r in json.loads(st.stdout)} == {"supervisor": True, "router": True, "pss": True,
-                                                                      "simulator": True}
+                                                                      "simulator": True, "dialogue": True,
+                                                                      "estimator": True}
 
     amc = bundled / "amc"
     train = [p for p in sorted(amc.glob("*/*.amc")) if "_dg_" not in p.name]
@@ -118,6 +119,23 @@ def test_simulator_cli_on_the_cluster(cluster, bundled, tmp_path):
             asker.kill()
     assert asker.returncode == 0 and out.strip() == "bit heavy", err
     assert list((tmp_path / "q").glob("*_1.npz"))
+
+
+def test_chapter3_from_the_cli(cluster, tmp_path):
+    env = cluster
+    assert cli(env, "other", "create", "r2", "--d", "6").returncode == 0
+    r = cli(env, "estimator", "start", "r2", "r2", "--d", "6")
+    assert r.returncode == 0 and "0 set(s)" in r.stdout, r.stderr
+    r = cli(env, "estimator", "converse", "r2", "--sets", "2")
+    assert r.returncode == 0 and "2 set(s)" in r.stdout, r.stderr
+    r = cli(env, "dialogue", "transcript", "r2")
+    assert r.returncode == 0 and "How heavy did that feel?" in r.stdout and "(k = " in r.stdout
+    r = cli(env, "reproduce", "ch3", "--out", tmp_path / "rep", "--sets", "1", "--seeds", "1", timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    report = (tmp_path / "rep/ch3/report.md").read_text()
+    for fig in ("fig3_6.png", "fig3_7.png", "fig3_8.png", "fig3_14_15.png"):
+        assert fig in report and (tmp_path / "rep/ch3" / fig).stat().st_size > 10_000
+    assert "simulated agents" in report and "| 6 |" in report
 
 
 def test_cli_says_when_the_cluster_is_not_running(tmp_path, bundled):

@@ -109,7 +109,8 @@ def other_ask(name: str = typer.Argument(..., help="Name of the other."),
 @other_app.command("answer")
 def other_answer(name: Optional[str] = typer.Argument(None, help="Only this other's questions (default: all)."),
                  folder: Path = typer.Option(Path("questions"), help="Where the motions are written (BVH, or NPZ for robot joint angles)."),
-                 wait: float = typer.Option(0.0, help="Seconds to wait for a question if none is pending."),
+                 wait: float = typer.Option(0.0, help="Seconds to wait for the first question if none is pending."),
+                 follow: bool = typer.Option(False, "--follow", help="Keep waiting for more questions (up to --wait after each)."),
                  answer: Optional[str] = typer.Option(None, help="Answer without a prompt (for scripts)."),
                  max_questions: int = typer.Option(100, help="Stop after this many questions.")):
     """Take an other's seat: see each pending question and its motion(s) as files, type the answer."""
@@ -122,7 +123,7 @@ def other_answer(name: Optional[str] = typer.Argument(None, help="Only this othe
         while answered < max_questions:
             qs = c.request("simulator", "other_pending", {"other": name} if name else {}, timeout=30)["questions"]
             if not qs:
-                if time.monotonic() >= deadline:
+                if time.monotonic() >= deadline or (answered and not follow):
                     break
                 time.sleep(0.5)
                 continue
@@ -144,6 +145,7 @@ def other_answer(name: Optional[str] = typer.Argument(None, help="Only this othe
                 try:
                     r = c.request("simulator", "other_answer", {"question": q["question"], "answer": given}, timeout=30)
                     typer.echo(f"  sent: {r['answer']}")
+                    deadline = time.monotonic() + max(wait, 0.0)
                     break
                 except Exception as e:  # an answer outside the accepted words: say so and ask again
                     if answer is not None or not sys.stdin.isatty() or getattr(e, "code", "") != "bad_request":
@@ -319,8 +321,9 @@ def estimator_info(name: str = typer.Argument(...), as_json: bool = typer.Option
 
 @app.command("reproduce")
 def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch3 (more arrive with the coach)."),
-              out: Path = typer.Option(Path("out/reproduce"), help="Folder for the reports and plots."),
-              sets: int = typer.Option(6, help="Conversation sets per curve (ch3).")):
+              out: Path = typer.Option(Path("reports"), help="Folder for the reports and plots (one sub-folder per chapter)."),
+              sets: int = typer.Option(6, help="Conversation sets per curve (ch3)."),
+              seeds: int = typer.Option(10, help="Noisy identification runs per rule and noise level (ch3).")):
     """Rerun the thesis's experiments on the cluster (simulated agents) and write reports with plots."""
     from shared.bus.client import Client
     from shared.bus.config import Settings
@@ -341,7 +344,7 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
             if "ch3" in chapters:
                 from shared.reproduce.ch3 import run
 
-                run(c, out / "ch3", sets=sets, echo=typer.echo)
+                run(c, out / "ch3", sets=sets, echo=typer.echo, seeds=seeds)
     finally:
         if started:
             down(settings, echo=typer.echo)

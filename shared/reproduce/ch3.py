@@ -29,8 +29,8 @@ THESIS = {"known_error": 0.10, "unknown_error": 0.20, "match": {4: (0.8, 0.8), 6
 
 
 class Ch3:
-    def __init__(self, client, out: Path, sets: int = SETS, echo=print):
-        self.c, self.out, self.sets, self.echo = client, Path(out), sets, echo
+    def __init__(self, client, out: Path, sets: int = SETS, echo=print, seeds: int = 10):
+        self.c, self.out, self.sets, self.echo, self.seeds = client, Path(out), sets, echo, seeds
         self.out.mkdir(parents=True, exist_ok=True)
         self._truth: dict = {}
 
@@ -112,7 +112,7 @@ class Ch3:
                   f"wrong rule {out['wrong']['rows'][-1]['thesis_unknown']['error']:.1%} (thesis estimator)")
         return out
 
-    def identification(self, seeds: int = 10) -> dict:
+    def identification(self) -> dict:
         """Identification rate: f1-f4 (thesis pairs and automatic) and 12 weighted rules
         (automatic), answer noise 0, 10 %, 20 %."""
         from shared.estimation.rules import THESIS_CANDIDATES, weighted_candidates
@@ -124,7 +124,7 @@ class Ch3:
                                          (weighted_candidates(), "auto", "12 weighted rules, automatic")):
                 ok = n = questions = 0
                 for c in cands:
-                    for seed in range(seeds if noise > 0 else 1):
+                    for seed in range(self.seeds if noise > 0 else 1):
                         other = "ch3-id"
                         self.new_other(other, rule=c.rule, weights=None if c.weights is None else list(c.weights),
                                        joints=list(ALL), noise=noise, seed=1000 * int(100 * noise) + seed, g_max=1.2)
@@ -274,9 +274,10 @@ def write_report(out: Path, res: dict, seconds: float) -> Path:
     return path
 
 
-def run(client, out: Path, sets: int = SETS, echo=print) -> Path:
+def run(client, out: Path, sets: int = SETS, echo=print, seeds: int = 10) -> Path:
+    """Every section; ``seeds`` noisy identification runs per rule and noise level."""
     t0 = time.perf_counter()
-    ch = Ch3(client, out, sets, echo)
+    ch = Ch3(client, out, sets, echo, seeds)
     res = {}
     echo("fig. 3.6-3.8: open questions, d = 4, 6, 8")
     res["open"] = ch.open_questions()

@@ -1,0 +1,164 @@
+"""Chapter 3 on real processes: the dialogue and estimator contracts, a misbehaving other, and
+a killed estimator (router, pss, simulator, dialogue, estimator, each its own process)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import pytest
+
+from schemas import dialogue as dlg
+from schemas import estimator as est
+from schemas.common import ERROR, clip_to_wire
+from shared.bus.client import RemoteError
+from shared.codec import pack
+from shared.estimation.motions import ALL, unknown_motions
+
+
+def _ok(endpoint, reply):
+    return endpoint.reply.validate(reply)
+
+
+def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services, client_of):
+    env, _ = chapter3_services
+    c = client_of(env)
+    lines, progress = [], []
+    c.subscribe("events/dialogue/transcript", lambda k, m: lines.append(m))
+    c.subscribe("events/estimator/progress", lambda k, m: progress.append(m))
+    time.sleep(0.3)
+    c.request("simulator", "other_create", {"other": "r2", "params": {"d": 6, "g_max": 0.6}, "replace": True})
+    motion = clip_to_wire(unknown_motions(1)[0])
+
+    assert _ok(dlg.WORDS, c.request("dialogue", "words", {"d": 8}))["words"][0] == "extremely light"
+    a = _ok(dlg.ASK_OPEN, c.request("dialogue", "ask_open", {"dialogue": "chat", "other": "r2", "d": 6, "clip": motion}))
+    assert a["understood"] and a["question"] == "How heavy did that feel?" and 1 <= a["k"] <= 6
+    b = _ok(dlg.ASK_COMPARE, c.request("dialogue", "ask_compare", {"dialogue": "chat", "other": "r2",
+                                                                    "clips": [motion, motion]}))
+    assert b["answer"] == "equal"
+    t = _ok(dlg.TRANSCRIPT, c.request("dialogue", "transcript", {"dialogue": "chat"}))["lines"]
+    assert [(x["speaker"], x["kind"]) for x in t] == [("self", "question"), ("r2", "answer")] * 2
+    assert t[1]["k"] == a["k"] and t[3]["answer"] == "equal"
+    assert {"dialogue": "chat", "lines": 4} in _ok(dlg.LIST, c.request("dialogue", "list"))["dialogues"]
+
+    info = _ok(est.START, c.request("estimator", "start", {"estimate": "r2", "other": "r2", "d": 6, "replace": True}))
+    assert info["sets_done"] == 0 and info["scale"] == 1.0
+    r = _ok(est.CONVERSE, c.request("estimator", "converse", {"estimate": "r2", "sets": 3}))
+    assert r["completed"] == 3 and r["info"]["sets_done"] == 3 and r["info"]["consistent"]
+    assert r["info"]["scale"] == pytest.approx(2.0, rel=0.05)  # the other is twice as heavy
+    for method in ("thesis", "interval"):
+        e = _ok(est.ESTIMATE_EP, c.request("estimator", "estimate", {"estimate": "r2", "clip": motion, "method": method}))
+        assert e["clip"]["sensor"] == ["tau.shoulder_pitch", "tau.shoulder_roll", "tau.elbow"] and e["g"] > 0
+    assert _ok(est.INFO_EP, c.request("estimator", "info", {"estimate": "r2"}))["sets_done"] == 3
+    assert {"estimate": "r2", "other": "r2", "sets_done": 3} in _ok(est.LIST, c.request("estimator", "list"))["estimates"]
+    deadline = time.monotonic() + 5
+    while len(progress) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert [p["set"] for p in progress] == [1, 2, 3]
+    assert any(x["dialogue"] == "r2" and x["kind"] == "answer" for x in lines)
+
+    # rule identification, applied to later sets
+    c.request("simulator", "other_create", {"other": "r4", "params": {"rule": "f3", "joints": list(ALL), "g_max": 1.2},
+                                            "replace": True})
+    c.request("estimator", "start", {"estimate": "r4", "other": "r4", "joints": list(ALL), "g_max": 1.2, "replace": True})
+    ident = _ok(est.IDENTIFY, c.request("estimator", "identify_rule", {"estimate": "r4"}))
+    assert ident["rule"] == "f3" and 1 <= len(ident["questions"]) <= 2 and ident["design"]["max_relative_error"] < 1e-3
+    assert c.request("estimator", "info", {"estimate": "r4"})["language"]["rule"] == "f3"
+    assert _ok(est.DELETE, c.request("estimator", "delete", {"estimate": "r4"}))["deleted"]
+
+
+def test_bad_requests_get_clear_errors(chapter3_services, client_of):
+    env, procs = chapter3_services
+    c = client_of(env)
+    c.request("simulator", "other_create", {"other": "ok", "replace": True})
+    c.request("estimator", "start", {"estimate": "ok", "other": "ok", "replace": True})
+    m = clip_to_wire(unknown_motions(1)[0])
+    human_like = dict(m, channels=["a.rx", "b.rx", "c.rx"])
+    cases = [
+        ("dialogue", "ask_open", {"dialogue": "x", "other": "nobody", "clip": m}, "not_found"),
+        ("dialogue", "ask_open", {"dialogue": "x", "other": "ok", "d": 5, "clip": m}, "bad_request"),
+        ("dialogue", "ask_compare", {"dialogue": "x", "other": "ok", "clips": [m]}, "bad_request"),
+        ("dialogue", "transcript", {"dialogue": "never"}, "not_found"),
+        ("dialogue", "transcript", {"dialogue": "../etc"}, "bad_request"),
+        ("estimator", "start", {"estimate": "ok", "other": "ok"}, "conflict"),
+        ("estimator", "start", {"estimate": "j", "other": "ok", "joints": ["tail"]}, "bad_request"),
+        ("estimator", "converse", {"estimate": "nope"}, "not_found"),
+        ("estimator", "converse", {"estimate": "ok", "sets": 0}, "bad_request"),
+        ("estimator", "estimate", {"estimate": "ok", "clip": human_like}, "bad_request"),
+        ("estimator", "identify_rule", {"estimate": "ok", "candidates": "weighted", "method": "thesis"}, "bad_request"),
+        ("estimator", "info", {"estimate": "a/b"}, "bad_request"),
+    ]
+    for service, verb, msg, code in cases:
+        with pytest.raises(RemoteError) as e:
+            c.request_raw(service, verb, pack(msg), timeout=60)
+        ERROR.validate({"code": e.value.code, "message": e.value.message, "details": e.value.details})
+        assert e.value.code == code, (service, verb, e.value.code, e.value.message)
+    for name in ("dialogue", "estimator"):
+        assert procs.procs[name].poll() is None and "Traceback" not in procs.log(name)
+
+
+@pytest.mark.parametrize("behaviour, reason", [("silent", "no answer"), ("nonsense", "not one of the words"),
+                                               ("contradict", "contradict")])
+def test_a_misbehaving_other_stops_the_conversation_and_keeps_the_estimate(chapter3_services, client_of, behaviour, reason):
+    env, _ = chapter3_services
+    c = client_of(env)
+    name = f"bad-{behaviour}"
+    c.request("simulator", "other_create", {"other": name, "params": {"d": 6, "g_max": 0.6, "seed": 3}, "replace": True})
+    c.request("estimator", "start", {"estimate": name, "other": name, "d": 6, "replace": True})
+    good = c.request("estimator", "converse", {"estimate": name, "sets": 1})["info"]  # one honest set first
+    c.request("simulator", "other_create", {"other": name, "params": {"d": 6, "g_max": 0.6, "seed": 3,
+                                                                      "behaviour": behaviour}, "replace": True})
+    r = c.request("estimator", "converse", {"estimate": name, "sets": 8, "timeout": 1.0}, timeout=120)
+    assert reason in r["stopped"], r.get("stopped")
+    info = r["info"]
+    assert info["sets_done"] >= good["sets_done"] == 1  # nothing learnt before is lost
+    assert any(reason in n for n in info["notes"])
+    if behaviour != "contradict":  # nothing was learnt from a silent or nonsensical other
+        assert info["sets_done"] == 1 and info["scale"] == pytest.approx(good["scale"])
+    assert c.request("estimator", "info", {"estimate": name})["sets_done"] == info["sets_done"]
+    lines = c.request("dialogue", "transcript", {"dialogue": name})["lines"]
+    if behaviour == "silent":
+        assert lines[-1]["kind"] == "note" and "no answer" in lines[-1]["text"]
+    if behaviour == "nonsense":
+        assert lines[-1]["understood"] is False
+
+
+def test_killing_the_estimator_between_sets_loses_no_completed_set(chapter3_services, client_of):
+    env, procs = chapter3_services
+    c = client_of(env)
+    c.request("simulator", "other_create", {"other": "kk", "params": {"d": 6, "g_max": 0.6}, "replace": True})
+    c.request("estimator", "start", {"estimate": "kk", "other": "kk", "d": 6, "replace": True})
+    done = []
+    c.subscribe("events/estimator/progress", lambda k, m: done.append(m["set"]) if m["estimate"] == "kk" else None)
+    time.sleep(0.3)
+    errors = []
+
+    def converse():
+        from shared.bus.client import Client
+
+        from tests.conftest import settings_of
+
+        try:
+            with Client(settings_of(env)) as c2:
+                c2.request("estimator", "converse", {"estimate": "kk", "sets": 40}, timeout=300)
+        except Exception as e:  # the estimator is killed under it: an error, not a hang
+            errors.append(e)
+
+    t = threading.Thread(target=converse)
+    t.start()
+    deadline = time.monotonic() + 60
+    while len(done) < 2 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    os.kill(procs.procs["estimator"].pid, signal.SIGKILL)
+    procs.procs["estimator"].wait()
+    t.join(timeout=120)
+    assert not t.is_alive() and errors and getattr(errors[0], "code", "") == "unavailable"
+    reported = max(done)
+    procs.start("estimator", "services.estimator")
+    procs.wait_alive({"estimator"})
+    info = c.request("estimator", "info", {"estimate": "kk"})
+    assert info["sets_done"] >= reported  # every set reported done was saved
+    r = c.request("estimator", "converse", {"estimate": "kk", "sets": 1})  # and it goes on from there
+    assert r["info"]["sets_done"] == info["sets_done"] + 1
