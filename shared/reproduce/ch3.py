@@ -169,8 +169,8 @@ def _plot(path: Path, title: str, ylabel: str, series: dict, ylim=None) -> str:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    for label, (xs, ys, style) in series.items():
-        ax.plot(xs, ys, style, label=label, marker="o", markersize=3)
+    for label, (xs, ys, style, *color) in series.items():
+        ax.plot(xs, ys, style, label=label, marker="o", markersize=3, color=color[0] if color else None)
     ax.set_xlabel("conversation sets")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -200,10 +200,11 @@ def write_report(out: Path, res: dict, seconds: float) -> Path:
         series = {}
         for d, cur in oq.items():
             xs = [r["set"] for r in cur["rows"]]
+            color = {4: "C0", 6: "C1", 8: "C2"}[d]
             for kind, style in (("known", "-"), ("unknown", "--")):
-                series[f"thesis d={d} {kind}"] = (xs, [r[f"thesis_{kind}"][metric] for r in cur["rows"]], style)
-                if key == "error":
-                    series[f"interval d={d} {kind}"] = (xs, [r[f"interval_{kind}"][metric] for r in cur["rows"]], ":")
+                series[f"thesis d={d} {kind}"] = (xs, [r[f"thesis_{kind}"][metric] for r in cur["rows"]], style, color)
+                if key == "error" and kind == "unknown":  # the interval estimator is the same on both
+                    series[f"interval d={d}"] = (xs, [r[f"interval_{kind}"][metric] for r in cur["rows"]], ":", color)
         name = _plot(out / f"fig3_{FIGURE[key]}.png", title, metric, series, ylim)
         lines += [f"## {title}", "", f"![{title}]({name})", ""]
     lines += ["### In numbers, after the last set", "",
