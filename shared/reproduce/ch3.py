@@ -106,6 +106,7 @@ class Ch3:
                 ident = self.c.request("estimator", "identify_rule", {"estimate": name})
             lang = Language(d=6, g_max=g_max, joints=list(ALL), rule="f4")
             out[label] = {"identified": ident and ident.get("rule"), "questions": ident and ident["questions"],
+                          "design": ident and ident.get("design"),
                           **self.curve(name, lang, 4.8, ALL, {"unknown": unknown})}
         self.echo(f"  rule f4 identified as {out['right']['identified']} in {len(out['right']['questions'])} question(s); "
                   f"unknown-motion error after {self.sets} sets: right rule {out['right']['rows'][-1]['thesis_unknown']['error']:.1%}, "
@@ -249,6 +250,22 @@ def write_report(out: Path, res: dict, seconds: float) -> Path:
               "|---|---|---|---|",
               f"| right rule | {r_right['thesis_unknown']['error']:.1%} | {r_right['interval_unknown']['error']:.2%} | ~10 % |",
               f"| wrong rule | {r_wrong['thesis_unknown']['error']:.1%} | {r_wrong['interval_unknown']['error']:.1%} | 45-60 % |", ""]
+    des = rules["right"]["design"]
+    if des:
+        a = des["a"]
+        lines += ["### The thesis's motion pairs, designed on the self's body (scipy.optimize)", "",
+                  f"a = {a:g} N m (the thesis's a = 0.5 is in its robot's units; every comparison is the same).", "",
+                  "| | designed | achieved |", "|---|---|---|",
+                  f"| m4 peak torques (4 joints at once) | {', '.join(f'{v:.4f}' for v in des['m4_design'])} | "
+                  f"{', '.join(f'{v:.4f}' for v in des['m4_peaks'])} |",
+                  f"| m3 peak torques (joints pitch, roll, elbow, knee; the knee moves first, then pitch, roll, elbow) | "
+                  f"{', '.join(f'{v:.4f}' for v in des['m3_design'])} | {', '.join(f'{v:.4f}' for v in des['m3_peaks'])} |",
+                  f"| m1 / m2 mean torque f1 (must be equal) | equal | {des['m1_m2_f1'][0]:.5f} / {des['m1_m2_f1'][1]:.5f} |",
+                  f"| m1 / m2 peak torque f4 (must differ) | different | {des['m1_m2_f4'][0]:.4f} / {des['m1_m2_f4'][1]:.4f} |",
+                  *[f"| {r}(m3) vs {r}(m4) | {want} | {v[0]:.4f} vs {v[1]:.4f} |"
+                    for r, want, v in (("f2", "4a vs 4a", des["thesis_values"]["f2"]), ("f3", "3a vs 4a", des["thesis_values"]["f3"]),
+                                       ("f4", "3a vs a", des["thesis_values"]["f4"]))],
+                  f"", f"Largest relative deviation from the design: {des['max_relative_error']:.1e}.", ""]
     lines += ["## Rule identification (comparative questions)", "",
               "| answer noise | candidates | identification rate | questions asked (mean) | thesis |", "|---|---|---|---|---|"]
     for v in ident.values():
