@@ -4,6 +4,6 @@
 ``mirrorcoach schemas`` prints them.
 """
 
-from schemas import dialogue, estimator, pss, simulator
+from schemas import coach, dialogue, estimator, pss, simulator
 
-CONTRACTS = {"pss": pss, "simulator": simulator, "dialogue": dialogue, "estimator": estimator}
+CONTRACTS = {"pss": pss, "simulator": simulator, "dialogue": dialogue, "estimator": estimator, "coach": coach}

@@ -73,6 +73,8 @@ ADD = Endpoint(
     Message("pss.add", Map({
         "space": SPACE,
         "clips": F(List(CLIP, min_len=1, max_len=MAX_CLIPS), "clips to add as new proto-symbols"),
+        "as_one": F(Str(pattern=NAME_PATTERN, max_len=64), "add all clips as the repetitions of one proto-symbol of this name",
+                    required=False),
     }), doc="add proto-symbols and rebuild the space"),
     Message("pss.add.reply", INFO),
     "Add clips as proto-symbols and rebuild the space's points.",

@@ -67,7 +67,7 @@ def make_service(settings: Settings | None = None) -> Service:
         name = req["space"]
         old = store.get(name)
         clips = [clip_from_wire(c, old.features.skeleton) for c in req["clips"]]
-        space = write(name, "add", lambda: old.rebuilt(add=clips))
+        space = write(name, "add", lambda: old.rebuilt(add=clips, as_one=req["as_one"]))
         changed(name, "added", space)
         return space_info(name, space)
 

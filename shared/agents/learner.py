@@ -28,7 +28,7 @@ phase axis) with an adverb, the learner updates ``m <- m + gamma_eff * P(D - m)`
   past the target, and the error grows again.
 
 Attempts. Each trial returns 5 repetitions: the memory played at the learner's tempo
-(duration factor ``tempo``) plus smooth motor noise (Gaussian, ``sigma`` degrees, low-passed
+(duration factor ``tempo``) plus smooth motor noise on the joint angles (Gaussian, ``sigma`` degrees, low-passed
 over ~0.2 s), at the target's frame rate.
 
 Every learner is drawn from :func:`population` with a seed; its parameters are documented in
@@ -136,6 +136,7 @@ class SimulatedLearner:
         self.target = target
         self.channels = target.group("motion") or list(target.channels)
         self.target_phase = to_phase(target, self.channels)
+        self._rotation_mask = np.array([0.0 if c.split(".")[-1].startswith("t") else 1.0 for c in self.channels])
         self.memory = self._initial() if memory is None else np.asarray(memory, float)
         self.trials = trials
         self.reference = None if reference is None else np.asarray(reference, float)
@@ -193,7 +194,8 @@ class SimulatedLearner:
             smooth = np.column_stack([np.convolve(white[:, c], kernel, mode="valid") for c in range(base.shape[1])])
             data = t.data[np.linspace(0, t.n_frames - 1, n).round().astype(int)].copy()
             idx = [t.channels.index(c) for c in self.channels]
-            data[:, idx] = base + p.noise * smooth[:n]
+            noise = p.noise * smooth[:n] * self._rotation_mask  # motor noise in degrees: joint angles only
+            data[:, idx] = base + noise
             out.append(Clip(data, list(t.channels), t.fps, t.skeleton, {g: list(v) for g, v in t.groups.items()},
                             name=f"{self.name}_trial{self.trials}_rep{r + 1}", label=t.label))
         return out

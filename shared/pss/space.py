@@ -161,14 +161,27 @@ class ProtoSymbolSpace:
         emb = smacof(f, params.dim)
         return cls(params, features, symbols, f, emb, name=name)
 
-    def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None) -> "ProtoSymbolSpace":
-        """A new space from a modified database (ch. 3 rebuilds every conversation set)."""
+    def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None,
+                as_one: str | None = None) -> "ProtoSymbolSpace":
+        """A new space from a modified database (ch. 3 rebuilds every conversation set).
+
+        ``as_one``: add the clips as the repetitions of one proto-symbol of that name (a
+        learner's attempt of 5 repetitions, ch. 4) instead of one proto-symbol per clip."""
         remove = set(remove or [])
         unknown = remove - {s.name for s in self.symbols}
         if unknown:
             raise NotFound(f"no proto-symbol named {sorted(unknown)[0]!r} in space {self.name!r}")
         symbols = [s for s in self.symbols if s.name not in remove]
         names = {s.name for s in symbols}
+        if as_one is not None:
+            if as_one in names:
+                raise BadInput(f"space {self.name!r} already has a proto-symbol named {as_one!r}")
+            reps = [c.resample(self.params.fps) for c in add or []]
+            if not reps:
+                raise BadInput("no clips to add")
+            symbols.append(ProtoSymbol(as_one, reps[0].label or as_one, self.abstract(reps), [c.name for c in reps],
+                                       [c.n_frames for c in reps]))
+            add = []
         for c in add or []:
             c = c.resample(self.params.fps)
             if c.name in names:

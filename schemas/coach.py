@@ -1,0 +1,120 @@
+"""Contract of the coach service (``services/coach``): coaching sessions and their policies.
+
+Keys: ``<prefix>/coach/<verb>``; every trial is published on ``<prefix>/events/coach/trial``.
+"""
+
+from __future__ import annotations
+
+from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, Message, Str
+from schemas.common import CLIP, name
+
+SERVICE = "coach"
+SESSION = name("session id")
+ADVERB = Str(choices=("a little more", "more", "much more", "more like this", "table"))
+
+POLICY = Map({
+    "kind": F(Str(choices=("fixed", "aeu1", "aeu2", "emu1", "emu1c", "emu2", "nb")), "which model", required=False,
+              default="fixed"),
+    "alpha": F(Float(0.0, 5.0), "emphasis alpha (eq. 4.3)", required=False, default=2.0),
+    "adverb": F(ADVERB, "none, a fixed adverb, or 'table' (Table 4.1 for the alpha)", required=False),
+    "calibration": F(Float(1e-9, 1e9), "AEU: thesis distance units per ours", required=False, default=1.0),
+    "per_learner": F(AnyMap(max_len=10_000), "EMU-2: learner -> alpha", required=False, default=dict),
+    "nb": F(AnyMap(), "naive Bayes parameters (from policy_fit)", required=False),
+    "body_part": F(Bool(), "emphasise the worst body part only", required=False, default=False),
+})
+
+TRIAL = Map({
+    "session": SESSION, "trial": F(Int(1)),
+    "d_p": F(Float(0.0), "|x_t - x_p| (eq. 4.4, HMM distance)"),
+    "d_cop": F(Float(0.0), "HMM distance of the centre-of-gravity trajectories (6.5)", required=False),
+    "alpha": F(Float(0.0), "the policy's alpha"), "alpha_shown": F(Float(0.0), "after the feasibility check"),
+    "adverb": F(Str(max_len=32), "what the coach says", required=False),
+    "feasible": F(Bool(), "whether the policy's alpha passed the simulator's check"),
+    "alpha_reduced": F(Bool()), "feasibility": F(Str(max_len=1000)),
+    "part": F(Str(max_len=16), "the body part emphasised (body-part policy)", required=False),
+    "shares": F(AnyMap(), "share of the error per body part"),
+    "emphatic": F(CLIP, "the motion to show next (the target when alpha is 0)"),
+    "x_t": F(List(Float(), max_len=20)), "x_p": F(List(Float(), max_len=20)), "x_s": F(List(Float(), max_len=20)),
+    "seconds": F(Float(0.0)),
+})
+
+INFO = Map({
+    "session": SESSION, "target": F(Str(max_len=128)), "learner": F(Str(max_len=64), required=False),
+    "mode": F(Str(max_len=16)),
+    "policy": F(AnyMap()), "trials": F(List(AnyMap(), max_len=1000), "every trial so far"),
+    "R": F(List(Float(0.0), max_len=1000), "d_l / d_1 (this learner's term of eq. 4.5)"),
+})
+
+START = Endpoint(
+    "start",
+    Message("coach.start", Map({
+        "session": SESSION,
+        "target": F(CLIP, "the target motion", required=False),
+        "target_space": F(Str(max_len=64), "or: a pss space ...", required=False),
+        "target_label": F(Str(max_len=64), "... and the proto-symbol (label or name) to take as target", required=False),
+        "learner": F(Str(max_len=64), "a simulated learner (created if new); absent: a person sends attempts",
+                     required=False),
+        "population_seed": F(Int(0, 2**32 - 1), required=False, default=0),
+        "index": F(Int(0, 9999), "which learner of the population", required=False, default=0),
+        "policy": F(POLICY, required=False, default=dict),
+        "mode": F(Str(choices=("residual", "thesis")),
+                  "residual: the emphasis applied to the real target; thesis: show F_gen(x_s) itself",
+                  required=False, default="residual"),
+        "replace": F(Bool(), required=False, default=False),
+    })),
+    Message("coach.start.reply", INFO),
+    "Start a coaching session on a target (a clip, or SPACE:LABEL) for a simulated learner or a person.",
+)
+
+ATTEMPT = Endpoint(
+    "attempt",
+    Message("coach.attempt", Map({"session": SESSION, "clips": F(List(CLIP, min_len=1, max_len=20),
+                                                                 "the attempt: its repetitions (5 in the thesis)")})),
+    Message("coach.attempt.reply", TRIAL),
+    "One trial: recognise the attempt, choose alpha and adverb, generate and check the emphatic motion.",
+)
+
+RUN = Endpoint(
+    "run",
+    Message("coach.run", Map({"session": SESSION, "trials": F(Int(1, 50), required=False, default=4)})),
+    Message("coach.run.reply", INFO),
+    "Coach the session's simulated learner for a number of trials (the first shows the target).",
+)
+
+STATE = Endpoint("state", Message("coach.state", Map({"session": SESSION})), Message("coach.state.reply", INFO),
+                 "A session and its trials.")
+
+POLICY_FIT = Endpoint(
+    "policy_fit",
+    Message("coach.policy_fit", Map({
+        "kind": F(Str(choices=("aeu1", "aeu2", "emu1", "emu1c", "emu2", "nb"))),
+        "first_trial_dp": F(List(Float(0.0), max_len=100_000), "AEU: learners' first-trial d_p (calibration)",
+                            required=False),
+        "demonstrations": F(List(List(List(Float(), max_len=20), min_len=3, max_len=3), max_len=100_000),
+                            "EMU-1: observed (x_t, x_p, x_s)", required=False),
+        "simulated_coach": F(AnyMap(), "EMU-1 without data: {n, alpha, off_line, seed} of a simulated coach",
+                             required=False),
+        "sweep": F(AnyMap(max_len=10_000), "EMU-2: learner -> {alpha: final error}", required=False),
+        "features": F(List(List(Float(), min_len=2, max_len=2), max_len=100_000), "NB: (d_p, d_cop) rows",
+                      required=False),
+        "labels": F(List(Str(max_len=32), max_len=100_000), "NB: the adverb that worked best", required=False),
+        "alpha": F(Float(0.0, 5.0), "the alpha the fitted policy uses where it does not choose one", required=False,
+                   default=2.0),
+    })),
+    Message("coach.policy_fit.reply", Map({"policy": F(POLICY), "fit": F(AnyMap(), "what was fitted")})),
+    "Fit a policy from data (EMU-1, EMU-2, AEU calibration, naive Bayes).",
+)
+
+LIST = Endpoint("list", Message("coach.list", Map({})),
+                Message("coach.list.reply", Map({"sessions": F(List(Map({"session": SESSION, "trials": F(Int(0)),
+                                                                         "learner": F(Str(max_len=64), required=False)}),
+                                                                    max_len=100_000))})), "Every session.")
+DELETE = Endpoint("delete", Message("coach.delete", Map({"session": SESSION})),
+                  Message("coach.delete.reply", Map({"session": SESSION, "deleted": F(Bool())})), "Delete a session.")
+
+ENDPOINTS = {e.verb: e for e in (START, ATTEMPT, RUN, STATE, POLICY_FIT, LIST, DELETE)}
+EVENTS = {"trial": Message("coach.event.trial", Map({
+    "session": SESSION, "trial": F(Int(1)), "d_p": F(Float(0.0)), "alpha": F(Float(0.0)),
+    "adverb": F(Str(max_len=32), required=False), "x_t": F(List(Float(), max_len=20)),
+    "x_p": F(List(Float(), max_len=20)), "x_s": F(List(Float(), max_len=20)), "learner": F(Str(max_len=64), required=False),
+}), doc="after every trial")}

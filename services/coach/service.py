@@ -1,0 +1,318 @@
+"""The coach service: coaching sessions (contract: ``schemas/coach.py``).
+
+The coach owns sessions and policies and nothing else: spaces and generation are the pss
+service's (space ``coach-<session>``), feasibility and learners the simulator's. A session is
+saved after every trial (JSON and the target clip, atomically), so a restarted coach continues
+where the last completed trial left it. An attempt is added to the space under a fresh name
+each try, so a trial interrupted by a crash can simply be sent again.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import uuid
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from schemas import coach as contract
+from schemas.common import clip_from_wire, clip_to_wire
+from shared.bus.client import Client, RemoteError
+from shared.bus.config import Settings
+from shared.bus.runtime import Service
+from shared.clip import Clip
+from shared.coaching.policies import (SWEEP, Calibration, Policy, fit_emu1_corrected, fit_nb,
+                                      simulated_coach_demonstrations)
+from shared.coaching.session import Session, Trial, check_attempts, session_to_dict, start, trial
+from shared.errors import BadInput, NotFound
+from shared.io import load_clip, save_clip
+from shared.io.atomic import atomic_write
+from shared.pss.store import Conflict, check_name
+
+
+class BusCoachPorts:
+    def __init__(self, client: Client, skeleton_json: str | None):
+        self.c, self.skeleton = client, skeleton_json
+
+    def build(self, space, target):
+        t = target.with_data(target.data, name="target", label="target")
+        self.c.request("pss", "build", {"space": space, "replace": True, "clips": [clip_to_wire(t)]})
+
+    def add_attempt(self, space, name, attempts):
+        self.c.request("pss", "add", {"space": space, "as_one": name,
+                                      "clips": [clip_to_wire(a.with_data(a.data, name=f"{name}_{i}", label=name))
+                                                for i, a in enumerate(attempts)]})
+
+    def distance(self, space, a, b):
+        return float(self.c.request("pss", "distance", {"space": space, "a": a, "b": b})["distance"])
+
+    def points(self, space):
+        info = self.c.request("pss", "info", {"space": space})
+        return {s["name"]: np.asarray(p) for s, p in zip(info["proto_symbols"], info["points"])}
+
+    def generate(self, space, mix):
+        return clip_from_wire(self.c.request("pss", "generate", {"space": space, "mix": mix})["clip"])
+
+    def perform(self, clip):
+        if self.skeleton is None:
+            return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames,
+                    "feasible": True}, None
+        r = self.c.request("simulator", "perform", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False)})
+        out = clip_from_wire(r["clip"])
+        return r["report"], out.select(["cog.x", "cog.y", "cog.z"])
+
+
+def trial_reply(session: Session, rec: Trial, demo: Clip) -> dict:
+    return {"session": session.name, "trial": rec.number, "d_p": rec.d_p, "d_cop": rec.d_cop, "alpha": rec.alpha,
+            "alpha_shown": rec.alpha_shown, "adverb": rec.adverb, "feasible": rec.feasible,
+            "alpha_reduced": rec.alpha_reduced, "feasibility": rec.feasibility, "part": rec.part,
+            "shares": rec.shares, "emphatic": clip_to_wire(demo), "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
+            "seconds": rec.seconds}
+
+
+def make_service(settings: Settings | None = None) -> Service:
+    settings = settings or Settings()
+    root = settings.data_dir("coach")
+    root.mkdir(parents=True, exist_ok=True)
+    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
+    guard = threading.Lock()
+    busy: set[str] = set()
+    client: dict = {}
+
+    def bus() -> Client:
+        with guard:
+            if "c" not in client:
+                client["c"] = Client(settings, connect_timeout_s=10.0)
+            return client["c"]
+
+    def paths(name: str) -> tuple[Path, Path]:
+        check_name(name)
+        return root / f"{name}.json", root / f"{name}.target.npz"
+
+    def save_clip_atomic(clip: Clip, path: Path) -> None:
+        tmp = path.with_name(f".{path.name}.tmp.npz")
+        save_clip(clip, tmp)
+        os.replace(tmp, path)
+
+    def save(s: Session) -> None:
+        meta, target = paths(s.name)
+        if not target.exists():
+            save_clip_atomic(s.target, target)
+        text = json.dumps(session_to_dict(s)).encode()
+        atomic_write(meta, lambda f: f.write(text))
+
+    def load(name: str) -> Session:
+        meta, target = paths(name)
+        if not meta.exists():
+            raise NotFound(f"no coaching session {name!r}", session=name)
+        d = json.loads(meta.read_text())
+        s = Session(name, load_clip(target), Policy.from_dict(d["policy"]), d.get("learner"),
+                    [Trial(**t) for t in d["trials"]], d.get("mode", "residual"), d.get("target_report"))
+        return s
+
+    class writing:
+        def __init__(self, name):
+            self.name = name
+
+        def __enter__(self):
+            with guard:
+                if self.name in busy:
+                    raise Conflict(f"session {self.name!r} is busy with another request", session=self.name)
+                busy.add(self.name)
+
+        def __exit__(self, *exc):
+            with guard:
+                busy.discard(self.name)
+
+    def info(s: Session) -> dict:
+        d = s.d()
+        return {"session": s.name, "target": s.target.name, "learner": s.learner, "mode": s.mode,
+                "policy": s.policy.to_dict(),
+                "trials": [asdict(t) for t in s.trials], "R": [x / d[0] for x in d] if d and d[0] > 0 else []}
+
+    def ports_of(s: Session) -> BusCoachPorts:
+        return BusCoachPorts(bus(), None if s.target.skeleton is None else s.target.skeleton.to_json())
+
+    def run_trial(s: Session, attempts: list[Clip]) -> tuple[Trial, Clip]:
+        ports = ports_of(s)
+        if s.target_cog is None and s.target.skeleton is not None:
+            s.target_report, s.target_cog = ports.perform(s.target)
+        # a fresh proto-symbol name per try: a trial cut short by a crash is simply sent again
+        rec, demo = trial(s, attempts, _Renamed(ports, f"-{uuid.uuid4().hex[:6]}"))
+        save_clip_atomic(demo, root / f"{s.name}.last.npz")  # what to show next, for run to continue from
+        save(s)
+        svc.publish("trial", {"session": s.name, "trial": rec.number, "d_p": rec.d_p, "alpha": rec.alpha_shown,
+                              "adverb": rec.adverb, "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
+                              "learner": s.learner})
+        return rec, demo
+
+    @svc.handler("start")
+    def start_session(req):
+        name = req["session"]
+        meta, _ = paths(name)
+        if meta.exists() and not req["replace"]:
+            raise Conflict(f"session {name!r} exists; delete it or start with replace", session=name)
+        if (req["target"] is None) == (req["target_space"] is None):
+            raise BadInput("give exactly one of target (a clip) and target_space + target_label", field="target")
+        if req["target"] is not None:
+            target = clip_from_wire(req["target"])
+        else:
+            if not req["target_label"]:
+                raise BadInput("target_space needs target_label", field="target_label")
+            r = bus().request("pss", "generate", {"space": req["target_space"], "mix": {req["target_label"]: 1.0},
+                                                  "name": "target"})
+            target = clip_from_wire(r["clip"])
+        target = target.resample(30.0) if target.fps != 30.0 else target
+        if target.n_frames < 10:
+            raise BadInput(f"the target has {target.n_frames} frames at 30 fps; at least 10", field="target")
+        policy = Policy.from_dict({k: v for k, v in req["policy"].items()})
+        s = Session(name, target, policy, req["learner"], mode=req["mode"])
+        with writing(name):
+            for p in (meta, paths(name)[1], root / f"{name}.last.npz"):
+                p.unlink(missing_ok=True)
+            if s.learner:
+                try:
+                    bus().request("simulator", "learner_create", {"learner": s.learner, "target": clip_to_wire(target),
+                                                                  "population_seed": req["population_seed"],
+                                                                  "index": req["index"], "replace": True})
+                except RemoteError as e:
+                    raise BadInput(f"cannot create learner {s.learner!r}: {e.message}") from None
+            start(s, ports_of(s))
+            save(s)
+        return info(s)
+
+    @svc.handler("attempt")
+    def attempt(req):
+        with writing(req["session"]):
+            s = load(req["session"])
+            attempts = [clip_from_wire(c, s.target.skeleton) for c in req["clips"]]
+            check_attempts(s, attempts)
+            rec, demo = run_trial(s, attempts)
+        return trial_reply(s, rec, demo)
+
+    @svc.handler("run")
+    def run(req):
+        with writing(req["session"]):
+            s = load(req["session"])
+            if not s.learner:
+                raise BadInput(f"session {s.name!r} coaches a person: send attempts with `coach attempt`")
+            demo, adverb = s.target, None
+            last = root / f"{s.name}.last.npz"
+            if s.trials and last.exists():  # continue: show what the last trial chose
+                demo, adverb = load_clip(last), s.trials[-1].adverb
+            for _ in range(req["trials"]):
+                r = bus().request("simulator", "learner_imitate", {"learner": s.learner, "demonstration": clip_to_wire(demo),
+                                                                   **({"adverb": adverb} if adverb else {})})
+                attempts = [clip_from_wire(a, s.target.skeleton) for a in r["attempts"]]
+                rec, demo = run_trial(s, attempts)
+                adverb = rec.adverb
+        return info(s)
+
+    @svc.handler("state")
+    def state(req):
+        return info(load(req["session"]))
+
+    @svc.handler("policy_fit")
+    def policy_fit(req):
+        kind = req["kind"]
+        if kind in ("aeu1", "aeu2"):
+            if not req["first_trial_dp"]:
+                raise BadInput("AEU calibration needs first_trial_dp", field="first_trial_dp")
+            cal = Calibration.fit(req["first_trial_dp"])
+            return {"policy": Policy(kind, alpha=req["alpha"], calibration=cal.scale).to_dict(),
+                    "fit": {"scale": cal.scale, "reference": cal.reference}}
+        if kind in ("emu1", "emu1c"):
+            if req["demonstrations"]:
+                pts = [tuple(np.asarray(v, float) for v in d) for d in req["demonstrations"]]
+                source = "observed demonstrations"
+            else:
+                sim = req["simulated_coach"] or {}
+                pts = simulated_coach_demonstrations(**{k: sim[k] for k in ("n", "alpha", "off_line", "seed") if k in sim})
+                source = "a simulated coach"
+            corrected, plain = fit_emu1_corrected(pts)
+            alpha = corrected if kind == "emu1c" else plain
+            return {"policy": Policy(kind, alpha=float(np.clip(alpha, 0.0, 5.0)), adverb="table").to_dict(),
+                    "fit": {"alpha_corrected": corrected, "alpha_uncorrected": plain, "n": len(pts), "source": source}}
+        if kind == "emu2":
+            if not req["sweep"]:
+                raise BadInput("EMU-2 needs a sweep: learner -> {alpha: final error}", field="sweep")
+            per = {}
+            for learner, errs in req["sweep"].items():
+                try:
+                    items = {float(a): float(e) for a, e in errs.items()}
+                except (TypeError, ValueError, AttributeError):
+                    raise BadInput(f"sweep of {learner!r} must map alphas to errors", field="sweep") from None
+                per[learner] = min(items, key=items.get)
+            return {"policy": Policy("emu2", alpha=req["alpha"], adverb=None, per_learner=per).to_dict(),
+                    "fit": {"per_learner": per, "sweep_alphas": list(SWEEP)}}
+        if not req["features"] or not req["labels"]:
+            raise BadInput("naive Bayes needs features (d_p, d_cop) and labels", field="features")
+        nb = fit_nb(req["features"], req["labels"])
+        return {"policy": Policy("nb", alpha=req["alpha"], adverb=None, nb=nb).to_dict(),
+                "fit": {"classes": nb["classes"], "n": len(req["labels"])}}
+
+    @svc.handler("list")
+    def list_sessions(req):
+        rows = []
+        for p in sorted(root.glob("*.json")):
+            d = json.loads(p.read_text())
+            rows.append({"session": p.stem, "trials": len(d["trials"]), "learner": d.get("learner")})
+        return {"sessions": rows}
+
+    @svc.handler("delete")
+    def delete(req):
+        name = req["session"]
+        with writing(name):
+            meta, target = paths(name)
+            if not meta.exists():
+                raise NotFound(f"no coaching session {name!r}", session=name)
+            meta.unlink()
+            target.unlink(missing_ok=True)
+            (root / f"{name}.last.npz").unlink(missing_ok=True)
+        try:
+            bus().request("pss", "delete", {"space": f"coach-{name}"}, timeout=30)
+        except RemoteError:
+            pass
+        return {"session": name, "deleted": True}
+
+    def close_client():
+        if "c" in client:
+            client["c"].close()
+
+    svc.on_stop.append(close_client)
+    return svc
+
+
+class _Renamed:
+    """Ports whose attempt proto-symbols get a unique suffix (see module docstring)."""
+
+    def __init__(self, ports: BusCoachPorts, suffix: str):
+        self.p, self.suffix, self.names = ports, suffix, {}
+
+    def _n(self, name):
+        return name if name == "target" else self.names.setdefault(name, name + self.suffix)
+
+    def build(self, space, target):
+        self.p.build(space, target)
+
+    def add_attempt(self, space, name, attempts):
+        self.p.add_attempt(space, self._n(name), attempts)
+
+    def distance(self, space, a, b):
+        return self.p.distance(space, self._n(a), self._n(b))
+
+    def points(self, space):
+        pts = self.p.points(space)
+        for short, long in self.names.items():
+            if long in pts:
+                pts[short] = pts[long]
+        return pts
+
+    def generate(self, space, mix):
+        return self.p.generate(space, {self._n(k): v for k, v in mix.items()})
+
+    def perform(self, clip):
+        return self.p.perform(clip)

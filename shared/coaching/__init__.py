@@ -1,0 +1,1 @@
+"""Coaching with emphatic motions and adverbs (thesis ch. 4-6)."""

@@ -1,0 +1,44 @@
+"""Coaching ports on local objects (no bus): a local PSS space per session and a MuJoCo body
+built from the target's skeleton. Used by tests and by quick experiments; the coach service
+has the same ports on the bus."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shared.bodies.body import perform
+from shared.bodies.human import human_body
+from shared.clip import Clip
+from shared.pss.space import ProtoSymbolSpace
+
+
+class LocalCoachPorts:
+    def __init__(self, skeleton=None, space_params: dict | None = None):
+        self.spaces: dict[str, ProtoSymbolSpace] = {}
+        self.body = None if skeleton is None else human_body(skeleton)
+        self.space_params = space_params or {}
+
+    def build(self, space, target: Clip):
+        t = target.with_data(target.data, name="target", label="target")
+        self.spaces[space] = ProtoSymbolSpace.build([t], **self.space_params)
+
+    def add_attempt(self, space, name, attempts):
+        self.spaces[space] = self.spaces[space].rebuilt(add=attempts, as_one=name)
+
+    def distance(self, space, a, b):
+        sp = self.spaces[space]
+        return float(sp.distances[sp.symbol(a), sp.symbol(b)])
+
+    def points(self, space):
+        sp = self.spaces[space]
+        return {s.name: np.asarray(p) for s, p in zip(sp.symbols, sp.points)}
+
+    def generate(self, space, mix):
+        sp = self.spaces[space]
+        return sp.generate(weights=sp.mix_weights(mix))
+
+    def perform(self, clip):
+        if self.body is None:
+            return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames}, None
+        out, report = perform(self.body, clip)
+        return report, out.select(["cog.x", "cog.y", "cog.z"])

@@ -1,0 +1,181 @@
+"""How much to emphasise and which adverb to say (thesis ch. 4-6).
+
+Every policy answers ``choose(d_p, d_cop, learner) -> (alpha, adverb)`` for the emphatic point
+``x_s = x_t + alpha (x_t - x_p)`` (eq. 4.3):
+
+* ``fixed``: a constant alpha with no adverb, a constant adverb ("more like this", case 2) or
+  Table 4.1's adverb for the alpha (cases 1-4);
+* ``aeu1`` / ``aeu2`` (table 5.2): the adverb from ``d_p`` thresholds 130/165 (beginners) or
+  160/180 (experienced), in the thesis's units: our distances are mapped to them by an explicit
+  :class:`Calibration`, never assumed to agree;
+* ``emu1``: ``alpha = 1 + slope`` of the regression of ``d_s`` on ``d_p`` over observed coach
+  demonstrations (eq. 5.3-5.5); ``emu1c`` the corrected form on ``d_h``, the distance from
+  ``x_t`` to the projection of ``x_s`` on the line through ``x_p`` and ``x_t`` (eq. 5.8, 5.9);
+* ``emu2``: a per-learner alpha picked from a sweep of {1.25, ..., 2.50} (fig. 5.7, 5.8);
+* ``nb``: the adverb from a naive Bayes classifier (scikit-learn ``GaussianNB``) over
+  ``(d_p, d_cop)``, trained on logged trials (eq. 6.6);
+
+and any of them can emphasise one body part at a time (``body_part``, beyond the thesis).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from shared.errors import BadInput
+
+TABLE_4_1 = {1.5: "a little more", 2.0: "more", 2.5: "much more"}
+ADVERBS = ("a little more", "more", "much more")
+SWEEP = (1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
+AEU_THRESHOLDS = {"aeu1": (130.0, 165.0), "aeu2": (160.0, 180.0)}
+KINDS = ("fixed", "aeu1", "aeu2", "emu1", "emu1c", "emu2", "nb")
+
+
+def table_adverb(alpha: float) -> str | None:
+    """Table 4.1: 1.5 / 2.0 / 2.5 -> "a little more" / "more" / "much more"; other alphas take
+    the nearest row; no emphasis, no adverb."""
+    if alpha <= 0:
+        return None
+    return TABLE_4_1[min(TABLE_4_1, key=lambda a: abs(a - alpha))]
+
+
+@dataclass
+class Calibration:
+    """Our distance (eq. 2.4 between HMMs of our features) -> the thesis's units: ``thesis =
+    scale * ours``. Fitted so that the median first-trial ``d_p`` of a learner population lands
+    on 147.5, the centre of AEU-Model 1's middle band (130, 165]: the thesis's beginners are
+    taken to sit, typically, in that band."""
+
+    scale: float = 1.0
+    reference: float = 147.5
+
+    @classmethod
+    def fit(cls, first_trial_dp) -> "Calibration":
+        d = np.asarray(first_trial_dp, float)
+        if d.size == 0 or not np.all(np.isfinite(d)) or np.median(d) <= 0:
+            raise BadInput("calibration needs positive first-trial distances")
+        return cls(scale=float(147.5 / np.median(d)))
+
+    def thesis_units(self, d_p: float) -> float:
+        return self.scale * d_p
+
+
+def fit_emu1(d_p, d_s) -> float:
+    """EMU-Model 1: ``alpha = 1 + slope`` of the least-squares line ``d_s = a d_p + b`` (eq. 5.5)."""
+    d_p, d_s = np.asarray(d_p, float), np.asarray(d_s, float)
+    if d_p.size < 2 or d_p.shape != d_s.shape:
+        raise BadInput("EMU-Model 1 needs at least two (d_p, d_s) pairs")
+    slope, _ = np.polyfit(d_p, d_s, 1)
+    return float(1.0 + slope)
+
+
+def projection_distance(x_t, x_p, x_s) -> float:
+    """``d_h`` (eq. 5.8): distance from ``x_t`` to the projection of ``x_s`` on the line
+    through ``x_p`` and ``x_t``, on the far side from ``x_p`` when positive."""
+    x_t, x_p, x_s = (np.asarray(v, float) for v in (x_t, x_p, x_s))
+    u = x_t - x_p
+    n = np.linalg.norm(u)
+    if n == 0:
+        raise BadInput("x_t and x_p coincide: no line to project on")
+    return float(np.dot(x_s - x_t, u / n))
+
+
+def fit_emu1_corrected(points) -> tuple[float, float]:
+    """EMU-Model 1 corrected (eq. 5.9): regress ``d_h`` on ``d_p`` over demonstrations
+    ``(x_t, x_p, x_s)``. Returns (alpha, alpha of the uncorrected model on the same data)."""
+    dp, ds, dh = [], [], []
+    for x_t, x_p, x_s in points:
+        dp.append(float(np.linalg.norm(np.asarray(x_t) - np.asarray(x_p))))
+        ds.append(float(np.linalg.norm(np.asarray(x_s) - np.asarray(x_t))))
+        dh.append(projection_distance(x_t, x_p, x_s))
+    return fit_emu1(dp, dh), fit_emu1(dp, ds)
+
+
+def simulated_coach_demonstrations(n: int = 40, alpha: float = 1.8, off_line: float = 0.35, seed: int = 0, dim: int = 3):
+    """Demonstrations of a **simulated** expert coach (the thesis observed a human one): for a
+    learner at ``x_p``, the coach shows ``x_s = x_t + alpha (x_t - x_p)`` plus an error of
+    relative size ``off_line`` perpendicular-ish to the line (coaches do not emphasise exactly
+    along it). Returns a list of ``(x_t, x_p, x_s)``."""
+    r = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        x_t = np.zeros(dim)
+        x_p = r.normal(size=dim) * r.uniform(0.5, 2.0)
+        d = np.linalg.norm(x_p)
+        x_s = x_t + alpha * (x_t - x_p) + off_line * d * alpha * r.normal(size=dim) / np.sqrt(dim)
+        out.append((x_t, x_p, x_s))
+    return out
+
+
+@dataclass
+class Policy:
+    """A coaching policy (see module docstring); ``to_dict``/``from_dict`` for the bus."""
+
+    kind: str = "fixed"
+    alpha: float = 2.0
+    adverb: str | None = "table"  # fixed: None, "table" or a literal adverb
+    calibration: float = 1.0  # aeu: thesis units per our unit
+    per_learner: dict = field(default_factory=dict)  # emu2: learner -> alpha
+    nb: dict | None = None  # nb: GaussianNB parameters
+    body_part: bool = False  # emphasise the worst body part only
+
+    def check(self) -> "Policy":
+        if self.kind not in KINDS:
+            raise BadInput(f"policy kind must be one of {', '.join(KINDS)}, got {self.kind!r}", field="kind")
+        if not (np.isfinite(self.alpha) and 0.0 <= self.alpha <= 5.0):
+            raise BadInput(f"alpha must be in [0, 5], got {self.alpha}", field="alpha")
+        if self.kind == "fixed" and self.adverb not in (None, "table", *ADVERBS, "more like this"):
+            raise BadInput(f"adverb must be none, 'table' or one of {', '.join(ADVERBS)}, 'more like this'", field="adverb")
+        if self.kind == "nb" and not self.nb:
+            raise BadInput("a naive Bayes policy needs a trained classifier (policy_fit)", field="nb")
+        return self
+
+    def choose(self, d_p: float, d_cop: float | None = None, learner: str | None = None) -> tuple[float, str | None]:
+        k = self.kind
+        if k == "fixed":
+            adverb = table_adverb(self.alpha) if self.adverb == "table" else self.adverb
+            return self.alpha, adverb
+        if k in AEU_THRESHOLDS:
+            lo, hi = AEU_THRESHOLDS[k]
+            t = self.calibration * d_p
+            return self.alpha, ADVERBS[0] if t <= lo else ADVERBS[1] if t <= hi else ADVERBS[2]
+        if k in ("emu1", "emu1c"):
+            return self.alpha, table_adverb(self.alpha) if self.adverb == "table" else self.adverb
+        if k == "emu2":
+            a = float(self.per_learner.get(learner, self.alpha))
+            return a, table_adverb(a) if self.adverb == "table" else self.adverb
+        # nb
+        return self.alpha, predict_nb(self.nb, d_p, d_cop if d_cop is not None else 0.0)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Policy":
+        known = {k: v for k, v in d.items()
+                 if k in cls.__dataclass_fields__ and (v is not None or k in ("adverb", "nb"))}
+        return cls(**known).check()
+
+
+def fit_nb(features, labels) -> dict:
+    """Naive Bayes over ``(d_p, d_cop)`` (eq. 6.6, scikit-learn ``GaussianNB``): the parameters,
+    so the policy travels as plain numbers."""
+    from sklearn.naive_bayes import GaussianNB
+
+    x = np.asarray(features, float)
+    y = np.asarray(labels)
+    if x.ndim != 2 or x.shape[1] != 2 or len(x) != len(y) or len(set(y)) < 2:
+        raise BadInput("naive Bayes needs (d_p, d_cop) rows and at least two different adverbs as labels")
+    m = GaussianNB().fit(x, y)
+    return {"classes": [str(c) for c in m.classes_], "theta": m.theta_.tolist(), "var": m.var_.tolist(),
+            "prior": m.class_prior_.tolist()}
+
+
+def predict_nb(params: dict, d_p: float, d_cop: float) -> str:
+    """``V_NB = argmax_V P(V) prod_i P(a_i | V)`` with Gaussian ``P(a_i | V)`` (eq. 6.6)."""
+    theta, var, prior = (np.asarray(params[k], float) for k in ("theta", "var", "prior"))
+    x = np.array([d_p, d_cop], float)
+    ll = np.log(prior) - 0.5 * np.sum(np.log(2 * np.pi * var) + (x - theta) ** 2 / var, axis=1)
+    return params["classes"][int(np.argmax(ll))]

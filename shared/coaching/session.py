@@ -1,0 +1,224 @@
+"""A coaching session and one trial of it (thesis fig. 4.3, eq. 4.3-4.5), against ports.
+
+Ports (the coach service wires them to the bus; tests can wire them to local objects):
+
+* ``build(space, target)`` a space holding the target as proto-symbol ``target``;
+* ``add_attempt(space, name, attempts)`` the attempt's repetitions as one proto-symbol;
+* ``distance(space, a, b)`` eq. 2.4 between two proto-symbols;
+* ``points(space)`` every proto-symbol's point;
+* ``generate(space, mix)`` the motion of a weighted mix of proto-symbols;
+* ``perform(clip)`` the simulator's feasibility report and centre-of-gravity trajectory on a
+  body built from the target's skeleton.
+
+One trial: the attempt (5 repetitions) becomes ``x_p``; ``d_p = |x_t - x_p|`` (eq. 4.4, the
+HMM distance); the policy picks alpha and the adverb; the emphatic motion is generated from
+``x_s = x_t + alpha (x_t - x_p)`` (eq. 4.3: weights ``1 + alpha`` on the target and
+``-alpha`` on the attempt); optionally only the body part with the largest share of the error
+is emphasised (by default the emphasis is applied to the real target, see
+:func:`residual_emphasis`; ``mode="thesis"`` shows ``F_gen(x_s)`` itself); the simulator checks it (no new joint-limit violations against the target's own,
+balance no worse than the target's, within tolerances: see ``_worse``) and alpha is lowered in
+steps of 0.25 until it passes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from shared.clip import Clip
+from shared.coaching.parts import error_shares, partial_emphasis
+from shared.coaching.policies import Policy, table_adverb
+from shared.errors import BadInput
+
+ALPHA_STEP = 0.25
+
+
+class CoachPorts(Protocol):
+    def build(self, space: str, target: Clip) -> None: ...
+    def add_attempt(self, space: str, name: str, attempts: list[Clip]) -> None: ...
+    def distance(self, space: str, a: str, b: str) -> float: ...
+    def points(self, space: str) -> dict[str, np.ndarray]: ...
+    def generate(self, space: str, mix: dict[str, float]) -> Clip: ...
+    def perform(self, clip: Clip) -> tuple[dict, np.ndarray]: ...
+
+
+@dataclass
+class Trial:
+    number: int
+    d_p: float
+    alpha: float  # what the policy chose
+    alpha_shown: float  # after the feasibility check
+    adverb: str | None
+    feasible: bool
+    alpha_reduced: bool
+    feasibility: str
+    part: str | None
+    shares: dict
+    d_cop: float | None
+    x_t: list
+    x_p: list
+    x_s: list
+    seconds: float = 0.0
+
+
+@dataclass
+class Session:
+    name: str
+    target: Clip
+    policy: Policy
+    learner: str | None = None  # a simulated learner's name, or None for a person
+    trials: list[Trial] = field(default_factory=list)
+    mode: str = "residual"  # "residual": target + F_gen(x_s) - F_gen(x_t); "thesis": F_gen(x_s)
+    target_report: dict | None = None
+    target_cog: np.ndarray | None = None
+
+    @property
+    def space(self) -> str:
+        return f"coach-{self.name}"
+
+    def d(self) -> list[float]:
+        """``d_il`` of this session's learner over its trials (eq. 4.4)."""
+        return [t.d_p for t in self.trials]
+
+
+def check_attempts(session: Session, attempts: list[Clip]) -> None:
+    """An attempt must carry the target's motion channels, enough frames and finite values."""
+    if not attempts:
+        raise BadInput("an attempt needs at least one repetition", field="clips")
+    need = session.target.group("motion") or session.target.channels
+    for a in attempts:
+        missing = [c for c in need if c not in a.channels]
+        if missing:
+            raise BadInput(f"attempt {a.name!r} lacks {len(missing)} of the target's channels, e.g. {missing[:3]} "
+                           "(a different skeleton?)", field="clips")
+        if a.duration < 0.3 or a.n_frames < 10:
+            raise BadInput(f"attempt {a.name!r} is too short ({a.n_frames} frames, {a.duration:.2f} s); "
+                           "at least 10 frames and 0.3 s", field="clips")
+
+
+LIMIT_TOLERANCE = 10.0  # degrees past max(limit, the target's own extreme) before a channel counts
+SUPPORT_TOLERANCE = 0.10  # more frames outside the support than the target's, as a share of the frames
+
+
+def _worse(report: dict, target_report: dict, target: Clip) -> str | None:
+    """Why an emphatic motion is less feasible than the target itself, or None: a joint goes
+    more than ``LIMIT_TOLERANCE`` past both its limit and the target's own extreme (real mocap
+    already exceeds the ASF limits), or the centre of gravity is outside the support on a
+    larger share of the frames than the target's by ``SUPPORT_TOLERANCE``."""
+    worst = None
+    for c, v in report["joint_limit_violations"].items():
+        lo, hi = v["limits"]
+        if c in target.channels:
+            lo, hi = min(lo, float(target.column(c).min())), max(hi, float(target.column(c).max()))
+        over = max(lo - v["min"], v["max"] - hi)
+        if over > LIMIT_TOLERANCE and (worst is None or over > worst[1]):
+            worst = (c, over)
+    if worst:
+        return f"{worst[0]} goes {worst[1]:.0f} degrees past its limit and past the target's own range"
+    s, ts = report["support"], target_report["support"]
+    if s.get("checked") and ts.get("checked"):
+        frac = s["frames_outside_support"] / max(report["frames"], 1)
+        t_frac = ts["frames_outside_support"] / max(target_report["frames"], 1)
+        if frac > t_frac + SUPPORT_TOLERANCE:
+            return f"the centre of gravity leaves the support on {frac:.0%} of the frames (target {t_frac:.0%})"
+    return None
+
+
+def _d_cop(target_cog: np.ndarray, attempt_cog: np.ndarray) -> float:
+    """6.5: HMM distance between the centre-of-gravity trajectories of target and attempt
+    (left-to-right HMMs of 6 states on the CoG in centimetres)."""
+    from shared.pss.distance import hmm_distance
+    from shared.pss.hmm import fit_hmm
+
+    n = max(2, min(6, len(target_cog) // 3, len(attempt_cog) // 3))
+    a = fit_hmm([100.0 * target_cog], n, var_floor=0.05)
+    b = fit_hmm([100.0 * attempt_cog], n, var_floor=0.05)
+    return float(hmm_distance(a, b))
+
+
+def _wrap(deg: np.ndarray) -> np.ndarray:
+    return (deg + 180.0) % 360.0 - 180.0
+
+
+def residual_emphasis(target: Clip, generated_s: Clip, generated_t: Clip) -> Clip:
+    """``theta_t + (F_gen(x_s) - F_gen(x_t))`` on the target's frames (beyond the thesis).
+
+    ``F_gen`` returns motions in a canonical frame (heading 0 and the start at the origin, the
+    features being turn-invariant) with generation error; the difference of two generations
+    from the same space keeps the emphasis and cancels both, so alpha = 0 shows the target
+    exactly. Angle differences are wrapped to (-180, 180]."""
+    grid = np.linspace(0, 1, target.n_frames)
+    out = target.data.copy()
+    for c in target.group("motion") or target.channels:
+        if c not in generated_s.channels or c not in generated_t.channels:
+            continue
+        s = np.interp(grid, np.linspace(0, 1, generated_s.n_frames), generated_s.column(c))
+        t = np.interp(grid, np.linspace(0, 1, generated_t.n_frames), generated_t.column(c))
+        diff = s - t if c.split(".")[-1].startswith("t") else _wrap(s - t)
+        out[:, target.channels.index(c)] += diff
+    return target.with_data(out, name=generated_s.name)
+
+
+def start(session: Session, ports: CoachPorts) -> None:
+    """Build the session's space and the target's reference report."""
+    ports.build(session.space, session.target)
+    session.target_report, session.target_cog = ports.perform(session.target)
+
+
+def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Trial, Clip]:
+    """One trial (see module docstring). Returns the record and the motion to show next."""
+    t0 = time.perf_counter()
+    check_attempts(session, attempts)
+    number = len(session.trials) + 1
+    name = f"attempt{number}"
+    ports.add_attempt(session.space, name, attempts)
+    d_p = ports.distance(session.space, "target", name)
+    d_cop = None
+    if session.target_cog is not None:
+        _, cog = ports.perform(attempts[0])
+        d_cop = _d_cop(session.target_cog, cog)
+    alpha, adverb = session.policy.choose(d_p, d_cop, session.learner)
+    shares = error_shares(session.target, attempts)
+    part = max(shares, key=shares.get) if session.policy.body_part else None
+    shown, reason, reduced = alpha, "", False
+    while True:
+        if shown <= 0:
+            demo = session.target
+            reason = reason or "no emphasis"
+            break
+        demo = ports.generate(session.space, {"target": 1.0 + shown, name: -shown})
+        if session.mode == "residual":
+            demo = residual_emphasis(session.target, demo, ports.generate(session.space, {"target": 1.0}))
+        if part is not None:
+            demo = partial_emphasis(session.target.resample(demo.fps), demo, part)
+        report, _ = ports.perform(demo)
+        why = _worse(report, session.target_report, session.target) if session.target_report else None
+        if why is None:
+            reason = reason or "feasible"
+            break
+        reason = f"alpha {shown:g} infeasible ({why}); lowered"
+        shown = round(max(0.0, shown - ALPHA_STEP), 6)
+        reduced = True
+    if reduced and adverb is not None and session.policy.adverb == "table":
+        adverb = table_adverb(shown)
+    pts = ports.points(session.space)
+    x_t, x_p = pts["target"], pts[name]
+    x_s = x_t + shown * (x_t - x_p)
+    rec = Trial(number, float(d_p), float(alpha), float(shown), adverb, not reduced, reduced, reason, part,
+                shares, d_cop, x_t.tolist(), x_p.tolist(), x_s.tolist(), time.perf_counter() - t0)
+    session.trials.append(rec)
+    return rec, demo.with_data(demo.data, name=f"{session.name}_emphatic{number}")
+
+
+def session_to_dict(s: Session) -> dict:
+    return {"name": s.name, "policy": s.policy.to_dict(), "learner": s.learner, "mode": s.mode,
+            "trials": [asdict(t) for t in s.trials], "target_report": s.target_report}
+
+
+def ratio(sessions_d: list[list[float]]) -> np.ndarray:
+    """``R_l = mean_i d_il / d_i1`` (eq. 4.5) over learners' ``d`` sequences."""
+    d = np.asarray(sessions_d, float)
+    return np.mean(d / d[:, :1], axis=0)
