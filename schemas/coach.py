@@ -40,7 +40,7 @@ TRIAL = Map({
 
 INFO = Map({
     "session": SESSION, "target": F(Str(max_len=128)), "learner": F(Str(max_len=64), required=False),
-    "mode": F(Str(max_len=16)),
+    "mode": F(Str(max_len=16)), "check": F(Bool()),
     "policy": F(AnyMap()), "trials": F(List(AnyMap(), max_len=1000), "every trial so far"),
     "R": F(List(Float(0.0), max_len=1000), "d_l / d_1 (this learner's term of eq. 4.5)"),
 })
@@ -60,6 +60,8 @@ START = Endpoint(
         "mode": F(Str(choices=("residual", "thesis")),
                   "residual: the emphasis applied to the real target; thesis: show F_gen(x_s) itself",
                   required=False, default="residual"),
+        "check": F(Bool(), "check every emphatic motion on the simulator and lower alpha if infeasible",
+                   required=False, default=True),
         "replace": F(Bool(), required=False, default=False),
     })),
     Message("coach.start.reply", INFO),

@@ -110,7 +110,8 @@ def make_service(settings: Settings | None = None) -> Service:
             raise NotFound(f"no coaching session {name!r}", session=name)
         d = json.loads(meta.read_text())
         s = Session(name, load_clip(target), Policy.from_dict(d["policy"]), d.get("learner"),
-                    [Trial(**t) for t in d["trials"]], d.get("mode", "residual"), d.get("target_report"))
+                    [Trial(**t) for t in d["trials"]], d.get("mode", "residual"), d.get("check", True),
+                    d.get("target_report"))
         return s
 
     class writing:
@@ -129,7 +130,7 @@ def make_service(settings: Settings | None = None) -> Service:
 
     def info(s: Session) -> dict:
         d = s.d()
-        return {"session": s.name, "target": s.target.name, "learner": s.learner, "mode": s.mode,
+        return {"session": s.name, "target": s.target.name, "learner": s.learner, "mode": s.mode, "check": s.check,
                 "policy": s.policy.to_dict(),
                 "trials": [asdict(t) for t in s.trials], "R": [x / d[0] for x in d] if d and d[0] > 0 else []}
 
@@ -169,7 +170,7 @@ def make_service(settings: Settings | None = None) -> Service:
         if target.n_frames < 10:
             raise BadInput(f"the target has {target.n_frames} frames at 30 fps; at least 10", field="target")
         policy = Policy.from_dict({k: v for k, v in req["policy"].items()})
-        s = Session(name, target, policy, req["learner"], mode=req["mode"])
+        s = Session(name, target, policy, req["learner"], mode=req["mode"], check=req["check"])
         with writing(name):
             for p in (meta, paths(name)[1], root / f"{name}.last.npz"):
                 p.unlink(missing_ok=True)
@@ -232,10 +233,11 @@ def make_service(settings: Settings | None = None) -> Service:
                 sim = req["simulated_coach"] or {}
                 pts = simulated_coach_demonstrations(**{k: sim[k] for k in ("n", "alpha", "off_line", "seed") if k in sim})
                 source = "a simulated coach"
-            corrected, plain = fit_emu1_corrected(pts)
-            alpha = corrected if kind == "emu1c" else plain
+            corrected, plain = fit_emu1_corrected(pts)  # eq. 5.5's alpha = 1 + eq. 4.3's
+            alpha = (corrected if kind == "emu1c" else plain) - 1.0
             return {"policy": Policy(kind, alpha=float(np.clip(alpha, 0.0, 5.0)), adverb="table").to_dict(),
-                    "fit": {"alpha_corrected": corrected, "alpha_uncorrected": plain, "n": len(pts), "source": source}}
+                    "fit": {"alpha_eq5_5_corrected": corrected, "alpha_eq5_5_uncorrected": plain,
+                            "alpha_eq4_3": float(alpha), "n": len(pts), "source": source}}
         if kind == "emu2":
             if not req["sweep"]:
                 raise BadInput("EMU-2 needs a sweep: learner -> {alpha: final error}", field="sweep")

@@ -323,13 +323,16 @@ def estimator_info(name: str = typer.Argument(...), as_json: bool = typer.Option
 def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch3 (more arrive with the coach)."),
               out: Path = typer.Option(Path("reports"), help="Folder for the reports and plots (one sub-folder per chapter)."),
               sets: int = typer.Option(6, help="Conversation sets per curve (ch3)."),
-              seeds: int = typer.Option(10, help="Noisy identification runs per rule and noise level (ch3).")):
+              seeds: int = typer.Option(10, help="Noisy identification runs per rule and noise level (ch3)."),
+              learners: int = typer.Option(12, help="Simulated learners per experiment group (ch4-6)."),
+              hdm05: Optional[Path] = typer.Option(None, help="HDM05 data (ch4-6 targets; default $MIRRORCOACH_HDM05 or ../shared/data/hdm05)."),
+              targets: str = typer.Option("squat,throw", help="Targets for ch4-6: squat, throw.")):
     """Rerun the thesis's experiments on the cluster (simulated agents) and write reports with plots."""
     from shared.bus.client import Client
     from shared.bus.config import Settings
     from shared.cluster import down, running, up
 
-    known = {"ch3"}
+    known = {"ch3", "ch4", "ch5", "ch6"}
     unknown = [c for c in chapters if c not in known]
     if unknown:
         _fail(f"unknown chapter(s) {', '.join(unknown)}; available: {', '.join(sorted(known))}")
@@ -345,6 +348,20 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                 from shared.reproduce.ch3 import run
 
                 run(c, out / "ch3", sets=sets, echo=typer.echo, seeds=seeds)
+            if {"ch4", "ch5", "ch6"} & set(chapters):
+                import os
+
+                from shared.reproduce.coaching import TARGETS
+                from shared.reproduce.coaching import run as run_coaching
+
+                data = hdm05 or Path(os.environ.get("MIRRORCOACH_HDM05") or Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hdm05")
+                chosen = [t.strip() for t in targets.split(",") if t.strip()]
+                bad = [t for t in chosen if t not in TARGETS]
+                if bad or not chosen:
+                    _fail(f"unknown target(s) {bad}; choose from {', '.join(TARGETS)}")
+                if not (data / "amc").is_dir():
+                    _fail(f"HDM05 data not found at {data} (give --hdm05 or set MIRRORCOACH_HDM05)")
+                run_coaching(c, data, out / "ch4-6", learners=learners, targets=chosen, echo=typer.echo)
     finally:
         if started:
             down(settings, echo=typer.echo)

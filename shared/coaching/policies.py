@@ -10,7 +10,11 @@ Every policy answers ``choose(d_p, d_cop, learner) -> (alpha, adverb)`` for the 
   :class:`Calibration`, never assumed to agree;
 * ``emu1``: ``alpha = 1 + slope`` of the regression of ``d_s`` on ``d_p`` over observed coach
   demonstrations (eq. 5.3-5.5); ``emu1c`` the corrected form on ``d_h``, the distance from
-  ``x_t`` to the projection of ``x_s`` on the line through ``x_p`` and ``x_t`` (eq. 5.8, 5.9);
+  ``x_t`` to the projection of ``x_s`` on the line through ``x_p`` and ``x_t`` (eq. 5.8, 5.9).
+  Note the thesis's two alphas: eq. 5.3 defines ``alpha = (d_p + d_s) / d_p``, which is
+  ``1 +`` eq. 4.3's alpha (``d_s = alpha_4.3 d_p``); the thesis reads eq. 5.5's values near 1 as
+  "almost no emphasis" accordingly. The policies emphasise with eq. 4.3, so an EMU-1 policy uses
+  ``alpha_4.3 = alpha_5.5 - 1``;
 * ``emu2``: a per-learner alpha picked from a sweep of {1.25, ..., 2.50} (fig. 5.7, 5.8);
 * ``nb``: the adverb from a naive Bayes classifier (scikit-learn ``GaussianNB``) over
   ``(d_p, d_cop)``, trained on logged trials (eq. 6.6);

@@ -72,6 +72,7 @@ class Session:
     learner: str | None = None  # a simulated learner's name, or None for a person
     trials: list[Trial] = field(default_factory=list)
     mode: str = "residual"  # "residual": target + F_gen(x_s) - F_gen(x_t); "thesis": F_gen(x_s)
+    check: bool = True  # the simulator's feasibility check (off reproduces the thesis's conditions)
     target_report: dict | None = None
     target_cog: np.ndarray | None = None
 
@@ -194,6 +195,9 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
             demo = residual_emphasis(session.target, demo, ports.generate(session.space, {"target": 1.0}))
         if part is not None:
             demo = partial_emphasis(session.target.resample(demo.fps), demo, part)
+        if not session.check:
+            reason = "not checked"
+            break
         report, _ = ports.perform(demo)
         why = _worse(report, session.target_report, session.target) if session.target_report else None
         if why is None:
@@ -214,7 +218,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
 
 
 def session_to_dict(s: Session) -> dict:
-    return {"name": s.name, "policy": s.policy.to_dict(), "learner": s.learner, "mode": s.mode,
+    return {"name": s.name, "policy": s.policy.to_dict(), "learner": s.learner, "mode": s.mode, "check": s.check,
             "trials": [asdict(t) for t in s.trials], "target_report": s.target_report}
 
 

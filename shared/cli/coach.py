@@ -1,0 +1,154 @@
+"""CLI commands of the coach service: ``coach start | attempt | show | run | list``."""
+
+from __future__ import annotations
+
+import json
+import uuid
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from shared.cli.app import SKELETON_HELP, _fail, app
+from shared.cli.cluster import _client, _jsonable, _wire
+
+coach_app = typer.Typer(help="Coaching sessions with emphatic motions and adverbs (coach service, thesis ch. 4-6).",
+                        no_args_is_help=True)
+app.add_typer(coach_app, name="coach")
+
+
+def _target_request(target: str, skeleton: Optional[Path]) -> dict:
+    """A clip file, or SPACE:LABEL (a proto-symbol of a pss space)."""
+    from shared.io import load_clip
+
+    p = Path(target)
+    if not p.exists() and ":" in target:
+        space, label = target.split(":", 1)
+        return {"target_space": space, "target_label": label}
+    return {"target": _wire(load_clip(p, skeleton=skeleton))}
+
+
+def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: Optional[Path]) -> dict:
+    if policy_file is not None:
+        try:
+            d = json.loads(policy_file.read_text())
+        except (OSError, ValueError) as e:
+            _fail(f"{policy_file}: cannot read a policy ({e})")
+        return d.get("policy", d)
+    if kind in ("aeu1", "aeu2", "emu2", "nb"):
+        _fail(f"policy {kind} is fitted from data: pass --policy-file (from the coach's policy_fit)")
+    return {"kind": kind, "alpha": alpha, "adverb": None if adverb == "none" else adverb, "body_part": body_part}
+
+
+def _print_trial(r: dict, file: Path | None) -> None:
+    adverb = r.get("adverb") or "(no adverb)"
+    extra = f"; alpha lowered from {r['alpha']:g}: {r['feasibility']}" if r["alpha_reduced"] else ""
+    part = f"; emphasised: {r['part']}" if r.get("part") else ""
+    typer.echo(f"trial {r['trial']}: d_p {r['d_p']:.1f}, alpha {r['alpha_shown']:g}, \"{adverb}\"{part}{extra}")
+    if file is not None:
+        typer.echo(f"  next motion to imitate: {file}")
+
+
+@coach_app.command("start")
+def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SPACE:LABEL (a proto-symbol of a space)."),
+                learner: Optional[str] = typer.Option(None, help="A simulated learner (created if new)."),
+                person: bool = typer.Option(False, "--person", help="A person sends attempts with `coach attempt`."),
+                session: Optional[str] = typer.Option(None, help="Session id (default: a new one)."),
+                index: int = typer.Option(0, help="Which learner of the seeded population."),
+                population_seed: int = typer.Option(0, help="Seed of the learner population."),
+                policy: str = typer.Option("fixed", help="fixed | emu1 | emu1c (or aeu1, aeu2, emu2, nb with --policy-file)."),
+                alpha: float = typer.Option(2.0, help="Emphasis alpha (eq. 4.3)."),
+                adverb: str = typer.Option("table", help="table (Table 4.1), none, or an adverb."),
+                body_part: bool = typer.Option(False, "--body-part", help="Emphasise the worst body part only."),
+                policy_file: Optional[Path] = typer.Option(None, help="A fitted policy (JSON)."),
+                mode: str = typer.Option("residual", help="residual (emphasis on the real target) or thesis (F_gen(x_s))."),
+                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                as_json: bool = typer.Option(False, "--json")):
+    """Start a coaching session; prints its id."""
+    if person and learner:
+        _fail("give --learner or --person, not both")
+    if not person and not learner:
+        _fail("give --learner ID (a simulated learner) or --person")
+    name = session or f"s{uuid.uuid4().hex[:8]}"
+    req = {"session": name, **_target_request(target, skeleton), "policy": _policy(policy, alpha, adverb, body_part, policy_file),
+           "mode": mode, "index": index, "population_seed": population_seed}
+    if learner:
+        req["learner"] = learner
+    with _client() as c:
+        r = c.request("coach", "start", req)
+    typer.echo(json.dumps(_jsonable(r)) if as_json else name)
+
+
+@coach_app.command("attempt")
+def coach_attempt(session: str = typer.Argument(...),
+                  clips: list[Path] = typer.Argument(..., help="The attempt: its repetitions (5 in the thesis)."),
+                  skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                  out: Path = typer.Option(Path("."), help="Folder for the emphatic motion (BVH)."),
+                  as_json: bool = typer.Option(False, "--json", help="alpha, adverb, d_p and the file, as JSON.")):
+    """One trial with your own attempt: prints alpha, the adverb and d_p; writes the emphatic motion as BVH."""
+    from schemas.common import clip_from_wire
+    from shared.io import load_clip, save_clip
+
+    reps = [_wire(load_clip(p, skeleton=skeleton)) for p in clips]
+    with _client() as c:
+        r = c.request("coach", "attempt", {"session": session, "clips": reps})
+    demo = clip_from_wire(r["emphatic"])
+    out.mkdir(parents=True, exist_ok=True)
+    file = out / f"{session}_trial{r['trial']}.bvh"
+    if demo.skeleton is not None:
+        save_clip(demo, file)
+    else:
+        file = file.with_suffix(".npz")
+        save_clip(demo, file)
+    if as_json:
+        typer.echo(json.dumps({"alpha": r["alpha_shown"], "adverb": r.get("adverb"), "d_p": r["d_p"], "file": str(file),
+                               "trial": r["trial"], "alpha_policy": r["alpha"], "feasibility": r["feasibility"]}))
+    else:
+        _print_trial(r, file)
+
+
+def _print_session(info: dict) -> None:
+    who = f"learner {info['learner']}" if info.get("learner") else "a person"
+    p = info["policy"]
+    typer.echo(f"session {info['session']}: target {info['target']}, {who}, policy {p['kind']} (alpha {p['alpha']:g}), "
+               f"mode {info['mode']}, {len(info['trials'])} trial(s)")
+    for t, r in zip(info["trials"], info["R"]):
+        typer.echo(f"  trial {t['number']}: d_p {t['d_p']:7.1f}  R {r:.3f}  alpha {t['alpha_shown']:<5g} "
+                   f"{(t['adverb'] or '-'):<14} {t['feasibility'][:70]}")
+
+
+@coach_app.command("show")
+def coach_show(session: str = typer.Argument(...), as_json: bool = typer.Option(False, "--json")):
+    """A session's trials: d_p, R, alpha, adverb, feasibility."""
+    with _client() as c:
+        r = c.request("coach", "state", {"session": session})
+    typer.echo(json.dumps(_jsonable(r))) if as_json else _print_session(r)
+
+
+@coach_app.command("run")
+def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
+              trials: int = typer.Option(4, help="Trials to run (the first shows the target)."),
+              session: Optional[str] = typer.Option(None, help="Continue this session (default: start one)."),
+              target: Optional[str] = typer.Option(None, help="Target for a new session: a clip file or SPACE:LABEL."),
+              index: int = typer.Option(0, help="Which learner of the seeded population (new session)."),
+              policy: str = typer.Option("fixed"), alpha: float = typer.Option(2.0), adverb: str = typer.Option("table"),
+              body_part: bool = typer.Option(False, "--body-part"), policy_file: Optional[Path] = typer.Option(None),
+              as_json: bool = typer.Option(False, "--json")):
+    """Coach a simulated learner for a number of trials (a simulation, not a person)."""
+    with _client() as c:
+        if session is None:
+            if target is None:
+                _fail("a new session needs --target")
+            session = f"s{uuid.uuid4().hex[:8]}"
+            c.request("coach", "start", {"session": session, **_target_request(target, None), "learner": learner,
+                                         "index": index, "policy": _policy(policy, alpha, adverb, body_part, policy_file)})
+        r = c.request("coach", "run", {"session": session, "trials": trials}, timeout=60 + 30 * trials)
+    typer.echo(json.dumps(_jsonable(r)) if as_json else _print_session(r))
+
+
+@coach_app.command("list")
+def coach_list():
+    """Every coaching session."""
+    with _client() as c:
+        for s in c.request("coach", "list")["sessions"]:
+            typer.echo(f"{s['session']:<24} {s['trials']} trial(s)  {s.get('learner') or 'person'}")
