@@ -159,6 +159,13 @@ def chapter3_services(tmp_path_factory):
                                          "dialogue": "services.dialogue", "estimator": "services.estimator"})
 
 
+@pytest.fixture(scope="module")
+def coach_services(tmp_path_factory):
+    """Router, pss, simulator and coach as real processes; yields (env, Processes)."""
+    yield from _serve(tmp_path_factory, {"pss": "services.pss", "simulator": "services.simulator",
+                                         "coach": "services.coach"})
+
+
 @pytest.fixture
 def client_of():
     """``client_of(env)``: a Client of that cluster, closed at the end of the test."""

@@ -1,0 +1,103 @@
+"""Coaching in the library: policies, residual and body-part emphasis, a local session."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from shared.agents.learner import LearnerParams, SimulatedLearner, population
+from shared.coaching.local import LocalCoachPorts
+from shared.coaching.parts import error_shares, partial_emphasis
+from shared.coaching.policies import (Calibration, Policy, fit_emu1, fit_emu1_corrected, fit_nb, predict_nb,
+                                      projection_distance, simulated_coach_demonstrations, table_adverb)
+from shared.coaching.session import Session, check_attempts, ratio, residual_emphasis, start, trial
+from shared.errors import BadInput
+
+
+@pytest.fixture(scope="module")
+def squat(bundled):
+    from shared.io import load_clip
+
+    return load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc").resample(30)
+
+
+def test_table_4_1_and_fixed_policies():
+    assert [table_adverb(a) for a in (0.0, 1.5, 2.0, 2.5, 1.2, 3.0)] == [None, "a little more", "more", "much more",
+                                                                         "a little more", "much more"]
+    assert Policy("fixed", alpha=0.0, adverb=None).choose(10.0) == (0.0, None)  # case 1
+    assert Policy("fixed", alpha=0.0, adverb="more like this").choose(10.0) == (0.0, "more like this")  # case 2
+    assert Policy("fixed", alpha=2.0, adverb="table").choose(10.0) == (2.0, "more")  # case 4
+    with pytest.raises(BadInput):
+        Policy("fixed", alpha=9.0).check()
+    with pytest.raises(BadInput):
+        Policy("nb").check()
+
+
+def test_aeu_models_use_an_explicit_calibration():
+    cal = Calibration.fit([10.0, 20.0, 30.0])
+    assert cal.thesis_units(20.0) == pytest.approx(147.5)
+    aeu1 = Policy("aeu1", calibration=cal.scale)
+    aeu2 = Policy("aeu2", calibration=cal.scale)
+    # thesis units 130 / 165 (AEU-1) and 160 / 180 (AEU-2), table 5.2
+    assert [aeu1.choose(d)[1] for d in (17.0, 20.0, 23.0)] == ["a little more", "more", "much more"]
+    assert [aeu2.choose(d)[1] for d in (20.0, 23.0, 25.0)] == ["a little more", "more", "much more"]
+    with pytest.raises(BadInput):
+        Calibration.fit([])
+
+
+def test_emu1_and_its_correction_recover_a_coachs_alpha():
+    d_p = np.array([1.0, 2.0, 3.0, 4.0])
+    assert fit_emu1(d_p, 1.8 * d_p) == pytest.approx(2.8)  # eq. 5.5: 1 + slope
+    assert projection_distance([0, 0], [-1, 0], [2, 5]) == pytest.approx(2.0)  # only the part along x_p -> x_t
+    corrected, plain = fit_emu1_corrected(simulated_coach_demonstrations(200, alpha=1.8, off_line=0.5, seed=3))
+    assert abs(corrected - 2.8) < abs(plain - 2.8)  # off-line errors inflate d_s, not d_h
+    assert corrected == pytest.approx(2.8, abs=0.15)
+
+
+def test_naive_bayes_adverbs_match_scikit_learn():
+    from sklearn.naive_bayes import GaussianNB
+
+    rng = np.random.default_rng(0)
+    x = np.vstack([rng.normal([10, 1], 1, (20, 2)), rng.normal([20, 2], 1, (20, 2)), rng.normal([30, 3], 1, (20, 2))])
+    y = ["a little more"] * 20 + ["more"] * 20 + ["much more"] * 20
+    params = fit_nb(x, y)
+    ref = GaussianNB().fit(x, y)
+    probe = rng.uniform([5, 0], [35, 4], (50, 2))
+    assert [predict_nb(params, *p) for p in probe] == list(ref.predict(probe))
+    assert Policy("nb", nb=params).check().choose(30.0, 3.0) == (2.0, "much more")
+
+
+def test_residual_emphasis_is_the_target_at_alpha_zero_and_parts_are_ranked(squat):
+    ports = LocalCoachPorts()
+    ports.build("s", squat)
+    g_t = ports.generate("s", {"target": 1.0})
+    assert np.allclose(residual_emphasis(squat, g_t, g_t).data, squat.data)
+    learner = SimulatedLearner("l", squat, LearnerParams(deviation={"legs": {"scale": 0.5, "offset": 0.0}}))
+    attempts = learner.imitate(squat)
+    shares = error_shares(squat, attempts)
+    assert max(shares, key=shares.get) == "legs" and sum(shares.values()) == pytest.approx(1.0)
+    part = partial_emphasis(squat, attempts[0], "legs")
+    arm = squat.channels.index("rhumerus.rx")
+    leg = squat.channels.index("rfemur.rx")
+    assert np.array_equal(part.data[:, arm], squat.data[:, arm]) and not np.array_equal(part.data[:, leg], squat.data[:, leg])
+
+
+def test_a_local_session_coaches_and_refuses_bad_attempts(squat):
+    ports = LocalCoachPorts(squat.skeleton)
+    s = Session("t", squat, Policy("fixed", alpha=2.0, adverb="table"))
+    start(s, ports)
+    learner = SimulatedLearner("l", squat, population(4, 0)[3])
+    demo, adverb = squat, None
+    for _ in range(4):
+        rec, demo = trial(s, learner.imitate(demo, adverb), ports)
+        adverb = rec.adverb
+        assert rec.alpha == 2.0 and 0.0 <= rec.alpha_shown <= 2.0 and rec.feasibility
+        assert demo.channels == squat.channels
+    r = ratio([s.d()])
+    assert r[0] == 1.0 and r[-1] < 0.8  # the learner improved
+    with pytest.raises(BadInput, match="lacks"):
+        check_attempts(s, [squat.with_data(squat.data[:, :10], channels=squat.channels[:10],
+                                           groups={"motion": squat.channels[:10]})])
+    with pytest.raises(BadInput, match="too short"):
+        check_attempts(s, [squat.frames(0, 5)])
+    assert len(s.trials) == 4
