@@ -39,6 +39,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.bus --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.sim --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.ch3 --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.coach --hdm05 $(HDM05) --out bench/results
 
 reproduce: $(STAMP)
 	$(BIN)/mirrorcoach reproduce ch3 --out reports

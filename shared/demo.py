@@ -10,6 +10,9 @@ Starts the local cluster if it is not running (``mirrorcoach up``: router + serv
    (eq. 2.6, 2.8);
 3. generates an interpolated motion (half squat, half kick) and an extrapolated, emphatic one
    (eq. 4.3 with alpha = 2: a squat pushed away from another actor's squat) to BVH;
+4. coaches a simulated learner on a real squat for 4 trials (coach service), printing each
+   trial's alpha, adverb and d_p;
+5. runs a short estimator conversation with a simulated other (chapter 3);
 
 says what it did, and stops the cluster again if it started it (``--keep-running`` leaves it up).
 """
@@ -79,8 +82,41 @@ def run(client: Client, data: Path, out: Path) -> None:
     d_tp = client.request("pss", "distance", {"space": "demo", "a": squat, "b": learner})["distance"]
     print(f"generated the emphatic motion x_t + {alpha:g} (x_t - x_p) (eq. 4.3), target {squat}, learner {learner} -> "
           f"{out / 'emphatic_squat.bvh'} (distance to the learner {d[learner]:.1f} > the target's {d_tp:.1f})")
-    print(f"done in {time.perf_counter() - t0:.1f} s. BVH files open in Blender or any BVH viewer. "
+    coach_learner(client, next(c for c in train if c.label == "squat1Reps"), out)
+    estimate_other(client)
+    print(f"done in {time.perf_counter() - t0:.1f} s. Outputs: BVH files in {out} (open in Blender or any BVH viewer); "
+          f"the services' state (spaces, sessions, transcripts) in {Settings().home / 'data'}. "
           "Data: HDM05 (CC BY-SA 3.0), see data/hdm05/SOURCE.md.")
+
+
+def coach_learner(client: Client, target, out: Path, trials: int = 4) -> None:
+    """Coach a simulated learner (a simulation, not a person) on a real squat for 4 trials."""
+    print(f"coaching simulated learner 'demo-learner' on {target.name} for {trials} trials "
+          "(alpha 2 with Table 4.1's adverbs; the simulator checks every emphatic motion):")
+    client.request("coach", "start", {"session": "demo", "target": clip_to_wire(target), "learner": "demo-learner",
+                                      "index": 3, "policy": {"kind": "fixed", "alpha": 2.0, "adverb": "table"},
+                                      "replace": True})
+    info = client.request("coach", "run", {"session": "demo", "trials": trials})
+    for t, r in zip(info["trials"], info["R"]):
+        note = f" (lowered from {t['alpha']:g}: {t['feasibility']})" if t["alpha_reduced"] else ""
+        print(f"  trial {t['number']}: d_p {t['d_p']:6.1f}  R {r:.2f}  alpha {t['alpha_shown']:g}  "
+              f"\"{t['adverb'] or 'no adverb'}\"{note}")
+    last = client.request("coach", "attempt", {"session": "demo", "clips": [clip_to_wire(target)]})
+    save_clip(clip_from_wire(last["emphatic"]), out / "coach_trial5_target_as_attempt.bvh")
+
+
+def estimate_other(client: Client) -> None:
+    """A short chapter-3 conversation: the self (2.4 kg) learns what a 4.8 kg other feels."""
+    from shared.estimation.motions import unknown_motions
+
+    client.request("simulator", "other_create", {"other": "demo-other", "params": {"mass": 4.8, "d": 6, "g_max": 0.6},
+                                                 "replace": True})
+    client.request("estimator", "start", {"estimate": "demo", "other": "demo-other", "d": 6, "replace": True})
+    r = client.request("estimator", "converse", {"estimate": "demo", "sets": 2})
+    m = unknown_motions(1)[0]
+    e = client.request("estimator", "estimate", {"estimate": "demo", "clip": clip_to_wire(m), "method": "interval"})
+    print(f"estimator: 2 conversation sets with a simulated other; its torques are {r['info']['scale']:.2f} x the "
+          f"self's; an unknown motion would feel '{e['word']}' to it. Transcript: `mirrorcoach dialogue transcript demo`.")
 
 
 def main(argv=None) -> int:

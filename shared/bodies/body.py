@@ -90,9 +90,11 @@ def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
         raise BadInput(f"a motion needs at least 5 frames to differentiate, got {n}")
     w = smooth_window(clip.fps, n)
     q = np.tile(m.qpos0, (n, 1))
-    for d in body.dofs:
-        if d.channel in clip.channels:
-            q[:, d.qpos] = np.radians(savgol_filter(clip.column(d.channel), w, 3, mode="interp"))
+    driven = [d for d in body.dofs if d.channel in clip.channels]
+    if driven:  # one filter call for every channel: the edge fits are shared
+        angles = savgol_filter(clip.select([d.channel for d in driven]), w, 3, axis=0, mode="interp")
+        for k, d in enumerate(driven):
+            q[:, d.qpos] = np.radians(angles[:, k])
     if body.root is not None:
         sk = body.skeleton
         r = body.root
@@ -100,7 +102,9 @@ def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
         trans = savgol_filter(trans, w, 3, axis=0, mode="interp")
         root_joint = sk.joints[sk.index(r)]
         q[:, 0:3] = (root_joint.offset + trans) * sk.unit_m
-        values = {c: savgol_filter(clip.column(c), w, 3, mode="interp") for c in clip.channels if c.startswith(f"{r}.r")}
+        rot = [c for c in clip.channels if c.startswith(f"{r}.r")]
+        smooth = savgol_filter(clip.select(rot), w, 3, axis=0, mode="interp") if rot else np.zeros((n, 0))
+        values = {c: smooth[:, k] for k, c in enumerate(rot)}
         glob = sk.local_rotations(values, n, joints=[root_joint])[0]
         from scipy.spatial.transform import Rotation
 

@@ -16,8 +16,8 @@ HMM distance); the policy picks alpha and the adverb; the emphatic motion is gen
 ``-alpha`` on the attempt); optionally only the body part with the largest share of the error
 is emphasised (by default the emphasis is applied to the real target, see
 :func:`residual_emphasis`; ``mode="thesis"`` shows ``F_gen(x_s)`` itself); the simulator checks it (no new joint-limit violations against the target's own,
-balance no worse than the target's, within tolerances: see ``_worse``) and alpha is lowered in
-steps of 0.25 until it passes.
+balance no worse than the target's, within tolerances: see ``_worse``) and alpha is lowered to
+the largest value of the grid 0.25, 0.5, ... that passes (found by bisection).
 """
 
 from __future__ import annotations
@@ -184,28 +184,46 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
     alpha, adverb = session.policy.choose(d_p, d_cop, session.learner)
     shares = error_shares(session.target, attempts)
     part = max(shares, key=shares.get) if session.policy.body_part else None
-    shown, reason, reduced = alpha, "", False
-    while True:
-        if shown <= 0:
-            demo = session.target
-            reason = reason or "no emphasis"
-            break
-        demo = ports.generate(session.space, {"target": 1.0 + shown, name: -shown})
-        if session.mode == "residual":
-            demo = residual_emphasis(session.target, demo, ports.generate(session.space, {"target": 1.0}))
+    g_target = ports.generate(session.space, {"target": 1.0}) if session.mode == "residual" and alpha > 0 else None
+
+    def show(a: float) -> Clip:
+        if a <= 0:
+            return session.target
+        demo = ports.generate(session.space, {"target": 1.0 + a, name: -a})
+        if g_target is not None:
+            demo = residual_emphasis(session.target, demo, g_target)
         if part is not None:
             demo = partial_emphasis(session.target.resample(demo.fps), demo, part)
-        if not session.check:
-            reason = "not checked"
-            break
+        return demo
+
+    def why_not(demo: Clip) -> str | None:
         report, _ = ports.perform(demo)
-        why = _worse(report, session.target_report, session.target) if session.target_report else None
-        if why is None:
-            reason = reason or "feasible"
-            break
-        reason = f"alpha {shown:g} infeasible ({why}); lowered"
-        shown = round(max(0.0, shown - ALPHA_STEP), 6)
-        reduced = True
+        return _worse(report, session.target_report, session.target) if session.target_report else None
+
+    shown, reduced = alpha, False
+    demo = show(alpha)
+    if alpha <= 0:
+        reason = "no emphasis"
+    elif not session.check:
+        reason = "not checked"
+    else:
+        first = why_not(demo)
+        reason = "feasible"
+        if first is not None:
+            # the largest feasible alpha on the grid 0.25, 0.5, ... below the policy's, by
+            # bisection (feasibility falls with alpha): log2 checks instead of one per step
+            reduced = True
+            grid = [round(ALPHA_STEP * k, 6) for k in range(1, int(np.ceil(alpha / ALPHA_STEP - 1e-9)))]
+            lo, hi, best = 0, len(grid) - 1, None
+            while lo <= hi:
+                mid = (lo + hi) // 2
+                candidate = show(grid[mid])
+                if why_not(candidate) is None:
+                    best, lo = (grid[mid], candidate), mid + 1
+                else:
+                    hi = mid - 1
+            shown, demo = best if best is not None else (0.0, session.target)
+            reason = f"alpha {alpha:g} infeasible ({first}); lowered to {shown:g}"
     if reduced and adverb is not None and session.policy.adverb == "table":
         adverb = table_adverb(shown)
     pts = ports.points(session.space)
