@@ -42,10 +42,10 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.coach --hdm05 $(HDM05) --out bench/results
 
 reproduce: $(STAMP)
-	$(BIN)/mirrorcoach reproduce ch3 --out reports
+	$(BIN)/mirrorcoach reproduce ch3 ch4 ch5 ch6 --out reports
 
-dashboard:
-	@echo "'make $@' arrives with the dashboard (issue 7)."; exit 2
+dashboard: $(STAMP)
+	$(BIN)/mirrorcoach dashboard
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -119,4 +119,10 @@ EVENTS = {"trial": Message("coach.event.trial", Map({
     "session": SESSION, "trial": F(Int(1)), "d_p": F(Float(0.0)), "alpha": F(Float(0.0)),
     "adverb": F(Str(max_len=32), required=False), "x_t": F(List(Float(), max_len=20)),
     "x_p": F(List(Float(), max_len=20)), "x_s": F(List(Float(), max_len=20)), "learner": F(Str(max_len=64), required=False),
-}), doc="after every trial")}
+    "attempt": F(CLIP, "the attempt's first repetition (for the dashboard)", required=False),
+    "emphatic": F(CLIP, "the motion shown next (for the dashboard)", required=False),
+}), doc="after every trial"),
+    "session": Message("coach.event.session", Map({
+        "session": SESSION, "learner": F(Str(max_len=64), required=False),
+        "target": F(CLIP, "the target, with its skeleton (for the dashboard)"),
+    }), doc="when a session starts")}

@@ -46,7 +46,8 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     assert st.returncode == 0, st.stderr
     assert {r["name"]: r["alive"] for r in json.loads(st.stdout)} == {"supervisor": True, "router": True, "pss": True,
                                                                       "simulator": True, "dialogue": True,
-                                                                      "estimator": True}
+                                                                      "estimator": True, "coach": True,
+                                                                      "observer": True}
 
     amc = bundled / "amc"
     train = [p for p in sorted(amc.glob("*/*.amc")) if "_dg_" not in p.name]
@@ -136,6 +137,65 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
     for fig in ("fig3_6.png", "fig3_7.png", "fig3_8.png", "fig3_14_15.png"):
         assert fig in report and (tmp_path / "rep/ch3" / fig).stat().st_size > 10_000
     assert "simulated agents" in report and "| 6 |" in report
+
+
+def test_coaching_from_the_cli(cluster, bundled, tmp_path):
+    env = cluster
+    squat = bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
+    mine = sorted((bundled / "amc/squat1Reps").glob("HDM_bk_*.amc"))
+    r = cli(env, "coach", "run", "--learner", "sim1", "--target", squat, "--trials", "4", "--index", "2")
+    assert r.returncode == 0 and "trial 4:" in r.stdout, r.stdout + r.stderr
+    r = cli(env, "coach", "start", "--target", squat, "--person")
+    assert r.returncode == 0, r.stderr
+    session = r.stdout.strip()
+    out = tmp_path / "emph"
+    r = cli(env, "coach", "attempt", session, *mine, "--json", "--out", out)
+    assert r.returncode == 0, r.stderr
+    j = json.loads(r.stdout)
+    assert {"alpha", "adverb", "d_p", "file"} <= set(j) and j["d_p"] > 0
+    from shared.io import load_clip
+
+    assert load_clip(j["file"]).n_frames > 10
+    r = cli(env, "coach", "show", session)
+    assert r.returncode == 0 and "trial 1: d_p" in r.stdout
+    r = cli(env, "coach", "attempt", session, bundled / "amc/squat1Reps", "--out", out)  # a folder is not a clip
+    assert r.returncode == 2 and r.stderr.startswith("error: ")
+
+
+def test_the_dashboard_recording_holds_what_the_cluster_did(cluster, bundled, tmp_path):
+    from shared.bus.client import Client
+    from shared.observe.snapshot import read
+
+    env = cluster
+    s = settings_of(env)
+    squat = bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
+    assert cli(env, "coach", "run", "--learner", "obs", "--target", squat, "--trials", "3", "--session", "watched",
+               ).returncode == 2  # --session continues an existing session only
+    r = cli(env, "coach", "start", "--target", squat, "--learner", "obs", "--session", "watched")
+    assert r.returncode == 0, r.stderr
+    assert cli(env, "coach", "run", "--learner", "obs", "--session", "watched", "--trials", "3").returncode == 0
+    with Client(s) as c:
+        c.request("simulator", "other_create", {"other": "o", "params": {"d": 6, "g_max": 0.6}})
+        c.request("estimator", "start", {"estimate": "watch", "other": "o", "d": 6})
+        c.request("estimator", "converse", {"estimate": "watch", "sets": 2})
+        lines = len(c.request("dialogue", "transcript", {"dialogue": "watch"})["lines"])
+    assert cli(env, "down").returncode == 0  # the observer flushes its recording on SIGTERM
+    rec = s.home / "recordings" / "latest.rrd"
+    data = read(rec)
+    paths = set(data)
+    for p in ("/coach/watched/d_p", "/coach/watched/alpha", "/space/coach-watched/path", "/space/coach-watched/emphatic",
+              "/skeletons/watched/target", "/skeletons/watched/attempt", "/skeletons/watched/emphatic",
+              "/curves/watched/rfemur.rx/emphatic", "/estimator/watch/scale", "/dialogue/watch", "/space/est-watch/proto_symbols"):
+        assert p in paths, p
+    assert [r["trial"] for r in data["/coach/watched/d_p"]] == [1, 2, 3]
+    path = data["/space/coach-watched/path"][-1]["LineStrips3D:strips"][0]
+    assert len(path) == 3  # the attempts' path across the trials
+    assert [r["set"] for r in data["/estimator/watch/scale"]] == [1, 2]
+    assert abs(data["/estimator/watch/scale"][-1]["Scalars:scalars"][0] - 2.0) < 0.1
+    assert len(data["/dialogue/watch"]) == lines
+    assert any(p.startswith("/latency/coach/") for p in paths)
+    r = cli(env, "dashboard", "--snapshot", tmp_path / "snap")
+    assert r.returncode == 0 and (tmp_path / "snap/dashboard_snapshot.png").stat().st_size > 20_000
 
 
 def test_cli_says_when_the_cluster_is_not_running(tmp_path, bundled):

@@ -147,7 +147,8 @@ def make_service(settings: Settings | None = None) -> Service:
         save(s)
         svc.publish("trial", {"session": s.name, "trial": rec.number, "d_p": rec.d_p, "alpha": rec.alpha_shown,
                               "adverb": rec.adverb, "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
-                              "learner": s.learner})
+                              "learner": s.learner, "attempt": clip_to_wire(attempts[0], False),
+                              "emphatic": clip_to_wire(demo, False)})
         return rec, demo
 
     @svc.handler("start")
@@ -183,6 +184,7 @@ def make_service(settings: Settings | None = None) -> Service:
                     raise BadInput(f"cannot create learner {s.learner!r}: {e.message}") from None
             start(s, ports_of(s))
             save(s)
+        svc.publish("session", {"session": name, "learner": s.learner, "target": clip_to_wire(target)})
         return info(s)
 
     @svc.handler("attempt")

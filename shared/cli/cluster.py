@@ -252,3 +252,35 @@ def schemas(service: Optional[str] = typer.Argument(None, help="Only this servic
         from schemas.common import ERROR
 
         typer.echo("# every error (reply_err)\n" + ERROR.describe())
+
+
+@app.command("dashboard")
+def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file (default: the latest recording)."),
+              snapshot: Optional[Path] = typer.Option(None, help="Instead of opening the viewer, render PNG snapshots "
+                                                                   "of the recording into this folder.")):
+    """Open the rerun viewer on the cluster's recording, or say where it is and how to open it."""
+    import os
+    import shutil
+    import subprocess
+
+    from shared.bus.config import Settings
+
+    path = recording or (Settings().home / "recordings" / "latest.rrd")
+    if not path.exists():
+        _fail(f"no recording at {path}: run `make demo` (or `make up` and use the cluster) first")
+    path = path.resolve()
+    if snapshot is not None:
+        from shared.observe.snapshot import render
+
+        for p in render(path, snapshot):
+            typer.echo(f"wrote {p}")
+        return
+    viewer = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
+    if (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) and Path(viewer).exists():
+        subprocess.run([viewer, "analytics", "disable"], capture_output=True, timeout=60)
+        typer.echo(f"opening {path} in the rerun viewer (analytics disabled)")
+        subprocess.Popen([viewer, str(path)], start_new_session=True)
+        return
+    typer.echo(f"no display here. The recording is {path}\n"
+               f"Open it where there is one: `pip install rerun-sdk==0.41.0 && rerun analytics disable && rerun {path.name}`\n"
+               f"or render snapshots here: `mirrorcoach dashboard --snapshot docs/dashboard`")
