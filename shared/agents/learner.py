@@ -6,7 +6,8 @@ below is fitted to human data.
 
 State. A learner holds its *motor memory* ``m``: its current version of the target motion,
 as joint-angle trajectories of the target's motion channels on a normalised time axis of
-``N_PHASE`` samples. It starts at the target plus a *personal deviation*: on one or two body
+``N_PHASE`` samples. The body's orientation in the room (the root's rotation channels) is not
+imitated: it follows the target. It starts at the target plus a *personal deviation*: on one or two body
 parts (arms, legs, trunk) it moves with a reduced amplitude ``s`` (0.5-0.8 of the target's
 range about its mean) and a constant offset ``o`` (up to 8 degrees).
 
@@ -137,6 +138,11 @@ class SimulatedLearner:
         self.channels = target.group("motion") or list(target.channels)
         self.target_phase = to_phase(target, self.channels)
         self._rotation_mask = np.array([0.0 if c.split(".")[-1].startswith("t") else 1.0 for c in self.channels])
+        # the body's orientation in the room (the root's rotation channels) is not part of the
+        # form a learner copies: it follows the target, and Euler triples of a root near
+        # gimbal lock would otherwise read as huge differences
+        root = target.skeleton.root.name if target.skeleton is not None else None
+        self._imitated = np.array([0.0 if root and c.startswith(f"{root}.r") else 1.0 for c in self.channels])
         self.memory = self._initial() if memory is None else np.asarray(memory, float)
         self.trials = trials
         self.reference = None if reference is None else np.asarray(reference, float)
@@ -146,7 +152,7 @@ class SimulatedLearner:
         mean = m.mean(axis=0)
         for c, ch in enumerate(self.channels):
             dev = self.params.deviation.get(body_part(ch))
-            if dev is not None and not ch.split(".")[-1].startswith("t"):  # rotations only
+            if dev is not None and not ch.split(".")[-1].startswith("t") and self._imitated[c]:  # joint rotations only
                 m[:, c] = mean[c] + dev["scale"] * (m[:, c] - mean[c]) + dev["offset"]
         return m
 
@@ -166,9 +172,9 @@ class SimulatedLearner:
         demo = to_phase(demonstration, self.channels)
         if self.reference is None:  # the first motion shown is taken to be the target
             self.reference = demo
-        diff = self.perceive(demo - self.memory)
-        own = float(np.sqrt(np.mean((self.reference - self.memory) ** 2)))
-        shown = float(np.sqrt(np.mean((demo - self.reference) ** 2)))
+        diff = self.perceive((demo - self.memory) * self._imitated)
+        own = float(np.sqrt(np.mean(((self.reference - self.memory) * self._imitated) ** 2)))
+        shown = float(np.sqrt(np.mean(((demo - self.reference) * self._imitated) ** 2)))
         exaggeration = min(shown / max(own, 1e-9), 5.0)
         a = 1.0 + p.adverb_sensitivity * (ADVERB_FACTOR[adverb] - 1.0)
         gain = min(p.gain * a * (1.0 + p.overshoot * exaggeration), 1.0)  # never past what it saw
@@ -194,7 +200,7 @@ class SimulatedLearner:
             smooth = np.column_stack([np.convolve(white[:, c], kernel, mode="valid") for c in range(base.shape[1])])
             data = t.data[np.linspace(0, t.n_frames - 1, n).round().astype(int)].copy()
             idx = [t.channels.index(c) for c in self.channels]
-            noise = p.noise * smooth[:n] * self._rotation_mask  # motor noise in degrees: joint angles only
+            noise = p.noise * smooth[:n] * self._rotation_mask * self._imitated  # motor noise: joint angles only
             data[:, idx] = base + noise
             out.append(Clip(data, list(t.channels), t.fps, t.skeleton, {g: list(v) for g, v in t.groups.items()},
                             name=f"{self.name}_trial{self.trials}_rep{r + 1}", label=t.label))
@@ -203,7 +209,8 @@ class SimulatedLearner:
     def error(self) -> float:
         """RMS difference (degrees) between the motor memory and the target: the truth a
         coach never sees, for evaluation."""
-        return float(np.sqrt(np.mean((self.memory - self.target_phase) ** 2)))
+        m = self._imitated.astype(bool)
+        return float(np.sqrt(np.mean((self.memory[:, m] - self.target_phase[:, m]) ** 2)))
 
     def reveal(self) -> dict:
         return {"name": self.name, "trials": self.trials, "error_deg": self.error(), **asdict(self.params)}

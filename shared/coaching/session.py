@@ -144,22 +144,58 @@ def _wrap(deg: np.ndarray) -> np.ndarray:
     return (deg + 180.0) % 360.0 - 180.0
 
 
+def _root_rotation_residual(target: Clip, gs: np.ndarray, gt: np.ndarray, chans: list[str], seq: str) -> dict:
+    """The root's emphasis as a rotation, not as Euler differences (a root Euler triple can
+    flip to its twin ``(a + 180, 180 - b, c + 180)``): ``M = M_target M_gt^-1 M_gs``, then the
+    Euler triple of ``M`` nearest to the target's, frame by frame."""
+    from scipy.spatial.transform import Rotation
+
+    axes = [a for a in seq.lower() if f"r{a}" in [c.split(".")[-1] for c in chans]]
+    order = [next(i for i, c in enumerate(chans) if c.endswith(f".r{a}")) for a in axes]
+    seq_used = "".join(axes).upper() if seq.isupper() else "".join(axes)
+    t_ang = np.stack([target.column(chans[i]) for i in order], axis=1)
+    r = (Rotation.from_euler(seq_used, t_ang, degrees=True)
+         * Rotation.from_euler(seq_used, gt[:, order], degrees=True).inv()
+         * Rotation.from_euler(seq_used, gs[:, order], degrees=True))
+    e = r.as_euler(seq_used, degrees=True)
+    if len(axes) == 3:  # the twin solution of a Tait-Bryan triple; keep the nearer
+        twin = np.column_stack([e[:, 0] + 180.0, 180.0 - e[:, 1], e[:, 2] + 180.0])
+        near = lambda x: np.abs(_wrap(x - t_ang)).sum(axis=1)  # noqa: E731
+        e = np.where((near(twin) < near(e))[:, None], twin, e)
+    e = t_ang + _wrap(e - t_ang)  # on the target's branch
+    return {chans[i]: e[:, k] for k, i in enumerate(order)}
+
+
 def residual_emphasis(target: Clip, generated_s: Clip, generated_t: Clip) -> Clip:
     """``theta_t + (F_gen(x_s) - F_gen(x_t))`` on the target's frames (beyond the thesis).
 
     ``F_gen`` returns motions in a canonical frame (heading 0 and the start at the origin, the
     features being turn-invariant) with generation error; the difference of two generations
     from the same space keeps the emphasis and cancels both, so alpha = 0 shows the target
-    exactly. Angle differences are wrapped to (-180, 180]."""
+    exactly. Angle differences are wrapped to (-180, 180]; the root's orientation is combined
+    as a rotation (see ``_root_rotation_residual``)."""
     grid = np.linspace(0, 1, target.n_frames)
     out = target.data.copy()
-    for c in target.group("motion") or target.channels:
-        if c not in generated_s.channels or c not in generated_t.channels:
+    sk = target.skeleton
+    root = sk.root.name if sk is not None else None
+    chans = [c for c in (target.group("motion") or target.channels)
+             if c in generated_s.channels and c in generated_t.channels]
+
+    def resampled(clip, c):
+        return np.interp(grid, np.linspace(0, 1, clip.n_frames), clip.column(c))
+
+    root_rot = [c for c in chans if root is not None and c.startswith(f"{root}.r")]
+    for c in chans:
+        if c in root_rot:
             continue
-        s = np.interp(grid, np.linspace(0, 1, generated_s.n_frames), generated_s.column(c))
-        t = np.interp(grid, np.linspace(0, 1, generated_t.n_frames), generated_t.column(c))
+        s, t = resampled(generated_s, c), resampled(generated_t, c)
         diff = s - t if c.split(".")[-1].startswith("t") else _wrap(s - t)
         out[:, target.channels.index(c)] += diff
+    if root_rot:
+        gs = np.column_stack([resampled(generated_s, c) for c in root_rot])
+        gt = np.column_stack([resampled(generated_t, c) for c in root_rot])
+        for c, v in _root_rotation_residual(target, gs, gt, root_rot, sk.root.euler or "xyz").items():
+            out[:, target.channels.index(c)] = v
     return target.with_data(out, name=generated_s.name)
 
 
