@@ -29,6 +29,12 @@ class NotFound(MirrorcoachError):
     code = "not_found"
 
 
+class Conflict(MirrorcoachError):
+    """The thing is busy with another request, or already exists."""
+
+    code = "conflict"
+
+
 class Unavailable(MirrorcoachError):
     """Something needed is not running or did not answer in time."""
 

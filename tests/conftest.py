@@ -126,6 +126,40 @@ class Processes:
                     p.wait()
 
 
+def kill_during(env: dict, procs: "Processes", service: str, module: str, request, ready, timeout: float = 120.0):
+    """Run ``request(client)`` in a thread; once ``ready()`` is true, SIGKILL ``service`` and
+    start it again. Returns the exception the request ended with (it must end, not hang)."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from shared.bus.client import Client
+
+    errors = []
+
+    def run():
+        try:
+            with Client(settings_of(env)) as c:
+                request(c)
+        except Exception as e:  # the service is killed under it
+            errors.append(e)
+
+    t = threading.Thread(target=run)
+    t.start()
+    deadline = time.monotonic() + timeout
+    while not ready() and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert ready(), f"{service} never got far enough to be killed"
+    os.kill(procs.procs[service].pid, signal.SIGKILL)
+    procs.procs[service].wait()
+    t.join(timeout=timeout)
+    assert not t.is_alive(), f"the request to the killed {service} hung"
+    procs.start(service, module)
+    procs.wait_alive({service})
+    return errors[0] if errors else None
+
+
 def _serve(tmp_path_factory, services: dict[str, str], **env_extra):
     env = cluster_env(tmp_path_factory.mktemp("home"), **env_extra)
     procs = Processes(env)

@@ -3,9 +3,6 @@ a killed estimator (router, pss, simulator, dialogue, estimator, each its own pr
 
 from __future__ import annotations
 
-import os
-import signal
-import threading
 import time
 
 import pytest
@@ -16,6 +13,7 @@ from schemas.common import ERROR, clip_to_wire
 from shared.bus.client import RemoteError
 from shared.codec import pack
 from shared.estimation.motions import ALL, unknown_motions
+from tests.conftest import kill_during
 
 
 def _ok(endpoint, reply):
@@ -133,31 +131,11 @@ def test_killing_the_estimator_between_sets_loses_no_completed_set(chapter3_serv
     done = []
     c.subscribe("events/estimator/progress", lambda k, m: done.append(m["set"]) if m["estimate"] == "kk" else None)
     time.sleep(0.3)
-    errors = []
-
-    def converse():
-        from shared.bus.client import Client
-
-        from tests.conftest import settings_of
-
-        try:
-            with Client(settings_of(env)) as c2:
-                c2.request("estimator", "converse", {"estimate": "kk", "sets": 40}, timeout=300)
-        except Exception as e:  # the estimator is killed under it: an error, not a hang
-            errors.append(e)
-
-    t = threading.Thread(target=converse)
-    t.start()
-    deadline = time.monotonic() + 60
-    while len(done) < 2 and time.monotonic() < deadline:
-        time.sleep(0.005)
-    os.kill(procs.procs["estimator"].pid, signal.SIGKILL)
-    procs.procs["estimator"].wait()
-    t.join(timeout=120)
-    assert not t.is_alive() and errors and getattr(errors[0], "code", "") == "unavailable"
+    err = kill_during(env, procs, "estimator", "services.estimator",
+                      lambda c2: c2.request("estimator", "converse", {"estimate": "kk", "sets": 40}, timeout=300),
+                      lambda: len(done) >= 2)
+    assert getattr(err, "code", "") == "unavailable"
     reported = max(done)
-    procs.start("estimator", "services.estimator")
-    procs.wait_alive({"estimator"})
     info = c.request("estimator", "info", {"estimate": "kk"})
     assert info["sets_done"] >= reported  # every set reported done was saved
     r = c.request("estimator", "converse", {"estimate": "kk", "sets": 1})  # and it goes on from there

@@ -3,9 +3,6 @@ and a crash in the middle of a session."""
 
 from __future__ import annotations
 
-import os
-import signal
-import threading
 import time
 
 import numpy as np
@@ -15,6 +12,7 @@ from schemas import coach as contract
 from schemas.common import ERROR, clip_to_wire
 from shared.bus.client import RemoteError
 from shared.codec import pack
+from tests.conftest import kill_during
 
 
 @pytest.fixture(scope="module")
@@ -117,31 +115,11 @@ def test_killing_the_coach_mid_session_loses_no_completed_trial(coach_services, 
     done = []
     c.subscribe("events/coach/trial", lambda k, m: done.append(m["trial"]) if m["session"] == "k" else None)
     time.sleep(0.3)
-    errors = []
-
-    def run():
-        from shared.bus.client import Client
-
-        from tests.conftest import settings_of
-
-        try:
-            with Client(settings_of(env)) as c2:
-                c2.request("coach", "run", {"session": "k", "trials": 30}, timeout=600)
-        except Exception as e:
-            errors.append(e)
-
-    t = threading.Thread(target=run)
-    t.start()
-    deadline = time.monotonic() + 120
-    while len(done) < 2 and time.monotonic() < deadline:
-        time.sleep(0.01)
-    os.kill(procs.procs["coach"].pid, signal.SIGKILL)
-    procs.procs["coach"].wait()
-    t.join(timeout=120)
-    assert not t.is_alive() and errors and getattr(errors[0], "code", "") == "unavailable"
+    err = kill_during(env, procs, "coach", "services.coach",
+                      lambda c2: c2.request("coach", "run", {"session": "k", "trials": 30}, timeout=600),
+                      lambda: len(done) >= 2)
+    assert getattr(err, "code", "") == "unavailable"
     reported = max(done)
-    procs.start("coach", "services.coach")
-    procs.wait_alive({"coach"})
     state = c.request("coach", "state", {"session": "k"})
     assert len(state["trials"]) >= reported
     r = c.request("coach", "run", {"session": "k", "trials": 1})  # and it goes on

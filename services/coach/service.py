@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import threading
 import uuid
 from dataclasses import asdict
 from pathlib import Path
@@ -22,15 +21,15 @@ from schemas import coach as contract
 from schemas.common import clip_from_wire, clip_to_wire
 from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
-from shared.bus.runtime import Service
+from shared.bus.runtime import OneWriter, Service
 from shared.clip import Clip
 from shared.coaching.policies import (SWEEP, Calibration, Policy, fit_emu1_corrected, fit_nb,
                                       simulated_coach_demonstrations)
 from shared.coaching.session import Session, Trial, check_attempts, session_to_dict, start, trial
-from shared.errors import BadInput, NotFound
+from shared.errors import BadInput, Conflict, NotFound
 from shared.io import load_clip, save_clip
 from shared.io.atomic import atomic_write
-from shared.pss.store import Conflict, check_name
+from shared.pss.store import check_name
 
 
 class BusCoachPorts:
@@ -78,15 +77,8 @@ def make_service(settings: Settings | None = None) -> Service:
     root = settings.data_dir("coach")
     root.mkdir(parents=True, exist_ok=True)
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
-    guard = threading.Lock()
-    busy: set[str] = set()
-    client: dict = {}
-
-    def bus() -> Client:
-        with guard:
-            if "c" not in client:
-                client["c"] = Client(settings, connect_timeout_s=10.0)
-            return client["c"]
+    bus = svc.client
+    writing = OneWriter("session")
 
     def paths(name: str) -> tuple[Path, Path]:
         check_name(name)
@@ -113,20 +105,6 @@ def make_service(settings: Settings | None = None) -> Service:
                     [Trial(**t) for t in d["trials"]], d.get("mode", "residual"), d.get("check", True),
                     d.get("target_report"))
         return s
-
-    class writing:
-        def __init__(self, name):
-            self.name = name
-
-        def __enter__(self):
-            with guard:
-                if self.name in busy:
-                    raise Conflict(f"session {self.name!r} is busy with another request", session=self.name)
-                busy.add(self.name)
-
-        def __exit__(self, *exc):
-            with guard:
-                busy.discard(self.name)
 
     def info(s: Session) -> dict:
         d = s.d()
@@ -282,11 +260,6 @@ def make_service(settings: Settings | None = None) -> Service:
             pass
         return {"session": name, "deleted": True}
 
-    def close_client():
-        if "c" in client:
-            client["c"].close()
-
-    svc.on_stop.append(close_client)
     return svc
 
 

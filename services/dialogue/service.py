@@ -14,7 +14,6 @@ import threading
 import time
 
 from schemas import dialogue as contract
-from shared.bus.client import Client
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
 from shared.errors import BadInput, MirrorcoachError, NotFound
@@ -30,13 +29,7 @@ def make_service(settings: Settings | None = None) -> Service:
     root.mkdir(parents=True, exist_ok=True)
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
     lock = threading.Lock()
-    client: dict = {}
-
-    def bus() -> Client:
-        with lock:
-            if "c" not in client:
-                client["c"] = Client(settings, connect_timeout_s=10.0)
-            return client["c"]
+    bus = svc.client
 
     def write(line: dict) -> dict:
         line = {"t": time.time(), **line}
@@ -103,9 +96,4 @@ def make_service(settings: Settings | None = None) -> Service:
             return {"dialogues": [{"dialogue": p.stem, "lines": sum(1 for _ in open(p))}
                                   for p in sorted(root.glob("*.jsonl"))]}
 
-    def close_client():
-        if "c" in client:
-            client["c"].close()
-
-    svc.on_stop.append(close_client)
     return svc

@@ -15,7 +15,6 @@ answers contradict each other.
 from __future__ import annotations
 
 import copy
-import threading
 from dataclasses import asdict
 
 import numpy as np
@@ -24,13 +23,13 @@ from schemas import estimator as contract
 from schemas.common import clip_from_wire, clip_to_wire
 from shared.bus.client import Client
 from shared.bus.config import Settings
-from shared.bus.runtime import Service
-from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.bus.runtime import OneWriter, Service
+from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
 from shared.estimation.conversation import TORQUE_PREFIX, Language, OtherEstimate, with_torques
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
 from shared.estimation.rules import (THESIS_CANDIDATES, design_thesis_pairs, identify, identify_thesis, pair_pool,
                                      weighted_candidates)
-from shared.pss.store import Conflict, check_name
+from shared.pss.store import check_name
 from shared.symbols import word
 
 
@@ -114,15 +113,8 @@ def make_service(settings: Settings | None = None) -> Service:
     root = settings.data_dir("estimator")
     root.mkdir(parents=True, exist_ok=True)
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
-    guard = threading.Lock()
-    busy: set[str] = set()
-    client: dict = {}
-
-    def bus() -> Client:
-        with guard:
-            if "c" not in client:
-                client["c"] = Client(settings, connect_timeout_s=10.0)
-            return client["c"]
+    bus = svc.client
+    writing = OneWriter("estimate")
 
     def path(name: str):
         return root / f"{check_name(name)}.npz"
@@ -131,22 +123,6 @@ def make_service(settings: Settings | None = None) -> Service:
         if not path(name).exists():
             raise NotFound(f"no estimate named {name!r}", estimate=name)
         return OtherEstimate.load(path(name))
-
-    class writing:
-        """One writer per estimate at a time."""
-
-        def __init__(self, name):
-            self.name = name
-
-        def __enter__(self):
-            with guard:
-                if self.name in busy:
-                    raise Conflict(f"estimate {self.name!r} is busy with another request", estimate=self.name)
-                busy.add(self.name)
-
-        def __exit__(self, *exc):
-            with guard:
-                busy.discard(self.name)
 
     @svc.handler("start")
     def start(req):
@@ -276,9 +252,4 @@ def make_service(settings: Settings | None = None) -> Service:
             pass  # the space may never have been built
         return {"estimate": name, "deleted": True}
 
-    def close_client():
-        if "c" in client:
-            client["c"].close()
-
-    svc.on_stop.append(close_client)
     return svc

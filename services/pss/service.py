@@ -13,9 +13,9 @@ from schemas import pss as contract
 from schemas.common import clip_from_wire, clip_to_wire
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
-from shared.errors import BadInput
+from shared.errors import BadInput, Conflict
 from shared.pss.space import ProtoSymbolSpace
-from shared.pss.store import Conflict, SpaceStore
+from shared.pss.store import SpaceStore
 
 
 def space_info(name: str, space: ProtoSymbolSpace) -> dict:

@@ -19,16 +19,12 @@ import numpy as np
 from shared.agents.learner import LearnerParams, SimulatedLearner
 from shared.agents.other import OtherParams, SimulatedOther
 from shared.clip import Clip
-from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.errors import BadInput, Conflict, NotFound
 from shared.io.atomic import atomic_write
 from shared.skeleton import Skeleton
 from shared.symbols import WORDS
 
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
-
-
-class Conflict(MirrorcoachError):
-    code = "conflict"
 
 
 class PersonOther:

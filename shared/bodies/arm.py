@@ -67,16 +67,10 @@ def inverse_dynamics(model: mujoco.MjModel, q: np.ndarray, fps: float) -> np.nda
         raise BadInput(f"joint trajectory must be T x {model.nq}, got {q.shape}")
     if not np.all(np.isfinite(q)):
         raise BadInput("joint trajectory contains NaN or Inf")
+    from shared.bodies.body import mj_inverse_series
+
     qd, qdd = derivatives(q, fps)
-    data = mujoco.MjData(model)
-    out = np.empty((len(q), model.nv))
-    for t in range(len(q)):
-        data.qpos[:] = q[t]
-        data.qvel[:] = qd[t]
-        data.qacc[:] = qdd[t]
-        mujoco.mj_inverse(model, data)
-        out[t] = data.qfrc_inverse
-    return out
+    return mj_inverse_series(model, q, qd, qdd)[0]
 
 
 def arm_angles(clip: Clip) -> np.ndarray:

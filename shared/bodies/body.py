@@ -130,20 +130,25 @@ def _derivatives(model, q: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarr
     return v, a
 
 
-def inverse_dynamics(body: Body, q: np.ndarray, fps: float):
-    """(qvel, qacc, qfrc_inverse, centre of gravity (T, 3)) for a joint trajectory."""
-    m = body.model
-    v, a = _derivatives(m, q, fps)
-    data = mujoco.MjData(m)
-    tau = np.empty((len(q), m.nv))
+def mj_inverse_series(model, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``mj_inverse`` frame by frame: generalised forces (T, nv) and the centre of gravity (T, 3)."""
+    data = mujoco.MjData(model)
+    tau = np.empty((len(q), model.nv))
     cog = np.empty((len(q), 3))
     for t in range(len(q)):
         data.qpos[:] = q[t]
         data.qvel[:] = v[t]
         data.qacc[:] = a[t]
-        mujoco.mj_inverse(m, data)
+        mujoco.mj_inverse(model, data)
         tau[t] = data.qfrc_inverse
         cog[t] = data.subtree_com[0]
+    return tau, cog
+
+
+def inverse_dynamics(body: Body, q: np.ndarray, fps: float):
+    """(qvel, qacc, qfrc_inverse, centre of gravity (T, 3)) for a joint trajectory."""
+    v, a = _derivatives(body.model, q, fps)
+    tau, cog = mj_inverse_series(body.model, q, v, a)
     return v, a, tau, cog
 
 

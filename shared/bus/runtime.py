@@ -32,7 +32,7 @@ from typing import Callable
 from schemas.base import Endpoint, Message
 from shared.bus.config import Settings, client_config
 from shared.codec import pack, unpack
-from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
 
 log = logging.getLogger("mirrorcoach.service")
 
@@ -75,6 +75,17 @@ class Service:
         self._publishers: dict[str, object] = {}
         self._inflight = 0
         self._inflight_lock = threading.Lock()
+        self._client = None
+        self._client_lock = threading.Lock()
+
+    def client(self):
+        """A client of the cluster for calling other services (opened on first use, closed on stop)."""
+        from shared.bus.client import Client
+
+        with self._client_lock:
+            if self._client is None:
+                self._client = Client(self.settings, connect_timeout_s=10.0)
+            return self._client
 
     # ------------------------------------------------------------------ declaration
     def handler(self, verb: str):
@@ -132,6 +143,10 @@ class Service:
                 hook()
             except Exception:  # a failing hook must not keep the session open
                 log.exception("on_stop hook failed")
+        with self._client_lock:
+            if self._client is not None:
+                self._client.close()
+                self._client = None
         if self._token is not None:
             self._token.undeclare()
         for p in self._publishers.values():
@@ -201,3 +216,30 @@ class Service:
         except BadInput as e:  # our own reply is off-contract: a bug, not the caller's fault
             raise RuntimeError(f"reply does not match {ep.reply.name}: {e.message}") from None
         return pack({"v": ep.reply.version, **out})
+
+
+class OneWriter:
+    """One request at a time per key (a session, an estimate): a second one gets ``conflict``
+    at once instead of waiting or interleaving. ``with writer(key): ...``"""
+
+    def __init__(self, what: str):
+        self.what = what
+        self._busy: set[str] = set()
+        self._lock = threading.Lock()
+
+    def __call__(self, key: str):
+        writer = self
+
+        class _Slot:
+            def __enter__(self):
+                with writer._lock:
+                    if key in writer._busy:
+                        raise Conflict(f"{writer.what} {key!r} is busy with another request; try again when it is done",
+                                       **{writer.what: key})
+                    writer._busy.add(key)
+
+            def __exit__(self, *exc):
+                with writer._lock:
+                    writer._busy.discard(key)
+
+        return _Slot()

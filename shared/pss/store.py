@@ -22,14 +22,10 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.errors import BadInput, Conflict, NotFound
 from shared.pss.space import ProtoSymbolSpace
 
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
-
-
-class Conflict(MirrorcoachError):
-    code = "conflict"
 
 
 def check_name(name: str) -> str:

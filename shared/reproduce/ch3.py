@@ -265,7 +265,7 @@ def write_report(out: Path, res: dict, seconds: float) -> Path:
                   *[f"| {r}(m3) vs {r}(m4) | {want} | {v[0]:.4f} vs {v[1]:.4f} |"
                     for r, want, v in (("f2", "4a vs 4a", des["thesis_values"]["f2"]), ("f3", "3a vs 4a", des["thesis_values"]["f3"]),
                                        ("f4", "3a vs a", des["thesis_values"]["f4"]))],
-                  f"", f"Largest relative deviation from the design: {des['max_relative_error']:.1e}.", ""]
+                  "", f"Largest relative deviation from the design: {des['max_relative_error']:.1e}.", ""]
     lines += ["## Rule identification (comparative questions)", "",
               "| answer noise | candidates | identification rate | questions asked (mean) | thesis |", "|---|---|---|---|---|"]
     for v in ident.values():

@@ -119,7 +119,7 @@ def tukey_markdown(t: dict) -> list[str]:
                 p = t["pairs"][(i, j)]
                 cells.append(f"{p['diff']:.3f}{'*' if p['significant'] else ''}")
         lines.append(f"| **{a}** | " + " | ".join(cells) + " |")
-    lines += ["", f"Means of R_4: " + ", ".join(f"{n} {m:.3f}" for n, m in zip(names, t["means"])) +
+    lines += ["", "Means of R_4: " + ", ".join(f"{n} {m:.3f}" for n, m in zip(names, t["means"])) +
               f". One-way ANOVA: F = {t['anova_F']:.2f}, p = {t['anova_p']:.3g}. MSDs upper right, |differences| lower "
               "left, * where a difference exceeds its MSD (Tukey-Kramer, p < .05; scipy.stats.tukey_hsd agrees: "
               + ", ".join(f"{names[i]}-{names[j]} p = {v['p']:.3f}" for (i, j), v in t["pairs"].items() if i < j) + ")."]
