@@ -84,8 +84,10 @@ def run(client: Client, data: Path, out: Path) -> None:
           f"{out / 'emphatic_squat.bvh'} (distance to the learner {d[learner]:.1f} > the target's {d_tp:.1f})")
     coach_learner(client, next(c for c in train if c.label == "squat1Reps"), out)
     estimate_other(client)
+    home = Settings().home
     print(f"done in {time.perf_counter() - t0:.1f} s. Outputs: BVH files in {out} (open in Blender or any BVH viewer); "
-          f"the services' state (spaces, sessions, transcripts) in {Settings().home / 'data'}. "
+          f"the services' state (spaces, sessions, transcripts) in {home / 'data'}; the dashboard recording "
+          f"{home / 'recordings' / 'latest.rrd'} (complete once the cluster stops; `make dashboard` opens it). "
           "Data: HDM05 (CC BY-SA 3.0), see data/hdm05/SOURCE.md.")
 
 
