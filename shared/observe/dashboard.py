@@ -69,32 +69,36 @@ class Dashboard:
         self.rec.disconnect()
 
     # ------------------------------------------------------------------ helpers
-    def _skeleton(self, entity: str, clip: Clip, offset: float, colour) -> None:
+    def _times(self, n: int, trial: int) -> list:
+        return [rr.TimeColumn("frame", sequence=np.arange(n)), rr.TimeColumn("trial", sequence=np.full(n, trial))]
+
+    def _skeleton(self, entity: str, clip: Clip, offset: float, colour, trial: int) -> None:
+        """Bones of every frame, sent as one column chunk (not one log call per frame)."""
         sk = clip.skeleton
         if sk is None:
             return
         pos = sk.forward_kinematics(clip.data, clip.channels, ends=False)
         pos = pos - pos[:1, :1] + np.array([offset, 0.0, 0.0])  # side by side, from the same start
         bones = [(j.parent, i) for i, j in enumerate(sk.joints) if j.parent >= 0]
-        for f in range(len(pos)):
-            self.rec.set_time("frame", sequence=f)
-            self.rec.log(entity, rr.LineStrips3D([[pos[f, a], pos[f, b]] for a, b in bones], colors=[colour]))
+        strips = [np.stack([pos[f, a], pos[f, b]]) for f in range(len(pos)) for a, b in bones]
+        n = len(pos)
+        rr.send_columns(entity, indexes=self._times(n, trial), recording=self.rec,
+                        columns=rr.LineStrips3D.columns(strips=strips, colors=[colour] * len(strips)).partition(
+                            lengths=[len(bones)] * n))
 
-    def _curves(self, session: str, kind: str, clip: Clip) -> None:
+    def _curves(self, session: str, kind: str, clip: Clip, trial: int) -> None:
         for c in CURVE_CHANNELS:
             if c in clip.channels:
-                x = clip.column(c)
-                for f in range(len(x)):
-                    self.rec.set_time("frame", sequence=f)
-                    self.rec.log(f"curves/{session}/{c}/{kind}", rr.Scalars(float(x[f])))
+                x = clip.column(c).astype(float)
+                rr.send_columns(f"curves/{session}/{c}/{kind}", indexes=self._times(len(x), trial), recording=self.rec,
+                                columns=rr.Scalars.columns(scalars=x))
 
     # ------------------------------------------------------------------ events
     def session_started(self, session: str, target: Clip) -> None:
         self.targets[session] = target
         self.paths[session], self.emphatic[session] = [], []
-        self.rec.set_time("trial", sequence=0)
-        self._skeleton(f"skeletons/{session}/target", target, SIDE_BY_SIDE["target"], COLOURS["target"])
-        self._curves(session, "target", target)
+        self._skeleton(f"skeletons/{session}/target", target, SIDE_BY_SIDE["target"], COLOURS["target"], 0)
+        self._curves(session, "target", target, 0)
 
     def trial(self, ev: dict, attempt: Clip | None, emphatic: Clip | None) -> None:
         s, n = ev["session"], int(ev["trial"])
@@ -120,8 +124,8 @@ class Dashboard:
                 continue
             if clip.skeleton is None and target is not None:
                 clip = clip.with_data(clip.data, skeleton=target.skeleton)
-            self._skeleton(f"skeletons/{s}/{kind}", clip, SIDE_BY_SIDE[kind], COLOURS[kind])
-            self._curves(s, kind, clip)
+            self._skeleton(f"skeletons/{s}/{kind}", clip, SIDE_BY_SIDE[kind], COLOURS[kind], n)
+            self._curves(s, kind, clip, n)
 
     def space(self, ev: dict) -> None:
         name = ev["space"]
