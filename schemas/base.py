@@ -14,6 +14,7 @@ is the single declaration services and contract tests import.
 from __future__ import annotations
 
 import re
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -24,14 +25,17 @@ from shared.errors import BadInput
 NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"  # no '/', no leading '.', so never a path
 
 
-class Spec:
+class Spec(ABC):
+    """What a field may hold: ``check`` returns the value (converted where allowed) or raises
+    :class:`BadInput` naming ``path``; ``describe`` says it for a person."""
+
     doc: str = ""
 
-    def check(self, value, path: str):  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def check(self, value, path: str): ...
 
-    def describe(self) -> str:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def describe(self) -> str: ...
 
 
 def _fail(path: str, problem: str, **details):
