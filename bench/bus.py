@@ -22,13 +22,11 @@ import re
 import statistics
 import subprocess
 import sys
-import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from bench.common import parse_args, private_cluster, stats, write_results
+from bench.common import concurrent, parse_args, private_cluster, stats, write_results
 
 def raw_zenoh_roundtrip(settings, n=300, size=100_000) -> dict:
     import zenoh
@@ -110,25 +108,12 @@ def main(argv=None) -> int:
 
             # ---- 20 concurrent recognitions on one space
             probe = clip_to_wire(load_clip(probe_file), with_skeleton=False)
-            lat: list[float] = []
-            lock = threading.Lock()
 
-            def one(_):
-                t0 = time.perf_counter()
+            def recognize(_):
                 c.request("pss", "recognize", {"space": "bench", "clips": [probe]})
-                with lock:
-                    lat.append(time.perf_counter() - t0)
 
-            one(0)
-            lat.clear()
-            rounds, walls = 5, []
-            with ThreadPoolExecutor(20) as pool:
-                for _ in range(rounds):
-                    t0 = time.perf_counter()
-                    list(pool.map(one, range(20)))
-                    walls.append(time.perf_counter() - t0)
-            res["concurrent_20"] = {**stats(lat), "throughput_per_s": 20 * rounds / sum(walls),
-                                    "round_wall_ms": 1e3 * statistics.median(walls)}
+            recognize(0)  # warm-up
+            res["concurrent_20"] = concurrent(recognize, 20, 5)
             print(f"20 concurrent recognitions: {res['concurrent_20']['throughput_per_s']:.0f} /s, "
                   f"latency median {res['concurrent_20']['median_ms']:.0f} ms, p95 {res['concurrent_20']['p95_ms']:.0f} ms")
         finally:

@@ -4,11 +4,9 @@ concurrent sessions (throughput and 95th-percentile latency). Writes ``bench/res
 
 from __future__ import annotations
 
-import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 
-from bench.common import parse_args, private_cluster, stats, write_results
+from bench.common import concurrent, parse_args, private_cluster, stats, write_results
 
 
 def main(argv=None) -> int:
@@ -35,21 +33,8 @@ def main(argv=None) -> int:
         res["trial_in_service_ms"] = 1e3 * r["seconds"]
         for i in range(20):
             c.request("coach", "start", {"session": f"c{i}", "target": clip_to_wire(target), "replace": True})
-        lat, lock = [], threading.Lock()
-
-        def one(i):
-            t0 = time.perf_counter()
-            c.request("coach", "attempt", {"session": f"c{i}", "clips": attempts}, timeout=300)
-            with lock:
-                lat.append(time.perf_counter() - t0)
-
-        rounds, walls = 3, []
-        with ThreadPoolExecutor(20) as pool:
-            for _ in range(rounds):
-                t0 = time.perf_counter()
-                list(pool.map(one, range(20)))
-                walls.append(time.perf_counter() - t0)
-        res["concurrent_20"] = {**stats(lat), "throughput_per_s": 20 * rounds / sum(walls)}
+        res["concurrent_20"] = concurrent(
+            lambda i: c.request("coach", "attempt", {"session": f"c{i}", "clips": attempts}, timeout=300), 20, 3)
     cc = res["concurrent_20"]
     print(f"one coaching trial through the bus: {res['trial']['median_ms']:.0f} ms median (p95 {res['trial']['p95_ms']:.0f}); "
           f"20 concurrent sessions: {cc['throughput_per_s']:.1f} trials/s, p95 {cc['p95_ms']:.0f} ms")

@@ -62,3 +62,27 @@ def write_results(out: Path, name: str, res: dict, markdown: list[str]) -> None:
     (out / f"{name}.json").write_text(json.dumps(res, indent=2))
     (out / f"{name}.md").write_text("\n".join(markdown) + "\n")
     print(f"wrote {out / f'{name}.md'}")
+
+
+def concurrent(call, n: int = 20, rounds: int = 3) -> dict:
+    """``call(i)`` for i in 0..n-1 at once, ``rounds`` times: latency statistics of every call
+    and the throughput (calls per second of wall time)."""
+    import threading
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    lat, lock = [], threading.Lock()
+
+    def one(i):
+        t0 = time.perf_counter()
+        call(i)
+        with lock:
+            lat.append(time.perf_counter() - t0)
+
+    walls = []
+    with ThreadPoolExecutor(n) as pool:
+        for _ in range(rounds):
+            t0 = time.perf_counter()
+            list(pool.map(one, range(n)))
+            walls.append(time.perf_counter() - t0)
+    return {**stats(lat), "throughput_per_s": n * rounds / sum(walls)}

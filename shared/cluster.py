@@ -151,8 +151,8 @@ def status(settings: Settings | None = None) -> list[dict]:
             alive = c.alive(timeout=1.0)
     except Unavailable:
         pass
-    rows = [{"name": "supervisor", "pid": read_pid(s.run_dir / "supervisor.pid"),
-             "alive": read_pid(s.run_dir / "supervisor.pid") is not None}]
+    sup = read_pid(s.run_dir / "supervisor.pid")
+    rows = [{"name": "supervisor", "pid": sup, "alive": sup is not None}]
     for p in plan:
         up = router_up if p.name == "router" else p.name in alive
         rows.append({"name": p.name, "pid": read_pid(s.run_dir / f"{p.name}.pid"), "alive": up})

@@ -126,6 +126,25 @@ class Processes:
                     p.wait()
 
 
+def assert_refused(client, procs: "Processes", cases) -> None:
+    """Every case ``(name, service, verb, message, code)`` (message: a map, or raw bytes) gets a
+    ``reply_err`` with that stable code, a readable message and no traceback; the service
+    stays up."""
+    from schemas.common import ERROR
+    from shared.bus.client import RemoteError
+    from shared.codec import pack
+
+    for name, service, verb, msg, code in cases:
+        with pytest.raises(RemoteError) as e:
+            client.request_raw(service, verb, msg if isinstance(msg, bytes) else pack(msg), timeout=60)
+        err = ERROR.validate({"code": e.value.code, "message": e.value.message, "details": e.value.details})
+        assert err["code"] == code, (name, e.value.code, e.value.message)
+        assert e.value.message and "Traceback" not in e.value.message, name
+        assert procs.procs[service].poll() is None, f"{service} died on: {name}"
+    for service in {c[1] for c in cases}:
+        assert "Traceback" not in procs.log(service), service
+
+
 def kill_during(env: dict, procs: "Processes", service: str, module: str, request, ready, timeout: float = 120.0):
     """Run ``request(client)`` in a thread; once ``ready()`` is true, SIGKILL ``service`` and
     start it again. Returns the exception the request ended with (it must end, not hang)."""

@@ -9,11 +9,9 @@ import pytest
 
 from schemas import dialogue as dlg
 from schemas import estimator as est
-from schemas.common import ERROR, clip_to_wire
-from shared.bus.client import RemoteError
-from shared.codec import pack
+from schemas.common import clip_to_wire
 from shared.estimation.motions import ALL, unknown_motions
-from tests.conftest import kill_during
+from tests.conftest import assert_refused, kill_during
 
 
 def _ok(endpoint, reply):
@@ -88,13 +86,7 @@ def test_bad_requests_get_clear_errors(chapter3_services, client_of):
         ("estimator", "identify_rule", {"estimate": "ok", "candidates": "weighted", "method": "thesis"}, "bad_request"),
         ("estimator", "info", {"estimate": "a/b"}, "bad_request"),
     ]
-    for service, verb, msg, code in cases:
-        with pytest.raises(RemoteError) as e:
-            c.request_raw(service, verb, pack(msg), timeout=60)
-        ERROR.validate({"code": e.value.code, "message": e.value.message, "details": e.value.details})
-        assert e.value.code == code, (service, verb, e.value.code, e.value.message)
-    for name in ("dialogue", "estimator"):
-        assert procs.procs[name].poll() is None and "Traceback" not in procs.log(name)
+    assert_refused(c, procs, [(f"{service}/{verb}", service, verb, msg, code) for service, verb, msg, code in cases])
 
 
 @pytest.mark.parametrize("behaviour, reason", [("silent", "no answer"), ("nonsense", "not one of the words"),

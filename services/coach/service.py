@@ -10,7 +10,6 @@ each try, so a trial interrupted by a crash can simply be sent again.
 from __future__ import annotations
 
 import json
-import os
 import uuid
 from dataclasses import asdict
 from pathlib import Path
@@ -25,7 +24,7 @@ from shared.bus.runtime import OneWriter, Service
 from shared.clip import Clip
 from shared.coaching.policies import (SWEEP, Calibration, Policy, fit_emu1_corrected, fit_nb,
                                       simulated_coach_demonstrations)
-from shared.coaching.session import Session, Trial, check_attempts, session_to_dict, start, trial
+from shared.coaching.session import Session, Trial, session_to_dict, start, trial
 from shared.errors import BadInput, Conflict, NotFound
 from shared.io import load_clip, save_clip
 from shared.io.atomic import atomic_write
@@ -84,15 +83,10 @@ def make_service(settings: Settings | None = None) -> Service:
         check_name(name)
         return root / f"{name}.json", root / f"{name}.target.npz"
 
-    def save_clip_atomic(clip: Clip, path: Path) -> None:
-        tmp = path.with_name(f".{path.name}.tmp.npz")
-        save_clip(clip, tmp)
-        os.replace(tmp, path)
-
     def save(s: Session) -> None:
         meta, target = paths(s.name)
         if not target.exists():
-            save_clip_atomic(s.target, target)
+            save_clip(s.target, target)
         text = json.dumps(session_to_dict(s)).encode()
         atomic_write(meta, lambda f: f.write(text))
 
@@ -101,10 +95,11 @@ def make_service(settings: Settings | None = None) -> Service:
         if not meta.exists():
             raise NotFound(f"no coaching session {name!r}", session=name)
         d = json.loads(meta.read_text())
-        s = Session(name, load_clip(target), Policy.from_dict(d["policy"]), d.get("learner"),
-                    [Trial(**t) for t in d["trials"]], d.get("mode", "residual"), d.get("check", True),
-                    d.get("target_report"))
-        return s
+        cog = d.get("target_cog")
+        return Session(name, load_clip(target), Policy.from_dict(d["policy"]), d.get("learner"),
+                       trials=[Trial(**t) for t in d["trials"]], mode=d.get("mode", "residual"),
+                       check=d.get("check", True), target_report=d.get("target_report"),
+                       target_cog=None if cog is None else np.asarray(cog))
 
     def info(s: Session) -> dict:
         d = s.d()
@@ -117,11 +112,9 @@ def make_service(settings: Settings | None = None) -> Service:
 
     def run_trial(s: Session, attempts: list[Clip]) -> tuple[Trial, Clip]:
         ports = ports_of(s)
-        if s.target_cog is None and s.target.skeleton is not None:
-            s.target_report, s.target_cog = ports.perform(s.target)
         # a fresh proto-symbol name per try: a trial cut short by a crash is simply sent again
         rec, demo = trial(s, attempts, _Renamed(ports, f"-{uuid.uuid4().hex[:6]}"))
-        save_clip_atomic(demo, root / f"{s.name}.last.npz")  # what to show next, for run to continue from
+        save_clip(demo, root / f"{s.name}.last.npz")  # what to show next, for run to continue from
         save(s)
         svc.publish("trial", {"session": s.name, "trial": rec.number, "d_p": rec.d_p, "alpha": rec.alpha_shown,
                               "adverb": rec.adverb, "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
@@ -148,7 +141,7 @@ def make_service(settings: Settings | None = None) -> Service:
         target = target.resample(30.0) if target.fps != 30.0 else target
         if target.n_frames < 10:
             raise BadInput(f"the target has {target.n_frames} frames at 30 fps; at least 10", field="target")
-        policy = Policy.from_dict({k: v for k, v in req["policy"].items()})
+        policy = Policy.from_dict(req["policy"])
         s = Session(name, target, policy, req["learner"], mode=req["mode"], check=req["check"])
         with writing(name):
             for p in (meta, paths(name)[1], root / f"{name}.last.npz"):
@@ -169,9 +162,7 @@ def make_service(settings: Settings | None = None) -> Service:
     def attempt(req):
         with writing(req["session"]):
             s = load(req["session"])
-            attempts = [clip_from_wire(c, s.target.skeleton) for c in req["clips"]]
-            check_attempts(s, attempts)
-            rec, demo = run_trial(s, attempts)
+            rec, demo = run_trial(s, [clip_from_wire(c, s.target.skeleton) for c in req["clips"]])
         return trial_reply(s, rec, demo)
 
     @svc.handler("run")

@@ -74,7 +74,7 @@ def make_service(settings: Settings | None = None) -> Service:
 
     @svc.handler("bodies")
     def list_bodies(req):
-        return {"robots": [robot(n).describe() for n in ROBOTS]}
+        return {"robots": [bodies.get(n, None, None).describe() for n in ROBOTS]}
 
     @svc.handler("perform")
     def do_perform(req):

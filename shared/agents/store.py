@@ -7,7 +7,6 @@ the reference and the trial count, so a restarted simulator continues every lear
 
 from __future__ import annotations
 
-import io
 import json
 import re
 import threading
@@ -115,9 +114,7 @@ class AgentStore:
         arrays = {"target": t.data, "memory": lr.memory, "header": np.array(json.dumps(header))}
         if lr.reference is not None:
             arrays["reference"] = lr.reference
-        buf = io.BytesIO()
-        np.savez(buf, **arrays)
-        atomic_write(self.root / "learners" / f"{_check(name)}.npz", lambda f: f.write(buf.getvalue()))
+        atomic_write(self.root / "learners" / f"{_check(name)}.npz", lambda f: np.savez(f, **arrays))
 
     @staticmethod
     def _load_learner(path: Path) -> SimulatedLearner:

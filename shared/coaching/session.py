@@ -273,7 +273,8 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
 
 def session_to_dict(s: Session) -> dict:
     return {"name": s.name, "policy": s.policy.to_dict(), "learner": s.learner, "mode": s.mode, "check": s.check,
-            "trials": [asdict(t) for t in s.trials], "target_report": s.target_report}
+            "trials": [asdict(t) for t in s.trials], "target_report": s.target_report,
+            "target_cog": None if s.target_cog is None else np.asarray(s.target_cog).tolist()}
 
 
 def ratio(sessions_d: list[list[float]]) -> np.ndarray:

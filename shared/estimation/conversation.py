@@ -173,7 +173,6 @@ class OtherEstimate:
     # ------------------------------------------------------------------ persistence
     def save(self, path) -> None:
         """One ``.npz`` (JSON header + arrays), written atomically."""
-        import io
         import json
         from dataclasses import asdict
 
@@ -190,9 +189,7 @@ class OtherEstimate:
             arrays[f"torques{i}"] = t
         for i, t in enumerate(self.self_torques):
             arrays[f"self{i}"] = t
-        buf = io.BytesIO()
-        np.savez(buf, **arrays)
-        atomic_write(path, lambda f: f.write(buf.getvalue()))
+        atomic_write(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
     def load(cls, path) -> "OtherEstimate":

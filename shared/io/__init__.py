@@ -43,15 +43,24 @@ def load_clip(path, skeleton=None, label: str | None = None) -> Clip:
 
 
 def save_clip(clip: Clip, path) -> None:
+    """Write a clip (format by suffix), atomically: a temporary file beside it, then a rename,
+    so a reader or a crash never sees half a file."""
+    import os
+    import uuid
+
     path = Path(path)
     writers = {".bvh": write_bvh, ".npz": write_npz, ".amc": write_amc}
     suffix = path.suffix.lower()
     if suffix not in writers:
         raise ClipFormatError(path, f"cannot write {suffix!r} (use .bvh, .npz or .amc)")
+    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
-        writers[suffix](clip, path)
+        writers[suffix](clip, tmp)
+        os.replace(tmp, path)
     except OSError as e:
         raise ClipFormatError(path, f"cannot write file: {e.strerror or e}") from None
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def find_clips(paths) -> list[Path]:

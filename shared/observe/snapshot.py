@@ -15,8 +15,14 @@ def read(path) -> dict[str, list[dict]]:
     """Entity path -> rows ``{timeline or component: value}`` in logging order."""
     from rerun.chunk import RrdReader
 
+    from shared.errors import BadInput
+
     out: dict[str, list[dict]] = defaultdict(list)
-    for ch in RrdReader(str(path)).stream():
+    try:
+        chunks = list(RrdReader(str(path)).stream())
+    except (RuntimeError, OSError, ValueError) as e:
+        raise BadInput(f"{path}: not a readable rerun recording ({e})") from None
+    for ch in chunks:
         rb = ch.to_record_batch()
         names = [n for n in rb.schema.names if ":" in n or n in ("frame", "trial", "set")]
         cols = {n: rb.column(n).to_pylist() for n in names}
