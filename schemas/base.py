@@ -75,11 +75,7 @@ class Int(Spec):
     def check(self, value, path):
         if isinstance(value, bool) or not isinstance(value, int):
             _fail(path, f"must be an integer, got {type(value).__name__}")
-        if self.min is not None and value < self.min:
-            _fail(path, f"must be >= {self.min}, got {value}")
-        if self.max is not None and value > self.max:
-            _fail(path, f"must be <= {self.max}, got {value}")
-        return value
+        return _in_range(value, self.min, self.max, path)
 
     def describe(self):
         return "int" + _range(self.min, self.max)
@@ -97,11 +93,7 @@ class Float(Spec):
         value = float(value)
         if not np.isfinite(value):
             _fail(path, "must be finite (no NaN or Inf)")
-        if self.min is not None and value < self.min:
-            _fail(path, f"must be >= {self.min}, got {value}")
-        if self.max is not None and value > self.max:
-            _fail(path, f"must be <= {self.max}, got {value}")
-        return value
+        return _in_range(value, self.min, self.max, path)
 
     def describe(self):
         return "float" + _range(self.min, self.max)
@@ -310,6 +302,14 @@ class Endpoint:
     request: Message
     reply: Message
     doc: str = ""
+
+
+def _in_range(value, lo, hi, path: str):
+    if lo is not None and value < lo:
+        _fail(path, f"must be >= {lo}, got {value}")
+    if hi is not None and value > hi:
+        _fail(path, f"must be <= {hi}, got {value}")
+    return value
 
 
 def _range(lo, hi) -> str:
