@@ -36,6 +36,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench.run --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.recognition --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.bus --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.sim --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.ch3 --hdm05 $(HDM05) --out bench/results

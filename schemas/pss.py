@@ -41,6 +41,8 @@ INFO = Map({
     "stress1": F(Float(0.0), "Kruskal stress-1"),
     "mds_converged": F(Bool()),
     "hmm_converged": F(Int(0), "how many HMMs met the convergence tolerance"),
+    "format": F(Str(max_len=64), "the space file's format (mirrorcoach.space/1 or /2)", required=False),
+    "recognition": F(Str(max_len=200), "how recognition decides a label in this space", required=False),
 })
 
 NEAREST = Map({"name": F(Str(max_len=64)), "label": F(Str(max_len=64)), "distance": F(Float(0.0), "eq. 2.4 distance")})
@@ -89,7 +91,16 @@ RECOGNIZE = Endpoint(
     }), doc="place a motion in the space (eq. 2.6)"),
     Message("pss.recognize.reply", Map({
         "space": SPACE,
-        "label": F(Str(max_len=64), "label of the nearest proto-symbol (eq. 2.4)"),
+        "label": F(Str(max_len=64), "the recognised class; absent when the motion is none of the space's classes",
+                   required=False),
+        "known": F(Bool(), "false: the motion is none of the space's classes (open-set rejection)", required=False,
+                   default=True),
+        "nearest_label": F(Str(max_len=64), "class of the nearest proto-symbol on the recognition channels",
+                           required=False),
+        "confidence": F(Float(0.0, 1.0), "calibrated probability of nearest_label among the space's classes",
+                        required=False),
+        "novelty": F(Float(0.0), "distance from the known motions relative to the open-set threshold (> 1: unknown)",
+                     required=False),
         "label_in_space": F(Str(max_len=64), "label of the nearest point in the space"),
         "point": F(Array(shape=(None,)), "the motion's point"),
         "nearest": F(List(NEAREST, max_len=100), "nearest proto-symbols, nearest first"),

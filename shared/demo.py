@@ -79,9 +79,9 @@ def run(client: Client, data: Path, out: Path) -> None:
     save_clip(emph, out / "emphatic_squat.bvh")
     r = client.request("pss", "recognize", {"space": "demo", "clips": [clip_to_wire(emph)], "top": len(rows)})
     d = {n["name"]: n["distance"] for n in r["nearest"]}
-    d_tp = client.request("pss", "distance", {"space": "demo", "a": squat, "b": learner})["distance"]
     print(f"generated the emphatic motion x_t + {alpha:g} (x_t - x_p) (eq. 4.3), target {squat}, learner {learner} -> "
-          f"{out / 'emphatic_squat.bvh'} (distance to the learner {d[learner]:.1f} > the target's {d_tp:.1f})")
+          f"{out / 'emphatic_squat.bvh'} (recognised as {r.get('label') or 'none of these'}; distance to the target "
+          f"{d[squat]:.1f}, to the learner {d[learner]:.1f})")
     coach_learner(client, next(c for c in train if c.label == "squat1Reps"), out)
     estimate_other(client)
     home = Settings().home

@@ -1,22 +1,43 @@
-"""Recognition on a train/test split: the PSS against 1-nearest-neighbour DTW.
+"""The recognition report: the proto-symbol space side by side with the peers a practitioner
+would pick, on the same clips, in one run (issue 11).
 
-Both see the same frames: every clip resampled to the space's frame rate and encoded with
-the space's turn-invariant features (:mod:`shared.pss.features`). DTW is dtw-python's
-symmetric2 step pattern on Euclidean frame distances, normalised by the summed lengths
-(``normalizedDistance``); a clip takes the label of the training
-clip with the smallest DTW distance.
+Splits: leave one performer out (a performer is the skeleton a clip came with: HDM05's
+actors bd, bk, dg); the "dev split" is the one that tests actor dg (learn bd + bk).
+
+Methods, all fed the same frames (every clip resampled to the space's 30 fps):
+
+* **PSS**: :meth:`ProtoSymbolSpace.recognize` (label by the nearest proto-symbol on the
+  position channel group, :mod:`shared.pss.recognition`); its time is the library's own
+  (HMM of the clip, distances, decision and placement).
+* **MiniRocket + ridge** (aeon, Dempster et al. 2021) on the space's position features (joints
+  in the heading frame, z-scored with the training clips' statistics) resampled to 64 frames.
+* **1-NN DTW** (dtw-python, Sakoe-Chiba band 10 %) on the same z-scored positions, resampled
+  to 64 frames so that one band fits every pair.
+
+Open set: every class is held out in turn; a space (and the DTW peer's calibration) is built
+without it; its test clips must come back "none of these", the other classes' test clips
+must not. The peers are dev extras (``pip install -e '.[dev]'``); without them the report
+says so.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from shared.clip import Clip
-from shared.pss.space import ProtoSymbolSpace
+from shared.pss.space import ProtoSymbolSpace, performer
+
+PEER_FRAMES = 64
+GOAL_ACCURACY = 0.98
+GOAL_OPEN_OUT = 0.90
+GOAL_OPEN_IN = 0.05
+GOAL_MS = 5.0
 
 
 @dataclass
@@ -26,6 +47,7 @@ class RecognitionResult:
     per_class: dict[str, tuple[int, int]]  # label -> (correct, total)
     seconds_per_clip: float
     predictions: list[str] = field(default_factory=list)
+    truth: list[str] = field(default_factory=list)
 
 
 def _summarise(method, truth, pred, seconds) -> RecognitionResult:
@@ -35,34 +57,321 @@ def _summarise(method, truth, pred, seconds) -> RecognitionResult:
         per[t][0] += int(t == p)
     acc = float(np.mean([t == p for t, p in zip(truth, pred)])) if truth else float("nan")
     return RecognitionResult(method, acc, {k: tuple(v) for k, v in sorted(per.items())},
-                             float(np.mean(seconds)) if seconds else float("nan"), list(pred))
+                             float(np.mean(seconds)) if len(seconds) else float("nan"), list(pred), list(truth))
 
 
-def pss_recognition(space: ProtoSymbolSpace, test: list[Clip], use: str = "distance") -> RecognitionResult:
-    """Label of the nearest proto-symbol by eq. 2.4 (``use="distance"``) or by the point in the space."""
+# ---------------------------------------------------------------------------- the methods
+def pss_recognition(space: ProtoSymbolSpace, test: list[Clip], use: str = "label") -> RecognitionResult:
+    """The space's own recognition: the class of the nearest proto-symbol on the recognition
+    channels (``use="label"``, closed set: the nearest class even when the open-set rule would
+    say "none of these") or of the nearest point in the space (``use="point"``, eq. 2.6)."""
     pred, secs = [], []
     for c in test:
         r = space.recognize(c)
         secs.append(r.seconds)
-        pred.append(r.label if use == "distance" else r.label_in_space)
-    return _summarise(f"PSS nearest proto-symbol ({use})", [c.label for c in test], pred, secs)
+        pred.append(r.nearest_label if use == "label" else r.label_in_space)
+    return _summarise(f"PSS ({use})", [c.label for c in test], pred, secs)
 
 
-def dtw_recognition(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip]) -> RecognitionResult:
-    """1-NN DTW baseline (dtw-python) on the same features."""
+def position_frames(space: ProtoSymbolSpace, clip: Clip, n_frames: int | None = PEER_FRAMES) -> np.ndarray:
+    """The space's z-scored position features of a clip (T, D), optionally resampled to ``n_frames``."""
+    x = space.features.encode(clip.resample(space.params.fps), ("motion", "position"))
+    x = x[:, space.features.feature_indices("position")]
+    if n_frames is None:
+        return x
+    t = np.linspace(0.0, len(x) - 1.0, n_frames)
+    return np.column_stack([np.interp(t, np.arange(len(x)), x[:, k]) for k in range(x.shape[1])])
+
+
+def dtw_distance_matrix(a: list[np.ndarray], b: list[np.ndarray], band: float = 0.1) -> np.ndarray:
+    """Normalised DTW distances (dtw-python, symmetric2, Sakoe-Chiba band) between two lists."""
     from dtw import dtw
 
-    enc = lambda c: space.features.encode(c.resample(space.params.fps), ("motion",))  # noqa: E731
-    tr = [(enc(c), c.label) for c in train]
+    out = np.zeros((len(a), len(b)))
+    for i, x in enumerate(a):
+        for j, y in enumerate(b):
+            w = max(1, int(round(band * max(len(x), len(y)))))
+            out[i, j] = dtw(x, y, distance_only=True, window_type="sakoechiba",
+                            window_args={"window_size": w}).normalizedDistance
+    return out
+
+
+def _symmetric_dtw(x: list[np.ndarray]) -> np.ndarray:
+    """DTW between every pair of one list (symmetric2 is symmetric: half the pairs)."""
+    d = np.zeros((len(x), len(x)))
+    for i in range(len(x) - 1):
+        d[i, i + 1:] = dtw_distance_matrix([x[i]], x[i + 1:])[0]
+    return d + d.T
+
+
+def dtw_recognition(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip], keep: dict | None = None) -> RecognitionResult:
+    """1-NN DTW on the space's z-scored positions (the peer of DESIGN.md); ``keep`` receives
+    the test x train distances."""
+    tr = [position_frames(space, c) for c in train]
+    labels = [c.label for c in train]
+    pred, secs, rows = [], [], []
+    for c in test:
+        t0 = time.perf_counter()
+        d = dtw_distance_matrix([position_frames(space, c)], tr)[0]
+        pred.append(labels[int(np.argmin(d))])
+        secs.append(time.perf_counter() - t0)
+        rows.append(d)
+    if keep is not None:
+        keep["test_train"] = np.array(rows)
+        keep["train_frames"] = tr
+    return _summarise("1-NN DTW, positions", [c.label for c in test], pred, secs)
+
+
+def minirocket_recognition(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip], seed: int = 0) -> RecognitionResult:
+    """MiniRocket (aeon) + ridge classifier on the space's z-scored positions, 64 frames."""
+    from aeon.transformations.collection.convolution_based import MiniRocket
+    from sklearn.linear_model import RidgeClassifierCV
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    xtr = np.stack([position_frames(space, c).T for c in train])
+    model = make_pipeline(MiniRocket(random_state=seed), StandardScaler(with_mean=True),
+                          RidgeClassifierCV(alphas=np.logspace(-3, 3, 10)))
+    model.fit(xtr, np.array([c.label for c in train]))
     pred, secs = [], []
     for c in test:
-        x = enc(c)
         t0 = time.perf_counter()
-        best, label = np.inf, None
-        for y, lab in tr:
-            d = dtw(x, y, distance_only=True).normalizedDistance
-            if d < best:
-                best, label = d, lab
+        pred.append(str(model.predict(position_frames(space, c).T[None])[0]))
         secs.append(time.perf_counter() - t0)
-        pred.append(label)
-    return _summarise("1-NN DTW (dtw-python)", [c.label for c in test], pred, secs)
+    return _summarise("MiniRocket + ridge (aeon)", [c.label for c in test], pred, secs)
+
+
+def peers_available() -> dict[str, str | None]:
+    """Which peers can run here: name -> None, or why not."""
+    out: dict[str, str | None] = {}
+    for name, module in (("minirocket", "aeon"), ("dtw", "dtw")):
+        try:
+            __import__(module)
+            out[name] = None
+        except ImportError:
+            out[name] = f"{module} is not installed (pip install -e '.[dev]')"
+    return out
+
+
+# ---------------------------------------------------------------------------- open set
+def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.ndarray] | None = None,
+             progress=None) -> dict:
+    """Hold every class out in turn: how many of its test clips come back "none of these"
+    (out-of-class rejected) and how many of the others' do (in-class rejected).
+
+    ``dtw``: the peer's (train x train, test x train) distances, computed once on the split's
+    features; each held-out class takes its rows and columns out and calibrates the same rule
+    (:mod:`shared.pss.recognition`) on what is left."""
+    from shared.pss.recognition import calibrate, decide
+
+    classes = sorted({c.label for c in train})
+    rows = []
+    for k, held in enumerate(classes):
+        keep = np.array([c.label != held for c in train])
+        tr = [c for c, kp in zip(train, keep) if kp]
+        space = ProtoSymbolSpace.build(tr)
+        row = {"held_out": held, "pss": {"out": [0, 0], "in": [0, 0]}}
+        for c in test:
+            r = space.recognize(c)
+            key = "out" if c.label == held else "in"
+            row["pss"][key][0] += int(r.label is None)
+            row["pss"][key][1] += 1
+        if dtw is not None:
+            d_tr, d_te = dtw
+            labels = [c.label for c in tr]
+            cal = calibrate(d_tr[np.ix_(keep, keep)], labels, [performer(c) for c in tr])
+            row["dtw"] = {"out": [0, 0], "in": [0, 0]}
+            for c, di in zip(test, d_te[:, keep]):
+                key = "out" if c.label == held else "in"
+                row["dtw"][key][0] += int(decide(di, labels, cal).label is None)
+                row["dtw"][key][1] += 1
+        rows.append(row)
+        if progress:
+            progress(k + 1, len(classes))
+    return {"rows": rows}
+
+
+# ---------------------------------------------------------------------------- the report
+def _ece(conf: np.ndarray, correct: np.ndarray, bins: int = 10) -> float:
+    """Expected calibration error: mean |accuracy - confidence| over equal-width bins."""
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    idx = np.clip(np.digitize(conf, edges) - 1, 0, bins - 1)
+    return float(sum(np.abs(correct[idx == b].mean() - conf[idx == b].mean()) * np.mean(idx == b)
+                     for b in range(bins) if np.any(idx == b)))
+
+
+def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = True, progress=print) -> dict:
+    """Every split, every method, open set and calibration; returns the results as a dict."""
+    from threadpoolctl import threadpool_limits
+
+    performers = sorted({performer(c) for c in clips})
+    if len(performers) < 2:
+        from shared.errors import BadInput
+
+        raise BadInput("the recognition report needs clips of at least two performers (skeletons)")
+    avail = peers_available() if peers else {"minirocket": "not asked for (--no-peers)", "dtw": "not asked for (--no-peers)"}
+    res: dict = {"performers": performers, "n_clips": len(clips), "classes": sorted({c.label for c in clips}),
+                 "peers": avail, "splits": {}, "open_set": {}}
+    for who in performers:
+        train = [c for c in clips if performer(c) != who]
+        test = [c for c in clips if performer(c) == who]
+        progress(f"split: test {who} ({len(test)} clips), learn the others ({len(train)} clips)")
+        t0 = time.perf_counter()
+        with threadpool_limits(1):  # one recognition is a small job: BLAS threads cost more than they give
+            space = ProtoSymbolSpace.build(train)
+            build_s = time.perf_counter() - t0
+            recs = [space.recognize(c) for c in test]
+            point = pss_recognition(space, test, use="point")
+        truth = [c.label for c in test]
+        ours = _summarise("PSS (label)", truth, [r.nearest_label for r in recs], [r.seconds for r in recs])
+        conf = np.array([r.confidence for r in recs])
+        correct = np.array([r.nearest_label == t for r, t in zip(recs, truth)], dtype=float)
+        split = {"train": len(train), "test": len(test), "n_states": space.params.n_states, "build_s": build_s,
+                 "methods": {"pss": ours.__dict__, "pss_point": point.__dict__},
+                 "calibration": {"ece": _ece(conf, correct), "mean_confidence": float(conf.mean()),
+                                 "scheme": space.calibration.scheme,
+                                 "rejected_in_class": int(sum(r.label is None for r in recs))}}
+        if avail.get("minirocket") is None:
+            split["methods"]["minirocket"] = minirocket_recognition(space, train, test).__dict__
+        kept: dict = {}
+        if avail.get("dtw") is None:
+            split["methods"]["dtw"] = dtw_recognition(space, train, test, keep=kept).__dict__
+        res["splits"][who] = split
+        line = ", ".join(f"{k} {v['accuracy']:.3f}" for k, v in split["methods"].items())
+        progress(f"  {line}")
+        if open_set_test:
+            dtw = None
+            if kept:
+                progress(f"  open set: DTW between the {len(train)} training clips")
+                tr = kept["train_frames"]
+                dtw = (_symmetric_dtw(tr), kept["test_train"])
+            with threadpool_limits(1):
+                res["open_set"][who] = open_set(train, test, dtw=dtw,
+                                                progress=lambda k, n: progress(f"  open set: held out {k}/{n} classes"))
+    res["verdicts"] = verdicts(res)
+    return res
+
+
+def _open_rates(res: dict, method: str) -> tuple[float, float] | None:
+    out, inn = [0, 0], [0, 0]
+    for split in res["open_set"].values():
+        for row in split["rows"]:
+            if method not in row:
+                return None
+            for k, acc in (("out", out), ("in", inn)):
+                acc[0] += row[method][k][0]
+                acc[1] += row[method][k][1]
+    if not out[1]:
+        return None
+    return out[0] / out[1], inn[0] / max(inn[1], 1)
+
+
+def verdicts(res: dict) -> dict:
+    """The goals of issue 11, each computed from the numbers (``met`` / ``missed``)."""
+    v = {}
+    splits = res["splits"]
+    ours = {k: s["methods"]["pss"] for k, s in splits.items()}
+    v["accuracy_every_split"] = all(o["accuracy"] >= GOAL_ACCURACY for o in ours.values())
+    within = True
+    for k, s in splits.items():
+        peers = [m for name, m in s["methods"].items() if name in ("minirocket", "dtw")]
+        if peers:
+            best = max(sum(a for a, _ in m["per_class"].values()) for m in peers)
+            mine = sum(a for a, _ in ours[k]["per_class"].values())
+            within &= mine >= best - 1
+    v["within_one_clip_of_best_peer"] = within
+    v["ms_per_clip"] = max(o["seconds_per_clip"] for o in ours.values()) * 1e3 <= GOAL_MS
+    rates = _open_rates(res, "pss")
+    if rates is not None:
+        v["open_set"] = rates[0] >= GOAL_OPEN_OUT and rates[1] <= GOAL_OPEN_IN
+    return v
+
+
+def _word(ok: bool) -> str:
+    return "met" if ok else "missed"
+
+
+def report_markdown(res: dict) -> str:
+    """The report's text; every verdict word comes from :func:`verdicts`."""
+    splits = res["splits"]
+    names = {"pss": "PSS: nearest proto-symbol on positions (ours)", "pss_point": "PSS: nearest point in the 3-D space (eq. 2.6)",
+             "minirocket": "MiniRocket + ridge (aeon)", "dtw": "1-NN DTW (band 0.1), positions"}
+    methods = [m for m in ("pss", "minirocket", "dtw", "pss_point") if all(m in s["methods"] for s in splits.values())]
+    who = list(splits)
+    lines = ["# Recognition: the proto-symbol space against its peers (issue 11)", "",
+             f"HDM05, {res['n_clips']} clips, {len(res['classes'])} classes, performers {', '.join(res['performers'])}; "
+             "leave one performer out (the dev split is the one that tests dg). All methods see the same 30 fps clips; "
+             "the peers read the space's z-scored joint positions in the heading frame. Written by "
+             "`mirrorcoach evaluate recognition` (also `make bench`).", "",
+             "| method | " + " | ".join(f"test {w} ({splits[w]['test']} clips)" for w in who) + " | ms per clip |",
+             "|---|" + "---|" * (len(who) + 1)]
+    for m in methods:
+        cells = []
+        for w in who:
+            r = splits[w]["methods"][m]
+            ok = sum(a for a, _ in r["per_class"].values())
+            cells.append(f"{100 * r['accuracy']:.1f} % ({ok}/{splits[w]['test']})")
+        ms = np.mean([splits[w]["methods"][m]["seconds_per_clip"] for w in who]) * 1e3
+        lines.append(f"| {names[m]} | " + " | ".join(cells) + f" | {ms:.1f} |")
+    for name, why in res["peers"].items():
+        if why:
+            lines.append(f"\n{names[name]}: not run ({why}).")
+    v = res["verdicts"]
+    ms_max = max(splits[w]["methods"]["pss"]["seconds_per_clip"] for w in who) * 1e3
+    accs = [splits[w]["methods"]["pss"]["accuracy"] for w in who]
+    lines += ["", "## Goals", "",
+              f"- At least {100 * GOAL_ACCURACY:.0f} % on every split: **{_word(v['accuracy_every_split'])}** "
+              f"({', '.join(f'{100 * acc:.1f} %' for acc in accs)}).",
+              f"- Never below the best peer of the same split by more than one clip: **{_word(v['within_one_clip_of_best_peer'])}**.",
+              f"- At most {GOAL_MS:g} ms per clip in the library (HMM of the clip, distances, decision and the eq. 2.6 "
+              f"placement): **{_word(v['ms_per_clip'])}** (worst split mean {ms_max:.1f} ms).", ""]
+    rates = _open_rates(res, "pss")
+    if rates is not None:
+        lines += ["## Unknown motions (open set)", "",
+                  "Every class held out in turn, the space built without it: its test clips should come back "
+                  "\"none of these\", the other classes' should not.", "",
+                  "| method | out-of-class clips rejected | in-class clips rejected |", "|---|---|---|",
+                  f"| PSS (ours) | {100 * rates[0]:.1f} % | {100 * rates[1]:.1f} % |"]
+        d = _open_rates(res, "dtw")
+        if d is not None:
+            lines.append(f"| 1-NN DTW, same rule on its distances | {100 * d[0]:.1f} % | {100 * d[1]:.1f} % |")
+        lines += ["", f"Goal: at least {100 * GOAL_OPEN_OUT:.0f} % out-of-class rejected, at most "
+                      f"{100 * GOAL_OPEN_IN:.0f} % in-class rejected: **{_word(v['open_set'])}**.", "",
+                  "| held-out class | " + " | ".join(f"{w}: rejected" for w in who) + " |", "|---|" + "---|" * len(who)]
+        for k, cls in enumerate(res["classes"]):
+            cells = []
+            for w in who:
+                row = res["open_set"][w]["rows"][k]
+                cells.append(f"{row['pss']['out'][0]}/{row['pss']['out'][1]}")
+            lines.append(f"| {cls} | " + " | ".join(cells) + " |")
+        lines.append("")
+    lines += ["## Confidence", "",
+              "| split | mean confidence | expected calibration error | calibration | in-class clips rejected |",
+              "|---|---|---|---|---|"]
+    for w in who:
+        c = splits[w]["calibration"]
+        lines.append(f"| test {w} | {c['mean_confidence']:.3f} | {c['ece']:.3f} | {c['scheme']} | "
+                     f"{c['rejected_in_class']}/{splits[w]['test']} |")
+    lines += ["", "## Per class (ours / best peer, correct of total)", "",
+              "| class | " + " | ".join(f"test {w}" for w in who) + " |", "|---|" + "---|" * len(who)]
+    for cls in res["classes"]:
+        cells = []
+        for w in who:
+            ms = splits[w]["methods"]
+            a, n = ms["pss"]["per_class"].get(cls, (0, 0))
+            peer = max((ms[p]["per_class"].get(cls, (0, 0))[0] for p in ("minirocket", "dtw") if p in ms), default=None)
+            cells.append(f"{a}/{n}" + ("" if peer is None else f" / {peer}/{n}"))
+        lines.append(f"| {cls} | " + " | ".join(cells) + " |")
+    lines += ["", "## Confusions (ours)", ""]
+    conf = [(w, t, p) for w in who for t, p in zip(splits[w]["methods"]["pss"]["truth"], splits[w]["methods"]["pss"]["predictions"]) if t != p]
+    lines += [f"- test {w}: {t} recognised as {p}" for w, t, p in conf] or ["- none"]
+    lines.append("")
+    return "\n".join(lines)
+
+
+def write_report(res: dict, out: Path) -> Path:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps(res, indent=1, default=float))
+    path = out / "report.md"
+    path.write_text(report_markdown(res))
+    return path

@@ -124,8 +124,74 @@ class Skeleton:
         """Joint positions in metres, shape (T, J [+ leaves], 3).
 
         ``data`` holds the clip's frames over ``channels``; channels the skeleton does not
-        know are ignored, missing ones are zero.
+        know are ignored, missing ones are zero. Compiled
+        (numba, :mod:`shared.kinematics`); :meth:`forward_kinematics_reference` is the same
+        map through scipy's ``Rotation`` and is what this one is tested against.
         """
+        from shared.kinematics import fk_positions
+
+        data = np.asarray(data, dtype=float)
+        n = data.shape[0]
+        col = {c: i for i, c in enumerate(channels)}
+        padded = np.concatenate([data, np.zeros((n, 1))], axis=1)  # column -1: a missing channel is 0
+        nj = len(self.joints)
+        bad = [j.name for i, j in enumerate(self.joints) if not (-1 <= j.parent < i) or (j.parent < 0) != (i == 0)]
+        if bad:
+            from shared.errors import BadInput
+
+            raise BadInput(f"skeleton {self.name!r}: joint {bad[0]!r} does not come after its parent "
+                           "(a skeleton lists one root first, then every joint after its parent)")
+        axes = np.full((nj, 3), -1, dtype=np.int64)
+        cols = np.full((nj, 3), -1, dtype=np.int64)
+        for i, j in enumerate(self.joints):
+            for k, ax in enumerate(j.euler.lower()):
+                axes[i, k] = "xyz".index(ax)
+                cols[i, k] = col.get(f"{j.name}.r{ax}", -1)
+        ang = np.deg2rad(padded[:, cols])
+        root = self.joints[0]
+        root_t = np.ascontiguousarray(padded[:, [col.get(f"{root.name}.{d}", -1) for d in TRANS_DOFS]])
+        parents = {j.parent for j in self.joints}
+        ends_at = [i for i, j in enumerate(self.joints) if ends and j.end is not None and i not in parents]
+        pos = fk_positions(np.ascontiguousarray(ang), axes, np.array([j.euler.isupper() for j in self.joints]),
+                           np.stack([j.pre for j in self.joints]).astype(float),
+                           np.array([j.parent for j in self.joints], dtype=np.int64),
+                           np.stack([j.offset for j in self.joints]).astype(float), root_t,
+                           np.array(ends_at, dtype=np.int64),
+                           np.array([self.joints[i].end for i in ends_at], dtype=float).reshape(-1, 3))
+        return pos * self.unit_m
+
+    def root_matrices(self, data: np.ndarray, channels: list[str]) -> np.ndarray:
+        """The root's rotation matrices (T, 3, 3) ``C M C^T`` in numpy (no scipy import):
+        the same map as :meth:`global_root_rotation`, which it is tested against."""
+        data = np.asarray(data, dtype=float)
+        n = data.shape[0]
+        root = self.root
+        col = {c: i for i, c in enumerate(channels)}
+        m = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+        for ax in root.euler.lower():  # extrinsic: each next axis turns what came before
+            ch = f"{root.name}.r{ax}"
+            a = np.deg2rad(data[:, col[ch]]) if ch in col else np.zeros(n)
+            c, s = np.cos(a), np.sin(a)
+            r = np.zeros((n, 3, 3))
+            i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[ax]
+            k = 3 - i - j
+            r[:, k, k] = 1.0
+            r[:, i, i] = c
+            r[:, j, j] = c
+            r[:, i, j] = -s
+            r[:, j, i] = s
+            m = m @ r if root.euler.isupper() else r @ m
+        return root.pre @ m @ root.pre.T
+
+    def rest_height(self) -> float:
+        """The body's height in its rest pose (all channels 0), in metres, along its up axis."""
+        if "_rest_height" not in self.__dict__:
+            rest = self.forward_kinematics(np.zeros((1, len(self.channels()))), self.channels())[0]
+            self.__dict__["_rest_height"] = max(float(np.ptp(rest[:, self.up_axis])), 1e-6)
+        return self.__dict__["_rest_height"]
+
+    def forward_kinematics_reference(self, data: np.ndarray, channels: list[str], *, ends: bool = True) -> np.ndarray:
+        """:meth:`forward_kinematics` through scipy's ``Rotation`` (the reference it is tested against)."""
         data = np.asarray(data, dtype=float)
         n = data.shape[0]
         values = {c: data[:, i] for i, c in enumerate(channels)}

@@ -76,7 +76,9 @@ def make_service(settings: Settings | None = None) -> Service:
         space = store.get(req["space"])
         clips = [clip_from_wire(c, space.features.skeleton) for c in req["clips"]]
         rec = space.recognize(clips[0] if len(clips) == 1 else clips, top=req["top"])
-        return {"space": req["space"], "label": rec.label, "label_in_space": rec.label_in_space,
+        decided = {"label": rec.label} if rec.label is not None else {}
+        return {"space": req["space"], **decided, "known": rec.label is not None, "nearest_label": rec.nearest_label,
+                "confidence": float(rec.confidence), "novelty": float(rec.novelty), "label_in_space": rec.label_in_space,
                 "point": np.asarray(rec.point, float), "stress": float(rec.stress), "seconds": float(rec.seconds),
                 "nearest": [{"name": n, "label": lab, "distance": float(d)} for n, lab, d in rec.nearest]}
 

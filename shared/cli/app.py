@@ -147,21 +147,64 @@ def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
                     clips: list[Path] = typer.Argument(..., help="Clip(s): several are repetitions of one motion."),
                     as_json: bool = typer.Option(False, "--json"),
                     skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
-    """Recognise a motion as a point of the space (eq. 2.6) and list its nearest proto-symbols."""
+    """Recognise a motion: its class with a calibrated confidence (or "none of these"), its
+    nearest proto-symbols and its point in the space (eq. 2.6). How the label is decided:
+    README, "How a motion is recognised"."""
     from shared.io import load_clip
     from shared.pss.space import ProtoSymbolSpace
 
     space = ProtoSymbolSpace.load(space_file)
     reps = [load_clip(c, skeleton=skeleton) for c in clips]
     r = space.recognize(reps)
-    out = {"label": r.label, "point": [float(v) for v in r.point],
+    out = {**({"label": r.label} if r.label is not None else {}), "known": r.label is not None,
+           "nearest_label": r.nearest_label, "confidence": r.confidence, "novelty": r.novelty,
+           "point": [float(v) for v in r.point],
            "nearest": [{"name": n, "label": lab, "distance": d} for n, lab, d in r.nearest], "stress": r.stress}
-    if as_json:
-        typer.echo(json.dumps(out))
-        return
-    typer.echo(f"label {r.label}   point ({', '.join(f'{v:.3f}' for v in r.point)})")
-    for n, lab, d in r.nearest:
-        typer.echo(f"  {d:9.3f}  {lab:<30} {n}")
+    typer.echo(json.dumps(out) if as_json else recognition_text(out))
+
+
+evaluate_app = typer.Typer(help="Measured reports: how well mirrorcoach does next to its peers.", no_args_is_help=True)
+app.add_typer(evaluate_app, name="evaluate")
+
+
+@evaluate_app.command("recognition")
+def evaluate_recognition(data: Path = typer.Option(Path("../shared/data/hdm05"), "--data",
+                                                   help="Folder of labelled clips of several performers (HDM05 layout: "
+                                                        "amc/<class>/*.amc with asf/ beside)."),
+                         out: Path = typer.Option(Path("reports/recognition"), "--out", help="Folder for report.md and results.json."),
+                         peers: bool = typer.Option(True, "--peers/--no-peers",
+                                                    help="Run MiniRocket (aeon) and 1-NN DTW on the same clips (dev extras)."),
+                         open_set: bool = typer.Option(True, "--open-set/--no-open-set",
+                                                       help="Hold every class out in turn (about a minute per split).")):
+    """Recognition report: leave-one-performer-out accuracy, per-class confusions, confidence
+    calibration, unknown motions and time per clip, side by side with MiniRocket and DTW."""
+    from shared.evaluation import evaluate, write_report
+    from shared.io import find_clips, load_clip
+
+    folder = data / "amc" if (data / "amc").is_dir() else data
+    if not folder.is_dir():
+        _fail(f"no clip folder at {folder} (give --data)")
+    files = find_clips([folder])
+    if not files:
+        _fail(f"no clips under {folder}")
+    clips = [load_clip(f) for f in files]
+    res = evaluate(clips, peers=peers, open_set_test=open_set, progress=lambda m: typer.echo(m, err=True))
+    path = write_report(res, out)
+    typer.echo(f"wrote {path} and {out / 'results.json'}")
+    for k, ok in res["verdicts"].items():
+        typer.echo(f"  {k}: {'met' if ok else 'missed'}")
+
+
+def recognition_text(r: dict) -> str:
+    """What `space recognize` and `offline recognize` print for a person."""
+    if r.get("known", True):
+        head = f"{r['label']}   (confidence {r['confidence']:.2f})"
+    else:
+        head = (f"none of these: the motion is farther from every class of the space than its known motions are "
+                f"(nearest class {r['nearest_label']}, novelty {r['novelty']:.2f} > 1)")
+    lines = [head, f"point in the space ({', '.join(f'{v:.3f}' for v in r['point'])})", "nearest proto-symbols:"]
+    lines += [f"  {n['distance']:9.3f}  {n['label']:<30} {n['name']}" for n in r["nearest"]]
+    return "\n".join(lines)
 
 
 @offline_app.command("generate")

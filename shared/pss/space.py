@@ -4,9 +4,14 @@
 A space holds a database ``D`` of clips abstracted into proto-symbols (left-to-right HMMs,
 :mod:`shared.pss.hmm`), their pairwise eq. 2.4 distances and their points from metric MDS
 (:mod:`shared.pss.mds`). Every HMM of a space has the same number of states; by default that
-number comes from the shortest repetition (half its frames, between 2 and 15) so that no
+number comes from the shortest repetition (85 % of its frames, between 2 and 15) so that no
 state is left without frames. All clips are resampled to the space's frame rate (30 fps by
 default) and encoded by :class:`~shared.pss.features.MotionFeatures`.
+
+Each HMM models the channel groups of :class:`~shared.pss.features.MotionFeatures` together:
+``motion`` (invertible angles and root terms) and ``sensor`` (torques...) give the space its
+geometry (the eq. 2.4 distances MDS places, generation, emphasis), ``position`` (joints in the
+heading frame) decides recognition's label (:mod:`shared.pss.recognition`).
 
 A space is one ``.npz`` file (arrays plus a JSON header, no pickle), written atomically;
 loading it gives identical points, distances and generations. Every random step is seeded.
@@ -14,6 +19,7 @@ loading it gives identical points, distances and generations. Every random step 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass, field
@@ -24,13 +30,17 @@ import numpy as np
 from shared.clip import Clip
 from shared.errors import BadInput, NotFound
 from shared.io.atomic import atomic_write
-from shared.pss.distance import distances_to, distance_matrix
+from shared.pss.distance import ModelBank, distance_matrix, distances_to
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
 from shared.pss.mds import Embedding, place_point, smacof
 from shared.pss.synthesis import combine, generate, point_weights
 
-FORMAT = "mirrorcoach.space/1"
+FORMAT = "mirrorcoach.space/2"
+#: format 1 (mirrorcoach 0.1) has no position group: it loads, generates and associates as it
+#: did, and recognises by the nearest proto-symbol on its angle channels (the old rule)
+READABLE_FORMATS = ("mirrorcoach.space/1", FORMAT)
+GEOMETRY_GROUPS = ("motion", "sensor")
 MAX_STATES = 15
 
 
@@ -43,6 +53,12 @@ class ProtoSymbol:
     hmm: LeftToRightHMM
     clips: list[str] = field(default_factory=list)
     n_frames: list[int] = field(default_factory=list)
+    performers: list[str] = field(default_factory=list)  # skeleton names of its clips ("" if none)
+
+
+def performer(clip: Clip) -> str:
+    """Who performed a clip, as far as the data tells: the name of its skeleton."""
+    return clip.skeleton.name if clip.skeleton is not None else ""
 
 
 @dataclass
@@ -50,13 +66,17 @@ class Recognition:
     """Result of ``F_recog`` (eq. 2.6)."""
 
     point: np.ndarray
-    distances: np.ndarray  # eq. 2.4 distance to every proto-symbol
-    nearest: list[tuple[str, str, float]]  # (name, label, distance), nearest first
-    label: str  # label of the nearest proto-symbol by eq. 2.4
+    distances: np.ndarray  # eq. 2.4 distance to every proto-symbol on the geometry groups (placement)
+    nearest: list[tuple[str, str, float]]  # (name, label, recognition distance), nearest first
+    label: str | None  # the decided class; None: "none of these" (open set)
     label_in_space: str  # label of the nearest point in the space
     stress: float
     hmm: LeftToRightHMM
     seconds: float = 0.0
+    nearest_label: str = ""  # class of the nearest proto-symbol, known or not
+    confidence: float = 1.0  # calibrated probability of nearest_label
+    novelty: float = 0.0  # > 1: farther than the space's known motions (rejected)
+    recognition_distances: np.ndarray | None = None  # eq. 2.4 on the recognition group
 
 
 @dataclass
@@ -87,8 +107,11 @@ class SpaceParams:
 
 
 def default_n_states(min_frames: int) -> int:
-    """Half the frames of the shortest repetition, between 2 and 15 states."""
-    return int(np.clip(min_frames // 2, 2, MAX_STATES))
+    """85 % of the frames of the shortest repetition, between 2 and 15 states.
+
+    Measured (issue 11): on HDM05 at 30 fps (shortest clip 14 frames) 11-14 states recognise
+    98-100 % of unseen actors' clips, 7 states (the former default, half the frames) 83-95 %."""
+    return int(np.clip(round(0.85 * min_frames), 2, MAX_STATES))
 
 
 class ProtoSymbolSpace:
@@ -102,7 +125,11 @@ class ProtoSymbolSpace:
         self.distances = distances
         self.embedding = embedding
         self.name = name
+        self.format = FORMAT
         self._partial_scale: dict[str, float] = {}
+        self._group_models: dict[tuple, list[LeftToRightHMM] | ModelBank] = {}
+        self._calibration = None
+        self._recognition_matrix = None
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -149,7 +176,7 @@ class ProtoSymbolSpace:
             hmm = fit_hmm(seqs, n_states, covariance_type=covariance_type, var_floor=var_floor, backend=backend,
                           n_iter=params.n_iter)
             symbols.append(ProtoSymbol(key, members[0].label or key, hmm, [c.name for c in members],
-                                       [c.n_frames for c in members]))
+                                       [c.n_frames for c in members], [performer(c) for c in members]))
             if progress:
                 progress(i + 1, len(groups))
         return cls.from_symbols(params, features, symbols, name=name)
@@ -157,7 +184,8 @@ class ProtoSymbolSpace:
     @classmethod
     def from_symbols(cls, params: SpaceParams, features: MotionFeatures, symbols: list[ProtoSymbol],
                      name: str = "space") -> "ProtoSymbolSpace":
-        f = distance_matrix([s.hmm for s in symbols])
+        geo = features.group_indices(GEOMETRY_GROUPS)
+        f = distance_matrix([s.hmm.marginal(geo) for s in symbols])
         emb = smacof(f, params.dim)
         return cls(params, features, symbols, f, emb, name=name)
 
@@ -180,14 +208,14 @@ class ProtoSymbolSpace:
             if not reps:
                 raise BadInput("no clips to add")
             symbols.append(ProtoSymbol(as_one, reps[0].label or as_one, self.abstract(reps), [c.name for c in reps],
-                                       [c.n_frames for c in reps]))
+                                       [c.n_frames for c in reps], [performer(c) for c in reps]))
             add = []
         for c in add or []:
             c = c.resample(self.params.fps)
             if c.name in names:
                 raise BadInput(f"space {self.name!r} already has a proto-symbol named {c.name!r}")
             hmm = self.abstract([c])
-            symbols.append(ProtoSymbol(c.name, c.label or c.name, hmm, [c.name], [c.n_frames]))
+            symbols.append(ProtoSymbol(c.name, c.label or c.name, hmm, [c.name], [c.n_frames], [performer(c)]))
             names.add(c.name)
         if not symbols:
             raise BadInput("a space needs at least one proto-symbol")
@@ -222,7 +250,9 @@ class ProtoSymbolSpace:
         raise NotFound(f"no proto-symbol {name_or_label!r} in space {self.name!r}")
 
     # ------------------------------------------------------------------ recognition
-    def _sequences(self, clip_or_clips, groups=("motion", "sensor")) -> list[np.ndarray]:
+    def _sequences(self, clip_or_clips, groups=("motion", "position", "sensor"), min_frames: int | None = None) -> list[np.ndarray]:
+        """Feature frames of the clips at the space's rate; each needs ``min_frames`` frames
+        (default: the space's state count)."""
         clips = [clip_or_clips] if isinstance(clip_or_clips, Clip) else list(clip_or_clips)
         if not clips:
             raise BadInput("nothing to recognise")
@@ -231,16 +261,19 @@ class ProtoSymbolSpace:
             if not np.all(np.isfinite(c.data)):
                 raise BadInput(f"clip {c.name!r} contains NaN or Inf")
             c = c.resample(self.params.fps)
-            if c.n_frames < self.params.n_states:
-                raise BadInput(f"clip {c.name!r} has {c.n_frames} frames at {self.params.fps:g} fps, fewer than the space's "
-                               f"{self.params.n_states} HMM states", frames=c.n_frames, states=self.params.n_states)
+            need = self.params.n_states if min_frames is None else min_frames
+            if c.n_frames < need:
+                raise BadInput(f"clip {c.name!r} has {c.n_frames} frames at {self.params.fps:g} fps, fewer than the "
+                               f"{need} {'HMM states of the space' if min_frames is None else 'frames needed'}",
+                               frames=c.n_frames, states=self.params.n_states)
             seqs.append(self.features.encode(c, groups))
         return seqs
 
-    def abstract(self, clip_or_clips, groups=("motion", "sensor"), n_states: int | None = None) -> LeftToRightHMM:
+    def abstract(self, clip_or_clips, groups=("motion", "position", "sensor"),
+                 n_states: int | None = None) -> LeftToRightHMM:
         """Abstract one or several repetitions into an HMM with the space's settings."""
         p = self.params
-        if groups == ("motion", "sensor") and self.features.sensor_channels:
+        if "sensor" in groups and self.features.sensor_channels:
             clips = [clip_or_clips] if isinstance(clip_or_clips, Clip) else list(clip_or_clips)
             if any(not set(self.features.sensor_channels) <= set(c.channels) for c in clips):
                 raise BadInput("the clip lacks this space's sensor channels; use associate() to estimate them")
@@ -248,23 +281,81 @@ class ProtoSymbolSpace:
         return fit_hmm(seqs, n_states or p.n_states, covariance_type=p.covariance_type, var_floor=p.var_floor,
                        backend=p.backend, n_iter=p.n_iter)
 
+    def models_on(self, groups) -> list[LeftToRightHMM]:
+        """The proto-symbols seen on some channel groups (cached; a space is never changed in place)."""
+        key = tuple(groups)
+        if key not in self._group_models:
+            idx = self.features.group_indices(key)
+            full = len(idx) == self.features.n_features
+            self._group_models[key] = self.models if full else [m.marginal(idx) for m in self.models]
+        return self._group_models[key]
+
+    def bank_on(self, groups) -> ModelBank:
+        """:meth:`models_on` stacked for fast eq. 2.4 (cached)."""
+        key = ("bank",) + tuple(groups)
+        if key not in self._group_models:
+            self._group_models[key] = ModelBank(self.models_on(groups))
+        return self._group_models[key]
+
+    @property
+    def recognition_groups(self) -> tuple[str, ...]:
+        """The channel groups recognition's label is decided on: ``position`` where the space
+        has it, else the geometry groups (format-1 spaces, robots without a skeleton)."""
+        return ("position",) if self.features.has_position else GEOMETRY_GROUPS
+
+    @property
+    def recognition_matrix(self) -> np.ndarray:
+        """Eq. 2.4 between the proto-symbols on the recognition groups."""
+        if self._recognition_matrix is None:
+            self._recognition_matrix = (self.distances if self.recognition_groups == GEOMETRY_GROUPS
+                                        else distance_matrix(self.models_on(self.recognition_groups)))
+        return self._recognition_matrix
+
+    @property
+    def calibration(self):
+        """Confidence temperature and open-set threshold (:mod:`shared.pss.recognition`)."""
+        if self._calibration is None:
+            from shared.pss.recognition import calibrate
+
+            perf = [s.performers[0] if s.performers else "" for s in self.symbols]
+            self._calibration = calibrate(self.recognition_matrix, self.labels, perf if all(perf) else [])
+        return self._calibration
+
     def recognize(self, clip_or_clips, top: int = 5) -> Recognition:
         """``x = F_recog(M)`` (eq. 2.6): abstract the new clip (or the repetitions of one
-        trial) into an HMM, measure eq. 2.4 to every proto-symbol and place it without moving
-        the space's points."""
+        trial) into an HMM, measure eq. 2.4 to every proto-symbol, decide its label (nearest
+        proto-symbol on the recognition group, calibrated confidence, "none of these" when it
+        is farther than the space's known motions; :mod:`shared.pss.recognition`) and place it
+        without moving the space's points."""
         t0 = time.perf_counter()
         hmm = self.abstract(clip_or_clips)
-        f = distances_to(hmm, self.models)
-        rec = self._place(hmm, f, top)
+        geo = self.features.group_indices(GEOMETRY_GROUPS)
+        f = self.bank_on(GEOMETRY_GROUPS).distances(hmm.marginal(geo))
+        rg = self.recognition_groups
+        fr = f if rg == GEOMETRY_GROUPS else self.bank_on(rg).distances(hmm.marginal(self.features.group_indices(rg)))
+        rec = self._place(hmm, f, top, fr)
         rec.seconds = time.perf_counter() - t0
         return rec
 
-    def _place(self, hmm, f, top=5) -> Recognition:
+    def _place(self, hmm, f, top=5, fr=None) -> Recognition:
+        """Eq. 2.6 placement by the geometry distances ``f``. With recognition distances ``fr``
+        the label is decided (:mod:`shared.pss.recognition`); without (association, eq. 2.8,
+        on partial channels) it is the nearest proto-symbol's by ``f``, with no confidence."""
+        from shared.pss.recognition import decide
+
         x, stress = place_point(self.points, f)
-        order = np.argsort(f)
-        nearest = [(self.symbols[i].name, self.symbols[i].label, float(f[i])) for i in order[:top]]
+        order = np.argsort(f if fr is None else fr)
+        dist = f if fr is None else fr
+        nearest = [(self.symbols[i].name, self.symbols[i].label, float(dist[i])) for i in order[:top]]
         in_space = int(np.argmin(np.linalg.norm(self.points - x, axis=1)))
-        return Recognition(x, f, nearest, self.symbols[order[0]].label, self.symbols[in_space].label, stress, hmm)
+        if fr is None:
+            lab = self.symbols[order[0]].label
+            return Recognition(x, f, nearest, lab, self.symbols[in_space].label, stress, hmm, nearest_label=lab,
+                               confidence=float("nan"))
+        d = decide(fr, self.labels, self.calibration)
+        return Recognition(x, f, nearest, d.label, self.symbols[in_space].label, stress, hmm,
+                           nearest_label=d.nearest_label, confidence=d.confidence, novelty=d.novelty,
+                           recognition_distances=fr)
 
     # ------------------------------------------------------------------ generation
     def weights(self, point, method: str = "affine") -> np.ndarray:
@@ -307,11 +398,10 @@ class ProtoSymbolSpace:
 
     # ------------------------------------------------------------------ association
     def _marginal_scale(self, group: str) -> float:
-        """Factor mapping eq. 2.4 distances on one channel group to full distances, fitted by
-        least squares on the space's own pairs."""
+        """Factor mapping eq. 2.4 distances on one channel group to the space's (geometry)
+        distances, fitted by least squares on the space's own pairs."""
         if group not in self._partial_scale:
-            idx = self.features.feature_indices(group)
-            part = distance_matrix([m.marginal(idx) for m in self.models])
+            part = distance_matrix(self.models_on((group,)))
             iu = np.triu_indices(len(self.symbols), 1)
             num = float(np.sum(part[iu] * self.distances[iu]))
             den = float(np.sum(part[iu] ** 2))
@@ -345,11 +435,16 @@ class ProtoSymbolSpace:
         if not self.features.sensor_channels:
             raise BadInput(f"space {self.name!r} has no sensor channels to associate")
         midx = self.features.feature_indices("motion")
-        seq = self._sequences(clip, ("motion",))
+        # the motion is recognised on the recognition group (positions where the space has them:
+        # eq. 3.9 error 27 % against 34 % on the angle channels, HDM05 arm torques, 13 states)
+        group = "position" if self.features.has_position else "motion"
+        seqs = self._sequences(clip, ("motion", "position") if group == "position" else ("motion",))
+        seq = [x[:, midx] for x in seqs]
+        gidx = self.features.feature_indices(group)
         p = self.params
-        hmm = fit_hmm(seq, p.n_states, covariance_type=p.covariance_type, var_floor=p.var_floor, backend=p.backend,
-                      n_iter=p.n_iter)
-        f = distances_to(hmm, [m.marginal(midx) for m in self.models]) * self._marginal_scale("motion")
+        hmm = fit_hmm([x[:, gidx] for x in seqs], p.n_states, covariance_type=p.covariance_type,
+                      var_floor=p.var_floor, backend=p.backend, n_iter=p.n_iter)
+        f = self.bank_on((group,)).distances(hmm) * self._marginal_scale(group)
         rec = self._place(hmm, f)
         c = self.weights(rec.point, method=weighting)
         model = self.synthesize(c)
@@ -369,8 +464,8 @@ class ProtoSymbolSpace:
     def _associate_frames(self, clip, method, seed, weighting="affine") -> Association:
         p = self.params
         groups = ("motion", "sensor") if set(self.features.sensor_channels) <= set(clip.channels) and self.features.sensor_channels else ("motion",)
-        seq = self._sequences(clip, groups)[0]
-        models = self.models if groups == ("motion", "sensor") else [m.marginal(self.features.feature_indices("motion")) for m in self.models]
+        seq = self._sequences(clip, groups, min_frames=2)[0]  # the start of a motion: k <= frames states
+        models = self.models_on(groups)
         best_ll, best_prog = -np.inf, None
         for m in models:
             ll = m.log_likelihood_of([seq], end_in_last=False)
@@ -392,15 +487,19 @@ class ProtoSymbolSpace:
         """Write the space to one ``.npz`` file, atomically (temporary file, then rename)."""
         path = Path(path)
         header = {
-            "format": FORMAT,
+            "format": self.format,  # a format-1 space saved again keeps its content, hence its format
             "name": self.name,
             "params": self.params.to_dict(),
             "features": self.features.to_json(),
             "symbols": [{"name": s.name, "label": s.label, "clips": s.clips, "n_frames": s.n_frames,
+                         "performers": s.performers,
                          "n_iter": s.hmm.n_iter, "converged": s.hmm.converged, "log_likelihood": s.hmm.log_likelihood,
                          "hmm_frames": s.hmm.n_frames} for s in self.symbols],
             "embedding": {"stress": self.embedding.stress, "stress1": self.embedding.stress1,
                           "n_iter": self.embedding.n_iter, "converged": self.embedding.converged},
+            # recognition's decision (shared/pss/recognition.py), kept so that a loaded space
+            # recognises without refitting it (and without importing scipy.optimize)
+            "calibration": dataclasses.asdict(self.calibration),
         }
         arrays = {
             "means": np.stack([s.hmm.means for s in self.symbols]),
@@ -424,8 +523,9 @@ class ProtoSymbolSpace:
             raise NotFound(f"no space file {path}") from None
         except (OSError, KeyError, ValueError) as e:
             raise BadInput(f"{path}: not a readable space file ({e})") from None
-        if header.get("format") != FORMAT:
-            raise BadInput(f"{path}: unknown space format {header.get('format')!r}")
+        if header.get("format") not in READABLE_FORMATS:
+            raise BadInput(f"{path}: unknown space format {header.get('format')!r} (this mirrorcoach reads "
+                           f"{', '.join(READABLE_FORMATS)}; a newer mirrorcoach may have written it)")
         params = SpaceParams(**header["params"])
         features = MotionFeatures.from_json(header["features"])
         symbols = []
@@ -433,10 +533,16 @@ class ProtoSymbolSpace:
             hmm = LeftToRightHMM(arrays["means"][i], arrays["covars"][i], arrays["stay"][i], params.covariance_type,
                                  n_iter=s["n_iter"], converged=s["converged"], log_likelihood=s["log_likelihood"],
                                  n_frames=s["hmm_frames"])
-            symbols.append(ProtoSymbol(s["name"], s["label"], hmm, s["clips"], s["n_frames"]))
+            symbols.append(ProtoSymbol(s["name"], s["label"], hmm, s["clips"], s["n_frames"], s.get("performers", [])))
         e = header["embedding"]
         emb = Embedding(arrays["points"], e["stress"], e["stress1"], e["n_iter"], e["converged"])
-        return cls(params, features, symbols, arrays["distances"], emb, name=header["name"])
+        space = cls(params, features, symbols, arrays["distances"], emb, name=header["name"])
+        space.format = header["format"]
+        if header.get("calibration"):
+            from shared.pss.recognition import Calibration
+
+            space._calibration = Calibration(**header["calibration"])
+        return space
 
     # ------------------------------------------------------------------ summary
     def info(self) -> dict:
@@ -451,4 +557,9 @@ class ProtoSymbolSpace:
             "stress1": self.embedding.stress1,
             "mds_converged": self.embedding.converged,
             "hmm_converged": sum(s.hmm.converged for s in self.symbols),
+            "format": self.format,
+            "recognition": ("nearest proto-symbol on joint positions in the heading frame" if self.features.has_position
+                            else "nearest proto-symbol on the angle channels (format 1: rebuild the space from its "
+                                 "clips for position-based recognition)" if self.format != FORMAT
+                            else "nearest proto-symbol on the motion channels (no skeleton)"),
         }

@@ -1,0 +1,29 @@
+"""``make bench``: the recognition report (issue 11) with its peers, MiniRocket and DTW, in one
+run. Writes ``reports/recognition/`` (report and results) and ``bench/results/recognition.*``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bench.common import parse_args, write_results
+from shared.evaluation import evaluate, report_markdown, write_report
+from shared.io import find_clips, load_clip
+
+
+def main(argv=None) -> int:
+    args = parse_args(__doc__, argv)
+    clips = [load_clip(f) for f in find_clips([args.hdm05 / "amc"])]
+    res = evaluate(clips)
+    write_report(res, Path("reports/recognition"))
+    lines = report_markdown(res).splitlines()
+    write_results(args.out, "recognition", {k: v for k, v in res.items() if k != "splits"} | {
+        "accuracy": {w: {m: r["accuracy"] for m, r in s["methods"].items()} for w, s in res["splits"].items()},
+        "ms_per_clip": {w: {m: 1e3 * r["seconds_per_clip"] for m, r in s["methods"].items()} for w, s in res["splits"].items()},
+    }, lines)
+    print("\n".join(lines[:20]))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

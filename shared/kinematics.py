@@ -1,0 +1,103 @@
+"""Forward kinematics compiled with numba: the hot path of the position channel group.
+
+:meth:`shared.skeleton.Skeleton.forward_kinematics` packs a skeleton into arrays and calls
+:func:`fk_positions`; the numpy/scipy path (:meth:`Skeleton.forward_kinematics_reference`)
+is the reference it is tested against. Kept out of :mod:`shared.skeleton` so that reading a
+clip does not import numba.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def _axis(code, a, out):
+    c, s = np.cos(a), np.sin(a)
+    out[:] = 0.0
+    if code == 0:
+        out[0, 0] = 1.0
+        out[1, 1] = c
+        out[2, 2] = c
+        out[1, 2] = -s
+        out[2, 1] = s
+    elif code == 1:
+        out[1, 1] = 1.0
+        out[0, 0] = c
+        out[2, 2] = c
+        out[2, 0] = -s
+        out[0, 2] = s
+    else:
+        out[2, 2] = 1.0
+        out[0, 0] = c
+        out[1, 1] = c
+        out[0, 1] = -s
+        out[1, 0] = s
+
+
+@numba.njit(cache=True, nogil=True)
+def _mul(a, b, out):
+    """3x3 product by hand (numba's ``@`` calls BLAS, whose overhead dominates at 3x3)."""
+    for i in range(3):
+        for k in range(3):
+            out[i, k] = a[i, 0] * b[0, k] + a[i, 1] * b[1, k] + a[i, 2] * b[2, k]
+
+
+@numba.njit(cache=True, nogil=True)
+def fk_positions(ang, axes, intrinsic, pre, parent, offset, root_t, end_joint, end_offset):
+    """Joint and end-site positions (T, J + E, 3) in the skeleton's unit.
+
+    ``ang`` (T, J, 3) radians in each joint's Euler order, ``axes`` (J, 3) axis codes
+    (0 x, 1 y, 2 z, -1 none), ``intrinsic`` (J,), ``pre`` (J, 3, 3) the ASF axis
+    pre-rotation ``C`` (``L = C M C^T``), ``parent`` (J,) (-1 for the root), ``offset``
+    (J, 3), ``root_t`` (T, 3), ``end_joint`` (E,) and ``end_offset`` (E, 3).
+    """
+    n, nj = ang.shape[0], ang.shape[1]
+    ne = end_joint.shape[0]
+    out = np.zeros((n, nj + ne, 3))
+    glob = np.zeros((nj, 3, 3))
+    m = np.zeros((3, 3))
+    r = np.zeros((3, 3))
+    tmp = np.zeros((3, 3))
+    local = np.zeros((3, 3))
+    pre_t = np.zeros((nj, 3, 3))
+    for j in range(nj):
+        pre_t[j] = pre[j].T
+    for t in range(n):
+        for j in range(nj):
+            m[:] = 0.0
+            m[0, 0] = 1.0
+            m[1, 1] = 1.0
+            m[2, 2] = 1.0
+            for k in range(3):
+                code = axes[j, k]
+                if code < 0:
+                    continue
+                _axis(code, ang[t, j, k], r)
+                # intrinsic: M = R1 R2 R3 (right-multiply); extrinsic: M = R3 R2 R1 (left-multiply)
+                if intrinsic[j]:
+                    _mul(m, r, tmp)
+                else:
+                    _mul(r, m, tmp)
+                m[:] = tmp
+            _mul(pre[j], m, tmp)
+            _mul(tmp, pre_t[j], local)
+            p = parent[j]
+            if p < 0:
+                glob[j] = local
+                for a in range(3):
+                    out[t, j, a] = offset[j, a] + root_t[t, a]
+            else:
+                _mul(glob[p], local, tmp)
+                glob[j] = tmp
+                g = glob[p]
+                for a in range(3):
+                    out[t, j, a] = out[t, p, a] + g[a, 0] * offset[j, 0] + g[a, 1] * offset[j, 1] + g[a, 2] * offset[j, 2]
+        for e in range(ne):
+            j = end_joint[e]
+            g = glob[j]
+            for a in range(3):
+                out[t, nj + e, a] = (out[t, j, a] + g[a, 0] * end_offset[e, 0] + g[a, 1] * end_offset[e, 1]
+                                     + g[a, 2] * end_offset[e, 2])
+    return out

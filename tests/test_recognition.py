@@ -1,0 +1,160 @@
+"""Recognition as a user means it (issue 11): position channels, the decided label, its
+confidence, "none of these", old space files, and the compiled forward kinematics."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from shared.errors import BadInput
+from shared.evaluation import dtw_recognition, pss_recognition
+from shared.io import find_clips, load_clip, save_clip
+from shared.pss.recognition import Calibration, calibrate, conformal_threshold, decide
+from shared.pss.space import FORMAT, ProtoSymbolSpace
+from shared.skeleton import Skeleton
+
+FORMAT1 = Path(__file__).parent / "data" / "space_format1.npz"  # written by mirrorcoach 0.1 (commit 8906865)
+
+
+# ---------------------------------------------------------------------------- forward kinematics
+def test_compiled_forward_kinematics_equals_the_scipy_reference(dev_clips, tmp_path):
+    for c in dev_clips[::40]:
+        c = c.resample(30)
+        fast = c.skeleton.forward_kinematics(c.data, c.channels)
+        ref = c.skeleton.forward_kinematics_reference(c.data, c.channels)
+        assert fast.shape == ref.shape and np.abs(fast - ref).max() < 1e-9
+    # BVH: intrinsic upper-case Euler orders and no ASF axis pre-rotation
+    save_clip(dev_clips[0], tmp_path / "a.bvh")
+    b = load_clip(tmp_path / "a.bvh")
+    assert b.skeleton.joints[1].euler.isupper()
+    assert np.abs(b.positions() - b.skeleton.forward_kinematics_reference(b.data, b.channels)).max() < 1e-9
+
+
+def test_a_skeleton_out_of_order_is_refused_not_computed(dev_clips):
+    sk = Skeleton.from_json(dev_clips[0].skeleton.to_json())
+    sk.joints[3].parent = 7  # a joint before its parent (or a cycle): the compiled loop must never see it
+    with pytest.raises(BadInput, match="after its parent"):
+        sk.forward_kinematics(dev_clips[0].data, dev_clips[0].channels)
+
+
+# ---------------------------------------------------------------------------- position channels
+def _moved(clip, yaw_deg: float, shift_m: float):
+    """The same motion performed elsewhere in the room, facing elsewhere."""
+    sk = clip.skeleton
+    root = sk.root
+    rot = sk.global_root_rotation(clip.data, clip.channels)
+    turn = Rotation.from_euler("y", yaw_deg, degrees=True)
+    pre = Rotation.from_matrix(root.pre)
+    local = pre.inv() * (turn * rot) * pre
+    ang = local.as_euler(root.euler, degrees=True)
+    data = clip.data.copy()
+    for k, ax in enumerate(root.euler.lower()):
+        data[:, clip.channels.index(f"{root.name}.r{ax}")] = np.rad2deg(np.unwrap(np.deg2rad(ang[:, k])))
+    t = np.column_stack([clip.column(f"{root.name}.t{a}") for a in "xyz"])
+    t = turn.apply(t) + np.array([shift_m / sk.unit_m, 0.0, 0.0])
+    for k, a in enumerate("xyz"):
+        data[:, clip.channels.index(f"{root.name}.t{a}")] = t[:, k]
+    return clip.with_data(data, name=clip.name + "-moved")
+
+
+def test_position_channels_do_not_depend_on_where_a_person_stands_or_faces(dev_space, dev_split):
+    f = dev_space.features
+    pos = f.feature_indices("position")
+    assert len(pos) > 0 and set(pos).isdisjoint(f.feature_indices("motion"))
+    c = dev_split[1][0].resample(30)
+    moved = _moved(c, yaw_deg=90.0, shift_m=1.0)
+    assert np.abs(moved.positions() - c.positions()).max() > 0.5  # really elsewhere in the room
+    assert np.abs(f.encode(moved)[:, pos] - f.encode(c)[:, pos]).max() < 1e-6
+    a, b = dev_space.recognize(c), dev_space.recognize(moved)
+    assert a.nearest_label == b.nearest_label and np.allclose(a.recognition_distances, b.recognition_distances, rtol=1e-4)
+
+
+def test_generation_reads_the_motion_channels_and_ignores_the_position_group(dev_space):
+    clip = dev_space.generate(dev_space.points[0])
+    assert clip.channels == dev_space.features.motion_channels and np.all(np.isfinite(clip.data))
+
+
+# ---------------------------------------------------------------------------- the label
+def test_unseen_actor_is_recognised_next_to_dtw(dev_space, dev_split, capsys):
+    train, test = dev_split
+    ours = pss_recognition(dev_space, test)
+    dtw = dtw_recognition(dev_space, train, test)
+    n = len(test)
+    with capsys.disabled():
+        print(f"\nrecognition bd+bk -> dg, {n} clips: PSS {ours.accuracy:.3f} ({1e3 * ours.seconds_per_clip:.1f} ms/clip), "
+              f"1-NN DTW on positions {dtw.accuracy:.3f}")
+    assert len(ours.per_class) == 11
+    assert ours.accuracy >= 0.95
+    assert round(ours.accuracy * n) >= round(dtw.accuracy * n) - 1  # never below the peer by more than one clip
+
+
+def test_recognition_gives_a_calibrated_confidence_and_names_the_label(dev_space, dev_split):
+    cal = dev_space.calibration
+    assert cal.scheme == "across performers" and cal.temperature > 0 and cal.n_calibration > 100
+    recs = [dev_space.recognize(c) for c in dev_split[1][:12]]
+    for r in recs:
+        assert 0.0 <= r.confidence <= 1.0
+        assert r.label in (None, r.nearest_label)
+        assert r.nearest[0][1] == r.nearest_label
+    # a generated half squat, half kick is less certain than the real clips are
+    a, b = dev_space.symbol("HDM_bd_squat1Reps_001_120"), dev_space.symbol("HDM_bd_kickLFront1Reps_001_120")
+    mid = dev_space.recognize(dev_space.generate(weights=dev_space.mix_weights({dev_space.names[a]: 0.5,
+                                                                                dev_space.names[b]: 0.5})))
+    assert mid.confidence < np.median([r.confidence for r in recs])
+
+
+def test_a_motion_of_no_known_class_comes_back_as_none_of_these(dev_space, dev_split):
+    c = dev_split[1][0].resample(30)
+    rng = np.random.default_rng(3)
+    data = c.data.copy()
+    angles = [i for i, ch in enumerate(c.channels) if ch.split(".")[-1].startswith("r") and not ch.startswith("root")]
+    walk = np.cumsum(rng.normal(0.0, 6.0, size=(c.n_frames, len(angles))), axis=0)  # flailing: no class of HDM05
+    data[:, angles] += walk
+    r = dev_space.recognize(c.with_data(data, name="flail"))
+    assert r.label is None and r.novelty > 1.0 and r.nearest_label
+
+
+def test_open_set_rule_as_documented():
+    d = np.array([[0, 1, 9, 9], [1, 0, 9, 9], [9, 9, 0, 1], [9, 9, 1, 0]], float)
+    cal = calibrate(d, ["a", "a", "b", "b"], ["p", "q", "p", "q"])
+    assert cal.scheme == "across performers" and cal.threshold == np.inf  # 2 per class: too few to reject
+    assert conformal_threshold(np.arange(1, 100), 0.98) == 98.0  # ceil(100 * 0.98) = 98th smallest
+    c = Calibration(["a", "b"], 1.0, threshold=2.0, ratio_threshold=0.5, n_calibration=100, scheme="across performers")
+    assert decide(np.array([1.0, 5.0]), ["a", "b"], c).label == "a"
+    far = decide(np.array([3.0, 9.0]), ["a", "b"], c)
+    assert far.label is None and far.nearest_label == "a" and far.novelty == pytest.approx(1.5)
+    between = decide(np.array([1.0, 1.2]), ["a", "b"], c)  # not clearly nearer one class than the other
+    assert between.label is None and between.novelty == pytest.approx(1.0 / 1.2 / 0.5)
+
+
+# ---------------------------------------------------------------------------- files of 0.1
+def test_a_space_file_of_format_1_still_loads_generates_and_recognises(bundled, tmp_path):
+    space = ProtoSymbolSpace.load(FORMAT1)
+    assert space.format == "mirrorcoach.space/1" and not space.features.has_position
+    assert "format 1" in space.info()["recognition"]
+    squat = next(load_clip(f) for f in find_clips([bundled / "amc" / "squat1Reps"]) if "_dg_" in f.name)
+    r = space.recognize(squat)
+    assert r.nearest_label == "squat1Reps" and r.label == "squat1Reps"  # 16 clips: too few to ever reject
+    assert np.all(np.isfinite(space.generate(space.points[0]).data))
+    # saved again, it keeps its format (it has no position channels) and loads back identically
+    back = ProtoSymbolSpace.load(space.save(tmp_path / "again.npz"))
+    assert back.format == "mirrorcoach.space/1" and np.array_equal(back.points, space.points)
+    assert back.recognize(squat).nearest_label == "squat1Reps"
+
+
+def test_a_space_file_of_an_unknown_format_is_a_clear_error(tmp_path):
+    with np.load(FORMAT1, allow_pickle=False) as z:
+        arrays = {k: np.array(z[k]) for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    header["format"] = "mirrorcoach.space/9"
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "future.npz", **arrays)
+    with pytest.raises(BadInput, match="unknown space format 'mirrorcoach.space/9'.*reads"):
+        ProtoSymbolSpace.load(tmp_path / "future.npz")
+    shutil.copy(FORMAT1, tmp_path / "copy.npz")
+    assert ProtoSymbolSpace.load(tmp_path / "copy.npz").format != FORMAT
