@@ -124,16 +124,28 @@ class Skeleton:
         """Joint positions in metres, shape (T, J [+ leaves], 3).
 
         ``data`` holds the clip's frames over ``channels``; channels the skeleton does not
-        know are ignored, missing ones are zero. Compiled
-        (numba, :mod:`shared.kinematics`); :meth:`forward_kinematics_reference` is the same
-        map through scipy's ``Rotation`` and is what this one is tested against.
+        know are ignored, missing ones are zero. Compiled (numba, :mod:`shared.kinematics`);
+        :meth:`forward_kinematics_reference` is the same map through scipy's ``Rotation``
+        and is what this one is tested against.
         """
         from shared.kinematics import fk_positions
 
         data = np.asarray(data, dtype=float)
         n = data.shape[0]
-        col = {c: i for i, c in enumerate(channels)}
+        k = self._fk_arrays(tuple(channels), ends)
         padded = np.concatenate([data, np.zeros((n, 1))], axis=1)  # column -1: a missing channel is 0
+        pos = fk_positions(np.ascontiguousarray(np.deg2rad(padded[:, k["cols"]])), k["axes"], k["intrinsic"], k["pre"],
+                           k["parent"], k["offset"], np.ascontiguousarray(padded[:, k["root_t"]]), k["end_joint"],
+                           k["end_offset"])
+        return pos * self.unit_m
+
+    def _fk_arrays(self, channels: tuple[str, ...], ends: bool) -> dict:
+        """The skeleton packed for :func:`shared.kinematics.fk_positions`, cached per channel
+        layout (a skeleton is not changed once read; :meth:`from_json` makes a new one)."""
+        cache = self.__dict__.setdefault("_fk_cache", {})
+        key = (channels, ends)
+        if key in cache:
+            return cache[key]
         nj = len(self.joints)
         bad = [j.name for i, j in enumerate(self.joints) if not (-1 <= j.parent < i) or (j.parent < 0) != (i == 0)]
         if bad:
@@ -141,24 +153,25 @@ class Skeleton:
 
             raise BadInput(f"skeleton {self.name!r}: joint {bad[0]!r} does not come after its parent "
                            "(a skeleton lists one root first, then every joint after its parent)")
+        col = {c: i for i, c in enumerate(channels)}
         axes = np.full((nj, 3), -1, dtype=np.int64)
         cols = np.full((nj, 3), -1, dtype=np.int64)
         for i, j in enumerate(self.joints):
             for k, ax in enumerate(j.euler.lower()):
                 axes[i, k] = "xyz".index(ax)
                 cols[i, k] = col.get(f"{j.name}.r{ax}", -1)
-        ang = np.deg2rad(padded[:, cols])
-        root = self.joints[0]
-        root_t = np.ascontiguousarray(padded[:, [col.get(f"{root.name}.{d}", -1) for d in TRANS_DOFS]])
         parents = {j.parent for j in self.joints}
         ends_at = [i for i, j in enumerate(self.joints) if ends and j.end is not None and i not in parents]
-        pos = fk_positions(np.ascontiguousarray(ang), axes, np.array([j.euler.isupper() for j in self.joints]),
-                           np.stack([j.pre for j in self.joints]).astype(float),
-                           np.array([j.parent for j in self.joints], dtype=np.int64),
-                           np.stack([j.offset for j in self.joints]).astype(float), root_t,
-                           np.array(ends_at, dtype=np.int64),
-                           np.array([self.joints[i].end for i in ends_at], dtype=float).reshape(-1, 3))
-        return pos * self.unit_m
+        cache[key] = {
+            "cols": cols, "axes": axes, "intrinsic": np.array([j.euler.isupper() for j in self.joints]),
+            "pre": np.stack([j.pre for j in self.joints]).astype(float),
+            "parent": np.array([j.parent for j in self.joints], dtype=np.int64),
+            "offset": np.stack([j.offset for j in self.joints]).astype(float),
+            "root_t": [col.get(f"{self.root.name}.{d}", -1) for d in TRANS_DOFS],
+            "end_joint": np.array(ends_at, dtype=np.int64),
+            "end_offset": np.array([self.joints[i].end for i in ends_at], dtype=float).reshape(-1, 3),
+        }
+        return cache[key]
 
     def root_matrices(self, data: np.ndarray, channels: list[str]) -> np.ndarray:
         """The root's rotation matrices (T, 3, 3) ``C M C^T`` in numpy (no scipy import):

@@ -35,8 +35,12 @@ def test_space_build_recognize_generate(bundled, tmp_path):
     held = next((bundled / "amc/squat1Reps").glob("HDM_dg_*.amc"))
     r = run("offline", "recognize", space, held, "--json")
     assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["label"] == "squat1Reps"
-    names = [n["name"] for n in json.loads(r.stdout)["nearest"]]
+    rec = json.loads(r.stdout)
+    assert rec["label"] == "squat1Reps" and rec["known"] and 0.0 <= rec["confidence"] <= 1.0
+    names = [n["name"] for n in rec["nearest"]]
+    r = run("offline", "recognize", space, held)  # for a person: the class and its confidence first
+    assert r.returncode == 0 and r.stdout.startswith("squat1Reps   (confidence "), r.stdout
+    assert "point in the space" in r.stdout and names[0] in r.stdout
     r = run("offline", "generate", space, "--mix", f"{names[0]}=3", "--mix", f"{names[1]}=-2", "--out", tmp_path / "e.bvh")
     assert r.returncode == 0, r.stderr
     assert np.all(np.isfinite(load_clip(tmp_path / "e.bvh").data))

@@ -75,6 +75,7 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     for clip in test:
         r = _checked(contract.RECOGNIZE, c.request("pss", "recognize", {"space": "base", "clips": [clip_to_wire(clip, False)]}))
         assert r["label"] == clip.label and r["point"].shape == (3,) and len(r["nearest"]) == 5
+        assert r["known"] and r["nearest_label"] == clip.label and 0.0 <= r["confidence"] <= 1.0
         assert [n["distance"] for n in r["nearest"]] == sorted(n["distance"] for n in r["nearest"])
 
     names = [p["name"] for p in info["proto_symbols"]]

@@ -128,7 +128,7 @@ def _guttman_point(points, f, starts, max_iter, eps):
     return x, s
 
 
-def place_point(points: np.ndarray, f: np.ndarray, *, max_iter: int = 300, eps: float = 1e-9) -> tuple[np.ndarray, float]:
+def place_point(points: np.ndarray, f: np.ndarray, *, max_iter: int = 50, eps: float = 1e-9) -> tuple[np.ndarray, float]:
     """Out-of-sample embedding (eq. 2.6): the point ``x`` minimising
     ``sum_i (f_i - |x - x_i|)^2`` with the space's points ``x_i`` fixed.
 
