@@ -27,6 +27,7 @@ class Clip:
     name: str = ""
     label: str | None = None
     source: str | None = None
+    read_as: dict = field(default_factory=dict)  # what the reader decided about the file (units, up axis, ...)
 
     def __post_init__(self):
         self.data = np.asarray(self.data, dtype=np.float64)

@@ -45,13 +45,14 @@ def _mul(a, b, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def fk_positions(ang, axes, intrinsic, pre, parent, offset, root_t, end_joint, end_offset):
+def fk_positions(ang, axes, intrinsic, pre, parent, offset, trans, end_joint, end_offset):
     """Joint and end-site positions (T, J + E, 3) in the skeleton's unit.
 
     ``ang`` (T, J, 3) radians in each joint's Euler order, ``axes`` (J, 3) axis codes
     (0 x, 1 y, 2 z, -1 none), ``intrinsic`` (J,), ``pre`` (J, 3, 3) the ASF axis
     pre-rotation ``C`` (``L = C M C^T``), ``parent`` (J,) (-1 for the root), ``offset``
-    (J, 3), ``root_t`` (T, 3), ``end_joint`` (E,) and ``end_offset`` (E, 3).
+    (J, 3), ``trans`` (T, J, 3) every joint's translation channels (added to its offset in its
+    parent's frame; the root's in the world), ``end_joint`` (E,) and ``end_offset`` (E, 3).
     """
     n, nj = ang.shape[0], ang.shape[1]
     ne = end_joint.shape[0]
@@ -84,16 +85,20 @@ def fk_positions(ang, axes, intrinsic, pre, parent, offset, root_t, end_joint, e
             _mul(pre[j], m, tmp)
             _mul(tmp, pre_t[j], local)
             p = parent[j]
+            ox = offset[j, 0] + trans[t, j, 0]
+            oy = offset[j, 1] + trans[t, j, 1]
+            oz = offset[j, 2] + trans[t, j, 2]
             if p < 0:
                 glob[j] = local
-                for a in range(3):
-                    out[t, j, a] = offset[j, a] + root_t[t, a]
+                out[t, j, 0] = ox
+                out[t, j, 1] = oy
+                out[t, j, 2] = oz
             else:
                 _mul(glob[p], local, tmp)
                 glob[j] = tmp
                 g = glob[p]
                 for a in range(3):
-                    out[t, j, a] = out[t, p, a] + g[a, 0] * offset[j, 0] + g[a, 1] * offset[j, 1] + g[a, 2] * offset[j, 2]
+                    out[t, j, a] = out[t, p, a] + g[a, 0] * ox + g[a, 1] * oy + g[a, 2] * oz
         for e in range(ne):
             j = end_joint[e]
             g = glob[j]

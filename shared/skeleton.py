@@ -124,7 +124,10 @@ class Skeleton:
         """Joint positions in metres, shape (T, J [+ leaves], 3).
 
         ``data`` holds the clip's frames over ``channels``; channels the skeleton does not
-        know are ignored, missing ones are zero. Compiled (numba, :mod:`shared.kinematics`);
+        know are ignored, missing ones are zero. A joint's translation channels (the root's,
+        and any other joint's: BVH files that give every joint 6 channels) add to its offset
+        in its parent's frame: ``p_j = p_parent + R_parent (offset_j + t_j)`` (readers bring
+        files that mean "replace the offset" to this form, :mod:`shared.io.bvh`). Compiled (numba, :mod:`shared.kinematics`);
         :meth:`forward_kinematics_reference` is the same map through scipy's ``Rotation``
         and is what this one is tested against.
         """
@@ -135,7 +138,7 @@ class Skeleton:
         k = self._fk_arrays(tuple(channels), ends)
         padded = np.concatenate([data, np.zeros((n, 1))], axis=1)  # column -1: a missing channel is 0
         pos = fk_positions(np.ascontiguousarray(np.deg2rad(padded[:, k["cols"]])), k["axes"], k["intrinsic"], k["pre"],
-                           k["parent"], k["offset"], np.ascontiguousarray(padded[:, k["root_t"]]), k["end_joint"],
+                           k["parent"], k["offset"], np.ascontiguousarray(padded[:, k["tcols"]]), k["end_joint"],
                            k["end_offset"])
         return pos * self.unit_m
 
@@ -167,7 +170,7 @@ class Skeleton:
             "pre": np.stack([j.pre for j in self.joints]).astype(float),
             "parent": np.array([j.parent for j in self.joints], dtype=np.int64),
             "offset": np.stack([j.offset for j in self.joints]).astype(float),
-            "root_t": [col.get(f"{self.root.name}.{d}", -1) for d in TRANS_DOFS],
+            "tcols": np.array([[col.get(f"{j.name}.{d}", -1) for d in TRANS_DOFS] for j in self.joints], dtype=np.int64),
             "end_joint": np.array(ends_at, dtype=np.int64),
             "end_offset": np.array([self.joints[i].end for i in ends_at], dtype=float).reshape(-1, 3),
         }
@@ -213,12 +216,12 @@ class Skeleton:
         pos = np.zeros((n, len(self.joints), 3))
         end_pos = []
         for i, j in enumerate(self.joints):
+            t = np.stack([values.get(f"{j.name}.{d}", np.zeros(n)) for d in TRANS_DOFS], axis=1)
             if j.parent < 0:
-                t = np.stack([values.get(f"{j.name}.{d}", np.zeros(n)) for d in TRANS_DOFS], axis=1)
                 pos[:, i] = j.offset + t
                 glob.append(local[i])
             else:
-                pos[:, i] = pos[:, j.parent] + glob[j.parent].apply(j.offset)
+                pos[:, i] = pos[:, j.parent] + glob[j.parent].apply(j.offset + t)
                 glob.append(glob[j.parent] * local[i])
             if ends and j.end is not None and not self.children(i):
                 end_pos.append(pos[:, i] + glob[i].apply(j.end))

@@ -71,6 +71,12 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
     if skeleton is None or not skeleton.joints:
         raise BadInput("a human body needs a skeleton with joints")
     sk = skeleton
+    from shared.io.conventions import HUMAN_HEIGHT_M
+
+    height = sk.rest_height()
+    if not HUMAN_HEIGHT_M[0] <= height <= HUMAN_HEIGHT_M[1]:
+        raise BadInput(f"skeleton {sk.name!r} is {height:.3g} m tall in its rest pose: not a person "
+                       f"({HUMAN_HEIGHT_M[0]:g}-{HUMAN_HEIGHT_M[1]:g} m); is its length unit right? (--units)")
     unit = sk.unit_m
     spec = mujoco.MjSpec()
     spec.compiler.degree = False

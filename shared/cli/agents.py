@@ -11,7 +11,7 @@ from typing import Optional
 
 import typer
 
-from shared.cli.app import SKELETON_HELP, _fail, app
+from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
 from shared.cli.cluster import _client, _jsonable, _wire
 
 sim_app = typer.Typer(help="MuJoCo bodies on the simulator service (needs `make up`).", no_args_is_help=True)
@@ -44,11 +44,11 @@ def sim_perform(body: str = typer.Argument(..., help="A robot's name (self, othe
                 as_json: bool = typer.Option(False, "--json", help="Print the feasibility report as JSON.")):
     """Perform a motion with a body: joint torques (inverse dynamics), centre of gravity, feasibility."""
     from schemas.common import clip_from_wire
-    from shared.io import load_clip, save_clip
+    from shared.io import save_clip
 
     if out.suffix.lower() != ".npz":
         _fail("--out must be a .npz file (BVH and AMC hold motion only; NPZ keeps the torque channels' names)")
-    req = {**_body_request(body), "clip": _wire(load_clip(clip, skeleton=skeleton), with_skeleton=False)}
+    req = {**_body_request(body), "clip": _wire(read_clip(clip, skeleton=skeleton), with_skeleton=False)}
     if mass is not None:
         req["mass"] = mass
     with _client() as c:
@@ -93,14 +93,12 @@ def other_ask(name: str = typer.Argument(..., help="Name of the other."),
               skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
               timeout: float = typer.Option(300.0, help="Seconds to wait for a person's answer.")):
     """Ask an other how heavy a motion felt, or which of two motions felt heavier."""
-    from shared.io import load_clip
-
     if len(clips) not in (1, 2):
         _fail("give one motion (open question) or two (comparative question)")
     kind = "open" if len(clips) == 1 else "compare"
     text = "How heavy did that feel?" if kind == "open" else "Which felt heavier, the first or the second?"
     req = {"other": name, "kind": kind, "text": text, "timeout": timeout,
-           "clips": [_wire(load_clip(p, skeleton=skeleton)) for p in clips]}
+           "clips": [_wire(read_clip(p, skeleton=skeleton)) for p in clips]}
     with _client() as c:
         r = c.request("simulator", "other_ask", req, timeout=timeout + 30)
     typer.echo(r["answer"])
@@ -186,10 +184,8 @@ def learner_create(name: str = typer.Argument(...), target: Path = typer.Argumen
                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                    replace: bool = typer.Option(False, "--replace")):
     """Create a simulated learner of a target motion."""
-    from shared.io import load_clip
-
     with _client() as c:
-        r = c.request("simulator", "learner_create", {"learner": name, "target": _wire(load_clip(target, skeleton=skeleton)),
+        r = c.request("simulator", "learner_create", {"learner": name, "target": _wire(read_clip(target, skeleton=skeleton)),
                                                       "population_seed": population_seed, "index": index,
                                                       "replace": replace})
     typer.echo(f"created learner {r['learner']} ({len(r['channels'])} channels)")
@@ -202,9 +198,9 @@ def learner_imitate(name: str = typer.Argument(...), demonstration: Path = typer
                     skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Show a learner a motion; write its next attempt (5 repetitions) as BVH."""
     from schemas.common import clip_from_wire
-    from shared.io import load_clip, save_clip
+    from shared.io import save_clip
 
-    demo = load_clip(demonstration, skeleton=skeleton)
+    demo = read_clip(demonstration, skeleton=skeleton)
     req = {"learner": name, "demonstration": _wire(demo)}
     if adverb:
         req["adverb"] = adverb
@@ -289,10 +285,10 @@ def estimator_estimate(name: str = typer.Argument(...), clip: Path = typer.Argum
                        out: Optional[Path] = typer.Option(None, help="Write the motion with the estimated torques (.npz).")):
     """How heavy the other would feel a motion, and its estimated torques."""
     from schemas.common import clip_from_wire
-    from shared.io import load_clip, save_clip
+    from shared.io import save_clip
 
     with _client() as c:
-        r = c.request("estimator", "estimate", {"estimate": name, "clip": _wire(load_clip(clip)), "method": method})
+        r = c.request("estimator", "estimate", {"estimate": name, "clip": _wire(read_clip(clip)), "method": method})
     typer.echo(f"{r['word']} (k = {r['k']}, g = {r['g']:.4f}, {method})")
     if out is not None:
         save_clip(clip_from_wire(r["clip"]), out)

@@ -27,6 +27,28 @@ app.add_typer(clip_app, name="clip")
 app.add_typer(offline_app, name="offline")
 
 SKELETON_HELP = "ASF skeleton for AMC files (default: found beside the file or in a sibling asf/ folder)."
+#: how this command reads motion files (the root options; README "Files from other tools")
+READING: dict[str, str | None] = {"units": None, "up": None, "translations": None}
+
+
+@app.callback()
+def reading_options(units: Optional[str] = typer.Option(None, "--units", help="Length unit of the motion files: cm, m, mm, "
+                                                        "in or cmu (default: read off the body's height, 1-2.2 m)."),
+                    up: Optional[str] = typer.Option(None, "--up", help="Up axis of BVH files: y or z (default: from "
+                                                     "where the feet are)."),
+                    translations: Optional[str] = typer.Option(None, "--translations", help="BVH position channels: "
+                                                               "'replace' the joint offset (Blender), 'add' to it, or "
+                                                               "'auto' (default: the first frame tells, else Blender).")):
+    """mirrorcoach: motion coaching with the Proto-symbol Space method. The options before the
+    command say how the motion files it reads are to be read."""
+    READING.update(units=units, up=up, translations=translations)
+
+
+def read_clip(path, skeleton=None, label: str | None = None):
+    """:func:`shared.io.load_clip` with the reading options of this command line."""
+    from shared.io import load_clip
+
+    return load_clip(path, skeleton=skeleton, label=label, **READING)
 
 
 def _fail(msg: str) -> None:
@@ -39,16 +61,16 @@ def clip_info(file: Path = typer.Argument(..., help="Clip file: .amc, .bvh or .n
               skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
               as_json: bool = typer.Option(False, "--json", help="Machine-readable output.")):
     """Frames, frame rate, duration, skeleton and channel groups of a clip."""
-    from shared.io import load_clip
-
-    c = load_clip(file, skeleton=skeleton)
+    c = read_clip(file, skeleton=skeleton)
     info = {
         "file": str(file), "name": c.name, "label": c.label, "frames": c.n_frames, "fps": c.fps,
         "duration_s": round(c.duration, 4), "channels": len(c.channels),
         "groups": {g: len(v) for g, v in c.groups.items()},
         "skeleton": None if c.skeleton is None else {"name": c.skeleton.name, "joints": len(c.skeleton.joints),
                                                      "format": c.skeleton.source_format,
-                                                     "unit_m": c.skeleton.unit_m},
+                                                     "unit_m": c.skeleton.unit_m,
+                                                     "height_m": round(c.skeleton.rest_height(), 4)},
+        "read_as": c.read_as,
         "range_deg": [float(np.min(c.data)), float(np.max(c.data))] if c.data.size else None,
     }
     if as_json:
@@ -60,7 +82,9 @@ def clip_info(file: Path = typer.Argument(..., help="Clip file: .amc, .bvh or .n
     typer.echo(f"  channels  {len(c.channels)}: " + ", ".join(f"{g} {n}" for g, n in info["groups"].items()))
     if c.skeleton is not None:
         typer.echo(f"  skeleton  {c.skeleton.name} ({len(c.skeleton.joints)} joints, {c.skeleton.source_format}, "
-                   f"1 unit = {c.skeleton.unit_m:.4g} m)")
+                   f"1 unit = {c.skeleton.unit_m:.4g} m, {c.skeleton.rest_height():.2f} m tall at rest)")
+    if c.read_as:
+        typer.echo("  read as   " + ", ".join(f"{k} {', '.join(v) if isinstance(v, list) else v}" for k, v in c.read_as.items()))
 
 
 @clip_app.command("convert")
@@ -69,9 +93,9 @@ def clip_convert(src: Path = typer.Argument(..., help="Input clip: .amc, .bvh or
                  skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                  fps: Optional[float] = typer.Option(None, "--fps", help="Resample to this frame rate first.")):
     """Convert a clip between AMC, BVH and NPZ (BVH holds motion only; NPZ keeps everything)."""
-    from shared.io import load_clip, save_clip
+    from shared.io import save_clip
 
-    c = load_clip(src, skeleton=skeleton)
+    c = read_clip(src, skeleton=skeleton)
     if fps is not None:
         c = c.resample(fps)
     if dst.exists() and dst.resolve() == src.resolve():
@@ -83,12 +107,12 @@ def clip_convert(src: Path = typer.Argument(..., help="Input clip: .amc, .bvh or
 def _load_clips(paths: list[Path], skeleton, label: str | None = None):
     from rich.progress import track
 
-    from shared.io import find_clips, load_clip
+    from shared.io import find_clips
 
     files = find_clips(paths)
     if not files:
         _fail("no clip files (.amc, .bvh, .npz) under the given paths")
-    clips = [load_clip(f, skeleton=skeleton) for f in track(files, description="reading clips", transient=True,
+    clips = [read_clip(f, skeleton=skeleton) for f in track(files, description="reading clips", transient=True,
                                                              disable=not sys.stderr.isatty())]
     if label is not None:
         for c in clips:
@@ -150,11 +174,10 @@ def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
     """Recognise a motion: its class with a calibrated confidence (or "none of these"), its
     nearest proto-symbols and its point in the space (eq. 2.6). How the label is decided:
     README, "How a motion is recognised"."""
-    from shared.io import load_clip
     from shared.pss.space import ProtoSymbolSpace
 
     space = ProtoSymbolSpace.load(space_file)
-    reps = [load_clip(c, skeleton=skeleton) for c in clips]
+    reps = [read_clip(c, skeleton=skeleton) for c in clips]
     r = space.recognize(reps)
     out = {**({"label": r.label} if r.label is not None else {}), "known": r.label is not None,
            "nearest_label": r.nearest_label, "confidence": r.confidence, "novelty": r.novelty,
@@ -179,7 +202,7 @@ def evaluate_recognition(data: Path = typer.Option(Path("../shared/data/hdm05"),
     """Recognition report: leave-one-performer-out accuracy, per-class confusions, confidence
     calibration, unknown motions and time per clip, side by side with MiniRocket and DTW."""
     from shared.evaluation import evaluate, write_report
-    from shared.io import find_clips, load_clip
+    from shared.io import find_clips
 
     folder = data / "amc" if (data / "amc").is_dir() else data
     if not folder.is_dir():
@@ -187,7 +210,7 @@ def evaluate_recognition(data: Path = typer.Option(Path("../shared/data/hdm05"),
     files = find_clips([folder])
     if not files:
         _fail(f"no clips under {folder}")
-    clips = [load_clip(f) for f in files]
+    clips = [read_clip(f) for f in files]
     res = evaluate(clips, peers=peers, open_set_test=open_set, progress=lambda m: typer.echo(m, err=True))
     path = write_report(res, out)
     typer.echo(f"wrote {path} and {out / 'results.json'}")

@@ -12,7 +12,7 @@ from typing import Optional
 import numpy as np
 import typer
 
-from shared.cli.app import SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app, recognition_text
+from shared.cli.app import SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app, read_clip, recognition_text
 
 space_app = typer.Typer(help="Proto-symbol spaces on the pss service (needs `make up`).", no_args_is_help=True)
 app.add_typer(space_app, name="space")
@@ -140,9 +140,7 @@ def space_recognize(name: str = typer.Argument(..., help="Space name."),
     import time
 
     t_body = time.perf_counter()
-    from shared.io import load_clip
-
-    reps = [_wire(load_clip(p, skeleton=skeleton)) for p in clips]  # the performer's own body: positions are theirs
+    reps = [_wire(read_clip(p, skeleton=skeleton)) for p in clips]  # the performer's own body: positions are theirs
     with _client() as c:
         r = c.request("pss", "recognize", {"space": name, "clips": reps, "top": top}, timeout=timeout)
     if os.environ.get("MIRRORCOACH_TIMING"):  # for bench/bus.py: the command's own time, start-up excluded

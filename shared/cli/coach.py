@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from shared.cli.app import SKELETON_HELP, _fail, app
+from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
 from shared.cli.cluster import _client, _jsonable, _wire
 
 coach_app = typer.Typer(help="Coaching sessions with emphatic motions and adverbs (coach service, thesis ch. 4-6).",
@@ -19,13 +19,11 @@ app.add_typer(coach_app, name="coach")
 
 def _target_request(target: str, skeleton: Optional[Path]) -> dict:
     """A clip file, or SPACE:LABEL (a proto-symbol of a pss space)."""
-    from shared.io import load_clip
-
     p = Path(target)
     if not p.exists() and ":" in target:
         space, label = target.split(":", 1)
         return {"target_space": space, "target_label": label}
-    return {"target": _wire(load_clip(p, skeleton=skeleton))}
+    return {"target": _wire(read_clip(p, skeleton=skeleton))}
 
 
 def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: Optional[Path]) -> dict:
@@ -87,9 +85,9 @@ def coach_attempt(session: str = typer.Argument(...),
                   as_json: bool = typer.Option(False, "--json", help="alpha, adverb, d_p and the file, as JSON.")):
     """One trial with your own attempt: prints alpha, the adverb and d_p; writes the emphatic motion as BVH."""
     from schemas.common import clip_from_wire
-    from shared.io import load_clip, save_clip
+    from shared.io import save_clip
 
-    reps = [_wire(load_clip(p, skeleton=skeleton)) for p in clips]
+    reps = [_wire(read_clip(p, skeleton=skeleton)) for p in clips]
     with _client() as c:
         r = c.request("coach", "attempt", {"session": session, "clips": reps})
     demo = clip_from_wire(r["emphatic"])

@@ -14,17 +14,19 @@ CLIP_SUFFIXES = (".amc", ".bvh", ".npz")
 _ASF_CACHE: dict[str, object] = {}
 
 
-def load_skeleton(path):
-    key = str(Path(path).resolve())
+def load_skeleton(path, units: str | None = None):
+    key = f"{Path(path).resolve()}|{units}"
     if key not in _ASF_CACHE:
-        _ASF_CACHE[key] = read_asf(path)
+        _ASF_CACHE[key] = read_asf(path, units=units)
     return _ASF_CACHE[key]
 
 
-def load_clip(path, skeleton=None, label: str | None = None) -> Clip:
+def load_clip(path, skeleton=None, label: str | None = None, *, units: str | None = None, up: str | None = None,
+              translations: str | None = None) -> Clip:
     """Read a clip. For AMC the skeleton is found beside the file (see ``find_skeleton``)
     unless ``skeleton`` (a path or a Skeleton) is given. The label defaults to the name of
-    the clip's parent folder."""
+    the clip's parent folder. ``units``, ``up`` and ``translations`` override what the reader
+    reads off the body (:mod:`shared.io.conventions`)."""
     path = Path(path)
     if not path.exists():
         raise ClipFormatError(path, "no such file")
@@ -32,11 +34,13 @@ def load_clip(path, skeleton=None, label: str | None = None) -> Clip:
     if suffix == ".amc":
         if skeleton is None:
             skeleton = find_skeleton(path)
+        if up not in (None, "y"):
+            raise ClipFormatError(path, "ASF/AMC bodies are read Y-up; --up z applies to BVH files")
         if not hasattr(skeleton, "joints"):
-            skeleton = load_skeleton(skeleton)
+            skeleton = load_skeleton(skeleton, units=units)
         return read_amc(path, skeleton, label=label)
     if suffix == ".bvh":
-        return read_bvh(path, label=label)
+        return read_bvh(path, label=label, units=units, up=up, translations=translations)
     if suffix == ".npz":
         return read_npz(path, label=label)
     raise ClipFormatError(path, f"unknown clip format {suffix!r} (expected one of {', '.join(CLIP_SUFFIXES)})")

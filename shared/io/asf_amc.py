@@ -41,8 +41,10 @@ def _floats(path, lineno, parts, n=None) -> list[float]:
     return vals
 
 
-def read_asf(path) -> Skeleton:
-    """Read an ASF skeleton (see :mod:`shared.skeleton` for the joint convention)."""
+def read_asf(path, units: str | None = None) -> Skeleton:
+    """Read an ASF skeleton (see :mod:`shared.skeleton` for the joint convention). Its
+    ``:units length`` is taken when it makes a human height, else the unit that does
+    (:func:`shared.io.conventions.choose_unit`); ``units`` overrides both."""
     path = Path(path)
     lines = _lines(path)
     section = None
@@ -173,7 +175,11 @@ def read_asf(path) -> Skeleton:
                 j.end = bone_vec(name)
         index[name] = len(joints)
         joints.append(j)
-    return Skeleton(name=path.stem, joints=joints, unit_m=INCH_M / length_unit, up_axis=1, source_format="asf")
+    from shared.io import conventions as cv
+
+    sk = Skeleton(name=path.stem, joints=joints, unit_m=1.0, up_axis=1, source_format="asf")
+    sk.unit_m = cv.choose_unit(path, cv.rest_extent(sk, 1), units, declared_m=INCH_M / length_unit)
+    return sk
 
 
 def _limit(tok: str) -> float:

@@ -2,7 +2,9 @@
 
 A BVH file read here gives channels named ``<joint>.<dof>`` (``Zrotation`` -> ``rz``) and a
 skeleton whose joints compose their rotation channels in file order (intrinsic, as BVH
-specifies). Lengths are taken to be centimetres (``unit_m = 0.01``), the usual BVH unit.
+specifies). The file's length unit, up axis and what its position channels mean are read off
+the body (:mod:`shared.io.conventions`) unless given: ``units`` (cm, m, mm, in, cmu), ``up``
+(y, z) and ``translations`` (add, replace, auto).
 
 Writing a clip whose skeleton came from BVH writes its own channels unchanged (so a read -
 write - read round trip gives the same numbers to the printed precision). Writing a clip on an
@@ -65,7 +67,8 @@ class _Tokens:
         return v
 
 
-def read_bvh(path, label: str | None = None) -> Clip:
+def read_bvh(path, label: str | None = None, *, units: str | None = None, up: str | None = None,
+             translations: str | None = None) -> Clip:
     path = Path(path)
     try:
         text = path.read_bytes().decode("latin-1")
@@ -163,13 +166,43 @@ def read_bvh(path, label: str | None = None) -> Clip:
         raise ClipFormatError(path, f"'Frames: {n_frames}' but {len(rows)} frame lines")
     if not rows:
         raise ClipFormatError(path, "no frames")
-    sk = Skeleton(name=path.stem, joints=joints, unit_m=BVH_UNIT_M, up_axis=1, source_format="bvh")
+    sk, data, read_as = _conventions(path, Skeleton(name=path.stem, joints=joints, unit_m=1.0, up_axis=1,
+                                                    source_format="bvh"), np.vstack(rows), channels, units, up, translations)
     fps = 1.0 / frame_time
     if abs(fps - round(fps)) < 1e-3 * fps:  # "0.008333" means 120 fps, not 120.0048
         fps = float(round(fps))
-    return Clip(data=np.vstack(rows), channels=channels, fps=fps, skeleton=sk,
-                groups={"motion": list(channels)}, name=path.stem,
-                label=label if label is not None else path.parent.name, source=str(path))
+    return Clip(data=data, channels=channels, fps=fps, skeleton=sk, groups={"motion": list(channels)}, name=path.stem,
+                label=label if label is not None else path.parent.name, source=str(path), read_as=read_as)
+
+
+def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], units, up, translations):
+    """Translation channels to the add form, the body to Y up, the unit chosen (see
+    :mod:`shared.io.conventions`); returns the skeleton, the data and what was decided."""
+    from shared.io import conventions as cv
+
+    col = {c: i for i, c in enumerate(channels)}
+    size = max(cv.rest_extent(sk, a) for a in range(3))
+    modes = {}
+    for j in sk.joints:
+        t = [col.get(f"{j.name}.t{a}") for a in "xyz"]
+        if all(k is not None for k in t):
+            modes[j.name] = cv.translation_mode(j, data[0, t], size, translations)
+            if modes[j.name] == "replace":
+                data[:, t] -= j.offset
+        elif any(k is not None for k in t) and translations != "add" and np.any(j.offset):
+            raise ClipFormatError(path, f"joint {j.name!r} has only some of its position channels and an offset; "
+                                        "say how they combine (--translations add|replace)")
+    if up not in (None, "y", "z"):
+        raise ClipFormatError(path, f"up must be y or z, got {up!r}")
+    axis = {"y": 1, "z": 2}[up] if up else cv.detect_up(sk, path)
+    if axis == 2:
+        sk, data = cv.turn_z_up_to_y_up(sk, data, channels)
+    sk.unit_m = cv.choose_unit(path, cv.rest_extent(sk, 1), units)
+    unit = next(k for k, v in cv.UNITS.items() if v == sk.unit_m)
+    read_as = {"units": unit + ("" if units else " (from the body's height)"),
+               "up": ("z, turned to y" if axis == 2 else "y") + ("" if up else " (from the feet)"),
+               "translations": sorted(set(modes.values())) or ["none"]}
+    return sk, data, read_as
 
 
 def to_bvh_form(clip: Clip) -> tuple[Skeleton, np.ndarray, list[str]]:
@@ -177,21 +210,27 @@ def to_bvh_form(clip: Clip) -> tuple[Skeleton, np.ndarray, list[str]]:
     sk = clip.skeleton
     if sk is None:
         raise ClipFormatError(clip.source or clip.name, "a BVH file needs a skeleton; this clip has none")
-    if sk.source_format == "bvh":
+    plain = all(np.array_equal(j.pre, np.eye(3)) for j in sk.joints)
+    if sk.source_format == "bvh" and plain:
         chans = sk.channels()
         data = np.column_stack([clip.column(c) if c in clip.channels else np.zeros(clip.n_frames) for c in chans])
+        for i, c in enumerate(chans):  # position channels as Blender reads them: the whole local position
+            name, dof = c.rsplit(".", 1)
+            if dof in ("tx", "ty", "tz"):
+                data[:, i] += sk.joints[sk.index(name)].offset["xyz".index(dof[1])]
         return sk, data, chans
     scale = sk.unit_m / BVH_UNIT_M
     values = {c: clip.data[:, i] for i, c in enumerate(clip.channels)}
     local = sk.local_rotations(values, clip.n_frames)
     joints, cols, chans = [], [], []
     for j, rot in zip(sk.joints, local):
-        dofs = (["tx", "ty", "tz"] if j.parent < 0 else []) + ["rz", "rx", "ry"]
+        moves = j.parent < 0 or any(f"{j.name}.{d}" in values for d in ("tx", "ty", "tz"))
+        dofs = (["tx", "ty", "tz"] if moves else []) + ["rz", "rx", "ry"]
         nj = Joint(name=j.name, parent=j.parent, offset=j.offset * scale, dofs=dofs, euler="ZXY",
                    end=None if j.end is None else j.end * scale, limits={})
-        if j.parent < 0:
-            for d in ("tx", "ty", "tz"):
-                cols.append(values.get(f"{j.name}.{d}", np.zeros(clip.n_frames)) * scale)
+        if moves:  # Blender's reading: the channels are the whole local position
+            for k, d in enumerate(("tx", "ty", "tz")):
+                cols.append((values.get(f"{j.name}.{d}", np.zeros(clip.n_frames)) + j.offset[k]) * scale)
         eul = np.unwrap(np.deg2rad(rot.as_euler("ZXY", degrees=True)), axis=0)
         cols.extend(np.rad2deg(eul).T)
         joints.append(nj)

@@ -1,0 +1,210 @@
+"""Motion files in other tools' conventions (issue 12): units, up axis, position channels on
+every joint, ROOT OFFSET with position channels. Each test writes small files in one
+convention from a real HDM05 clip and checks that mirrorcoach reads back the same body and
+motion (positions in metres), or refuses with an error naming the file."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from shared.errors import BadInput, ClipFormatError
+from shared.io import load_clip, save_clip
+from shared.io.conventions import UNITS
+from shared.skeleton import Joint, Skeleton
+
+SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
+ROT_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # Y-up world -> Z-up world
+
+
+@pytest.fixture(scope="module")
+def plain(bundled, tmp_path_factory):
+    """The squat as a plain Y-up centimetre BVH (mirrorcoach's own writer), read back."""
+    path = tmp_path_factory.mktemp("conv") / "squat.bvh"
+    save_clip(load_clip(bundled / SQUAT).resample(30), path)
+    return load_clip(path)
+
+
+def _write_raw(path, sk: Skeleton, data: np.ndarray, channels: list[str], fps: float) -> None:
+    """A BVH with exactly these offsets and channel values (no convention applied)."""
+    out = ["HIERARCHY"]
+
+    def emit(i, depth):
+        j, pad = sk.joints[i], "  " * depth
+        out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}\n{pad}{{")
+        out.append(f"{pad}  OFFSET " + " ".join(f"{v:.6f}" for v in j.offset))
+        names = {"tx": "Xposition", "ty": "Yposition", "tz": "Zposition", "rx": "Xrotation", "ry": "Yrotation",
+                 "rz": "Zrotation"}
+        out.append(f"{pad}  CHANNELS {len(j.dofs)} " + " ".join(names[d] for d in j.dofs))
+        kids = sk.children(i)
+        for k in kids:
+            emit(k, depth + 1)
+        if not kids:
+            end = j.end if j.end is not None else np.zeros(3)
+            out.append(f"{pad}  End Site\n{pad}  {{\n{pad}    OFFSET " + " ".join(f"{v:.6f}" for v in end) + f"\n{pad}  }}")
+        out.append(f"{pad}}}")
+
+    emit(0, 0)
+    order = [f"{j.name}.{d}" for i in _depth_first(sk) for j in [sk.joints[i]] for d in j.dofs]
+    cols = [channels.index(c) for c in order]
+    out += ["MOTION", f"Frames: {len(data)}", f"Frame Time: {1.0 / fps:.10f}"]
+    out += [" ".join(f"{v:.6f}" for v in row[cols]) for row in data]
+    path.write_text("\n".join(out) + "\n")
+
+
+def _depth_first(sk):
+    order, stack = [], [0]
+    while stack:
+        i = stack.pop()
+        order.append(i)
+        stack.extend(reversed(sk.children(i)))
+    return order
+
+
+def _variant(plain, *, scale=1.0, turn=None, every_joint_moves=False, add_form=False, root_offset=None):
+    """The plain clip's skeleton and motion rewritten in another convention."""
+    sk, data, chans = plain.skeleton, plain.data.copy(), list(plain.channels)
+    r = np.eye(3) if turn is None else turn
+    joints, cols = [], {}
+    for j in sk.joints:
+        dofs = list(j.dofs)
+        off = r @ j.offset * scale
+        if every_joint_moves and j.parent >= 0:
+            dofs = ["tx", "ty", "tz"] + dofs
+        if j.parent < 0 and root_offset is not None:
+            off = np.asarray(root_offset, float)
+        joints.append(Joint(j.name, j.parent, off, dofs, j.euler, np.eye(3), None if j.end is None else r @ j.end * scale))
+    new = Skeleton(sk.name, joints, 1.0, 1, "bvh")
+    out_cols, out_data = [], []
+    for j, nj in zip(sk.joints, joints):
+        if "tx" in nj.dofs:
+            t = np.column_stack([data[:, chans.index(f"{j.name}.t{a}")] if f"{j.name}.t{a}" in chans else np.zeros(len(data))
+                                 for a in "xyz"])
+            t = (t + j.offset) @ r.T * scale  # the whole local position (Blender's reading)
+            if j.parent < 0 and root_offset is not None and add_form:
+                t = t - nj.offset  # a file whose channels add to its (non-zero) ROOT OFFSET
+            elif add_form:
+                t = t - nj.offset
+            out_cols += [f"{j.name}.t{a}" for a in "xyz"]
+            out_data.append(t)
+        rot = [d for d in nj.dofs if d.startswith("r")]
+        if rot:
+            ang = np.column_stack([data[:, chans.index(f"{j.name}.{d}")] for d in rot])
+            if turn is not None:  # the same local rotation seen in the turned world: R L R^T
+                seq = j.euler
+                m = Rotation.from_euler(seq, ang, degrees=True).as_matrix()
+                ang = np.rad2deg(np.unwrap(np.deg2rad(Rotation.from_matrix(r @ m @ r.T).as_euler(seq, degrees=True)), axis=0))
+            out_cols += [f"{j.name}.{d}" for d in rot]
+            out_data.append(ang)
+    return new, np.hstack(out_data), out_cols
+
+
+def _same_motion(a, b, tol_m=2e-4):
+    pa, pb = a.positions(), b.positions()
+    assert pa.shape == pb.shape
+    err = np.abs(pa - pb).max()
+    assert err < tol_m, f"positions differ by {err:.3g} m"
+
+
+@pytest.mark.parametrize("unit", ["m", "in", "cmu", "mm"])
+def test_a_bvh_in_other_length_units_is_the_same_body(plain, tmp_path, unit):
+    sk, data, chans = _variant(plain, scale=0.01 / UNITS[unit])
+    _write_raw(tmp_path / "u.bvh", sk, data, chans, plain.fps)
+    back = load_clip(tmp_path / "u.bvh")
+    assert back.read_as["units"].startswith(unit) and "from the body" in back.read_as["units"]
+    assert back.skeleton.rest_height() == pytest.approx(plain.skeleton.rest_height(), rel=1e-4)
+    _same_motion(back, plain)
+    forced = load_clip(tmp_path / "u.bvh", units="cm")  # the option overrides what the body says
+    assert forced.skeleton.unit_m == 0.01 and forced.read_as["units"] == "cm"
+
+
+def test_a_body_of_no_human_height_is_refused_with_the_files_name(plain, tmp_path):
+    sk, data, chans = _variant(plain, scale=0.02)  # a 3.4 cm "person" in any unit but m (then 3.4 m)
+    _write_raw(tmp_path / "giant.bvh", sk, data, chans, plain.fps)
+    with pytest.raises(ClipFormatError, match=r"giant\.bvh.*no human height.*--units"):
+        load_clip(tmp_path / "giant.bvh")
+    tiny = load_clip(tmp_path / "giant.bvh", units="cm")  # read as told ...
+    from shared.bodies.human import human_body
+
+    with pytest.raises(BadInput, match="not a person"):  # ... but never simulated as a person
+        human_body(tiny.skeleton)
+
+
+def test_the_cmu_sample_in_two_unit_conventions_is_one_body(tmp_path):
+    from pathlib import Path
+
+    cmu = Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu"
+    if not cmu.is_dir():
+        pytest.skip(f"the CMU sample is not at {cmu}")
+    a, b = load_clip(cmu / "131_01.bvh"), load_clip(cmu / "scaled_131_01.bvh")
+    assert a.read_as["units"].startswith("cmu") and b.read_as["units"].startswith("m ")
+    assert a.skeleton.rest_height() == pytest.approx(b.skeleton.rest_height(), rel=1e-3)
+    assert 1.3 < a.skeleton.rest_height() < 1.45
+    n = min(a.n_frames, b.n_frames)
+    assert np.abs(a.positions()[:n] - b.positions()[:n]).max() < 1e-3
+
+
+def test_a_z_up_bvh_is_turned_to_y_up(plain, tmp_path):
+    sk, data, chans = _variant(plain, turn=ROT_Z_UP)
+    _write_raw(tmp_path / "z.bvh", sk, data, chans, plain.fps)
+    back = load_clip(tmp_path / "z.bvh")
+    assert back.read_as["up"].startswith("z, turned to y")
+    _same_motion(back, plain)
+    as_is = load_clip(tmp_path / "z.bvh", up="y")  # told otherwise, it is read as it is: lying down
+    assert np.abs(as_is.positions() - plain.positions()).max() > 0.5
+    # written again by mirrorcoach, it is a plain Y-up BVH of the same motion
+    save_clip(back, tmp_path / "again.bvh")
+    again = load_clip(tmp_path / "again.bvh")
+    assert again.read_as["up"].startswith("y")
+    _same_motion(again, plain)
+
+
+@pytest.mark.parametrize("form", ["replace", "add"])
+def test_position_channels_on_every_joint(plain, tmp_path, form):
+    sk, data, chans = _variant(plain, every_joint_moves=True, add_form=form == "add")
+    _write_raw(tmp_path / "six.bvh", sk, data, chans, plain.fps)
+    back = load_clip(tmp_path / "six.bvh")
+    assert form in back.read_as["translations"]
+    _same_motion(back, plain)
+    # a joint that really slides moves its children with it, in its parent's frame
+    moved = back.data.copy()
+    k = back.channels.index("ltibia.ty")
+    moved[:, k] += 0.05 / back.skeleton.unit_m
+    i_tib, i_foot = back.skeleton.index("ltibia"), back.skeleton.index("lfoot")
+    d = back.with_data(moved).positions() - back.positions()
+    assert np.allclose(np.linalg.norm(d[:, i_tib], axis=1), 0.05, atol=1e-9)
+    assert np.allclose(d[:, i_foot], d[:, i_tib], atol=1e-9)
+    ref = back.skeleton.forward_kinematics_reference(moved, back.channels)
+    assert np.abs(back.with_data(moved).positions() - ref).max() < 1e-9
+
+
+@pytest.mark.parametrize("form", ["replace", "add"])
+def test_root_offset_with_root_channels_read_as_the_first_frame_tells(plain, tmp_path, form):
+    sk, data, chans = _variant(plain, root_offset=[0.0, 95.0, 0.0], add_form=form == "add")
+    _write_raw(tmp_path / "root.bvh", sk, data, chans, plain.fps)
+    back = load_clip(tmp_path / "root.bvh")
+    assert back.read_as["translations"] == [form]
+    _same_motion(back, plain)
+    other = "add" if form == "replace" else "replace"
+    wrong = load_clip(tmp_path / "root.bvh", translations=other)  # the option wins, and it matters
+    assert np.abs(wrong.positions() - plain.positions()).max() > 0.5
+
+
+def test_an_asf_whose_declared_unit_is_wrong_is_read_by_the_bodys_height(bundled, tmp_path):
+    src = (bundled / "asf" / "HDM_bd.asf").read_bytes().decode("latin-1")
+    k = 0.0254 / 0.45  # HDM05's unit in metres: the same lengths written in metres
+    text = re.sub(r"(\n\s*length\s+)([-0-9.eE]+)", lambda m: f"{m.group(1)}{float(m.group(2)) * k:.6f}", src)
+    text = text.replace(f"length {0.45 * k:.6f}", "length 0.45", 1)  # keep the (now wrong) declaration
+    assert ":units" in text and "length 0.45" in text
+    (tmp_path / "asf").mkdir()
+    (tmp_path / "asf" / "HDM_bd.asf").write_bytes(text.encode("latin-1"))
+    amc = tmp_path / "HDM_bd_squat1Reps_001_120.amc"
+    amc.write_bytes((bundled / SQUAT).read_bytes())
+    ours, orig = load_clip(amc), load_clip(bundled / SQUAT)
+    assert ours.skeleton.unit_m == 1.0
+    assert ours.skeleton.rest_height() == pytest.approx(orig.skeleton.rest_height(), rel=1e-5)
+    pa, pb = ours.positions(), orig.positions()  # the body's pose (root translations are AMC numbers)
+    assert np.abs((pa - pa[:, :1]) - (pb - pb[:, :1])).max() < 1e-5  # lengths printed to 6 decimals
