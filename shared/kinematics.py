@@ -45,6 +45,28 @@ def _mul(a, b, out):
 
 
 @numba.njit(cache=True, nogil=True)
+def _joint_local(angles, axes, intrinsic, pre, pre_t, m, r, tmp, out):
+    """``out = C M C^T`` for one joint and frame; ``m``, ``r``, ``tmp`` are scratch 3x3s."""
+    m[:] = 0.0
+    m[0, 0] = 1.0
+    m[1, 1] = 1.0
+    m[2, 2] = 1.0
+    for k in range(3):
+        code = axes[k]
+        if code < 0:
+            continue
+        _axis(code, angles[k], r)
+        # intrinsic: M = R1 R2 R3 (right-multiply); extrinsic: M = R3 R2 R1 (left-multiply)
+        if intrinsic:
+            _mul(m, r, tmp)
+        else:
+            _mul(r, m, tmp)
+        m[:] = tmp
+    _mul(pre, m, tmp)
+    _mul(tmp, pre_t, out)
+
+
+@numba.njit(cache=True, nogil=True)
 def fk_positions(ang, axes, intrinsic, pre, parent, offset, trans, end_joint, end_offset):
     """Joint and end-site positions (T, J + E, 3) in the skeleton's unit.
 
@@ -67,23 +89,7 @@ def fk_positions(ang, axes, intrinsic, pre, parent, offset, trans, end_joint, en
         pre_t[j] = pre[j].T
     for t in range(n):
         for j in range(nj):
-            m[:] = 0.0
-            m[0, 0] = 1.0
-            m[1, 1] = 1.0
-            m[2, 2] = 1.0
-            for k in range(3):
-                code = axes[j, k]
-                if code < 0:
-                    continue
-                _axis(code, ang[t, j, k], r)
-                # intrinsic: M = R1 R2 R3 (right-multiply); extrinsic: M = R3 R2 R1 (left-multiply)
-                if intrinsic[j]:
-                    _mul(m, r, tmp)
-                else:
-                    _mul(r, m, tmp)
-                m[:] = tmp
-            _mul(pre[j], m, tmp)
-            _mul(tmp, pre_t[j], local)
+            _joint_local(ang[t, j], axes[j], intrinsic[j], pre[j], pre_t[j], m, r, tmp, local)
             p = parent[j]
             ox = offset[j, 0] + trans[t, j, 0]
             oy = offset[j, 1] + trans[t, j, 1]
@@ -105,4 +111,19 @@ def fk_positions(ang, axes, intrinsic, pre, parent, offset, trans, end_joint, en
             for a in range(3):
                 out[t, nj + e, a] = (out[t, j, a] + g[a, 0] * end_offset[e, 0] + g[a, 1] * end_offset[e, 1]
                                      + g[a, 2] * end_offset[e, 2])
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def local_rotations(ang, axes, intrinsic, pre):
+    """Every joint's local rotation ``L = C M C^T`` (T, J, 3, 3) (arguments as :func:`fk_positions`)."""
+    n, nj = ang.shape[0], ang.shape[1]
+    out = np.zeros((n, nj, 3, 3))
+    m = np.zeros((3, 3))
+    r = np.zeros((3, 3))
+    tmp = np.zeros((3, 3))
+    for j in range(nj):
+        pre_t = pre[j].T.copy()
+        for t in range(n):
+            _joint_local(ang[t, j], axes[j], intrinsic[j], pre[j], pre_t, m, r, tmp, out[t, j])
     return out

@@ -142,6 +142,16 @@ class Skeleton:
                            k["end_offset"])
         return pos * self.unit_m
 
+    def local_matrices(self, data: np.ndarray, channels: list[str]) -> np.ndarray:
+        """Every joint's local rotation ``L_j = C_j M_j C_j^T`` (T, J, 3, 3): the rotation in
+        the world-aligned rest frame, whatever Euler order or axis convention the file used."""
+        from shared.kinematics import local_rotations
+
+        data = np.asarray(data, dtype=float)
+        k = self._fk_arrays(tuple(channels), False)
+        padded = np.concatenate([data, np.zeros((data.shape[0], 1))], axis=1)
+        return local_rotations(np.ascontiguousarray(np.deg2rad(padded[:, k["cols"]])), k["axes"], k["intrinsic"], k["pre"])
+
     def _fk_arrays(self, channels: tuple[str, ...], ends: bool) -> dict:
         """The skeleton packed for :func:`shared.kinematics.fk_positions`, cached per channel
         layout (a skeleton is not changed once read; :meth:`from_json` makes a new one)."""
