@@ -27,7 +27,14 @@ def _body_or_skeleton(req: dict, path: str):
 
 BODY_INFO = Map({"name": F(Str(max_len=128)), "kind": F(Str(choices=("robot", "human"))), "mass": F(Float(0.0), "kg"),
                  "channels": F(List(Str(max_len=64), max_len=1000), "motion channels the body needs"),
-                 "n_bodies": F(Int(0)), "floating": F(Bool(), "free root (human bodies)")})
+                 "n_bodies": F(Int(0)), "floating": F(Bool(), "free root (human bodies)"),
+                 "feet": F(List(Str(max_len=128), max_len=1000), "bones whose points make the support area",
+                           required=False),
+                 "unmapped_bones": F(List(Str(max_len=128), max_len=1000),
+                                     "bones no naming scheme names (mass from their parent's segment)", required=False),
+                 "missing_segments": F(List(Str(max_len=64), max_len=100),
+                                       "body segments the skeleton lacks (their mass spread over the rest)",
+                                       required=False)})
 
 BODIES = Endpoint(
     "bodies",
@@ -191,7 +198,10 @@ ENDPOINTS = {e.verb: e for e in (BODIES, PERFORM, OTHER_CREATE, OTHER_ASK, OTHER
 
 EVENTS = {
     "performed": Message("simulator.event.performed", Map({
-        "body": F(Str(max_len=128)), "frames": F(Int(0)), "feasible": F(Bool()),
+        "body": F(Str(max_len=128)), "frames": F(Int(0)),
+        "feasible": F(Bool(), "true only when something was checked and nothing failed"),
+        "checked": F(Bool(), "false: the body offered nothing to check (no joint limits, no feet)", required=False,
+                     default=True),
     }), doc="published on <prefix>/events/simulator/performed after every perform"),
     "answered": Message("simulator.event.answered", Map({
         "other": OTHER, "kind": F(Str(max_len=16)), "answer": F(Str(max_len=64)),

@@ -237,3 +237,137 @@ def test_the_same_motion_is_recognised_alike_whatever_file_carried_it(bundled, t
     la = amc.skeleton.local_matrices(amc.resample(30).data, amc.channels)[:, 1:]
     lb = back.skeleton.local_matrices(back.data, back.channels)[:, 1:]
     assert np.abs(la - lb).max() < 1e-6
+
+
+# ---------------------------------------------------------------------------- naming schemes
+_HDM05 = ["root", "lhipjoint", "rhipjoint", "lowerback", "upperback", "thorax", "lowerneck", "upperneck", "head",
+          "lclavicle", "lhumerus", "lradius", "lwrist", "lhand", "lfingers", "lthumb", "lfemur", "ltibia", "lfoot",
+          "ltoes"]
+_SCHEMES = {
+    "mixamo": ["mixamorig:Hips", "mixamorig:LeftHipJoint", "mixamorig:RightHipJoint", "mixamorig:Spine",
+               "mixamorig:Spine1", "mixamorig:Spine2", "mixamorig:Neck", "mixamorig:Neck1", "mixamorig:Head",
+               "mixamorig:LeftShoulder", "mixamorig:LeftArm", "mixamorig:LeftForeArm", "mixamorig:LeftHand",
+               "mixamorig:LeftHandMiddle1", "mixamorig:LeftHandMiddle2", "mixamorig:LeftHandThumb1",
+               "mixamorig:LeftUpLeg", "mixamorig:LeftLeg", "mixamorig:LeftFoot", "mixamorig:LeftToeBase"],
+    "unreal": ["pelvis", "hipjoint_l", "hipjoint_r", "spine_01", "spine_02", "spine_03", "neck_01", "neck_02", "head",
+               "clavicle_l", "upperarm_l", "lowerarm_l", "hand_l", "middle_01_l", "middle_02_l", "thumb_01_l",
+               "thigh_l", "calf_l", "foot_l", "ball_l"],
+    "character_creator": ["CC_Base_Hip", "CC_Base_L_HipJoint", "CC_Base_R_HipJoint", "CC_Base_Waist",
+                          "CC_Base_Spine01", "CC_Base_Spine02", "CC_Base_NeckTwist01", "CC_Base_NeckTwist02",
+                          "CC_Base_Head", "CC_Base_L_Clavicle", "CC_Base_L_Upperarm", "CC_Base_L_Forearm",
+                          "CC_Base_L_Hand", "CC_Base_L_Mid1", "CC_Base_L_Mid2", "CC_Base_L_Thumb1", "CC_Base_L_Thigh",
+                          "CC_Base_L_Calf", "CC_Base_L_Foot", "CC_Base_L_ToeBase"],
+    "joint_prefix": ["joint_Hips", "joint_LeftHipJoint", "joint_RightHipJoint", "joint_Spine", "joint_Spine1",
+                     "joint_Chest", "joint_Neck", "joint_Neck1", "joint_Head", "joint_LeftShoulder", "joint_LeftArm",
+                     "joint_LeftForeArm", "joint_LeftHand", "joint_LeftFingers", "joint_LeftFingers2",
+                     "joint_LeftThumb", "joint_LeftUpLeg", "joint_LeftLeg", "joint_LeftFoot", "joint_LeftToe"],
+}
+
+
+def _mirror(name: str) -> str:
+    """The right side's name in the scheme of a left-side name."""
+    for a, b in (("Left", "Right"), ("_L_", "_R_"), ("_l", "_r")):
+        if a in name:
+            return name.replace(a, b)
+    return name
+
+
+def _renamed(sk: Skeleton, names: dict[str, str]) -> Skeleton:
+    return Skeleton(sk.name, [Joint(names.get(j.name, j.name), j.parent, j.offset, j.dofs, j.euler, j.pre, j.end,
+                                    j.limits) for j in sk.joints], sk.unit_m, sk.up_axis, sk.source_format)
+
+
+@pytest.mark.parametrize("scheme", sorted(_SCHEMES))
+def test_human_bodies_from_any_naming_scheme_weigh_what_they_should(plain, scheme):
+    from shared.bodies.human import human_body
+
+    names = {}
+    for ours, theirs in zip(_HDM05, _SCHEMES[scheme]):
+        names[ours] = theirs
+        if ours.startswith("l") and ours not in ("lowerback", "lowerneck"):
+            names["r" + ours[1:]] = _mirror(theirs)
+    sk = _renamed(plain.skeleton, names)
+    assert len(set(names.values())) == len(names) == len(sk.joints)
+    ref, body = human_body(plain.skeleton), human_body(sk)
+    d = body.describe()
+    assert d["mass"] == pytest.approx(70.0, abs=0.05) and not d["missing_segments"]
+    assert len(body.feet) == 4 and set(body.feet) == {names[f] for f in ("lfoot", "rfoot", "ltoes", "rtoes")}
+    m_ref = {j: float(ref.model.body_mass[k + 1]) for k, j in enumerate(j.name for j in plain.skeleton.joints)}
+    m_new = {j: float(body.model.body_mass[k + 1]) for k, j in enumerate(j.name for j in sk.joints)}
+    for seg in (("lfemur",), ("ltibia",), ("lhumerus",), ("head",), ("lfoot", "ltoes"), ("rfemur",)):
+        assert sum(m_new[names[b]] for b in seg) == pytest.approx(sum(m_ref[b] for b in seg), rel=0.05), seg
+
+
+def test_a_body_whose_bones_no_scheme_names_says_so(plain):
+    from shared.bodies.human import human_body
+
+    sk = _renamed(plain.skeleton, {"lfoot": "bone_17", "ltoes": "bone_18", "rfoot": "bone_23", "rtoes": "bone_24",
+                                   "ltibia": "xx_1", "rtibia": "xx_2"})
+    d = human_body(sk).describe()
+    assert {"bone_17", "xx_1"} <= set(d["unmapped_bones"])
+    assert "l foot" in d["missing_segments"] and "r shank" in d["missing_segments"]
+    assert d["mass"] == pytest.approx(70.0, abs=0.05) and d["feet"] == []
+
+
+def test_a_report_where_nothing_was_checked_does_not_say_feasible(plain):
+    from shared.bodies.body import perform
+    from shared.bodies.human import human_body
+
+    clip = plain.frames(0, 40)
+    names = {"lfoot": "bone_17", "ltoes": "bone_18", "rfoot": "bone_23", "rtoes": "bone_24"}
+    feetless = _renamed(plain.skeleton, names)
+    chans = [names.get(c.rsplit(".", 1)[0], c.rsplit(".", 1)[0]) + "." + c.rsplit(".", 1)[1] for c in clip.channels]
+    _, report = perform(human_body(feetless), clip.with_data(clip.data, channels=chans, skeleton=feetless,
+                                                             groups={"motion": chans}))
+    assert report["feasible"] is None and len(report["not_checked"]) == 2  # a BVH body has no joint limits either
+    assert "no feet" in report["not_checked"][1] and "bone_17" in report["not_checked"][1]
+    _, report = perform(human_body(plain.skeleton), clip)  # feet, no limits: balance checked, limits said
+    assert report["feasible"] in (True, False) and report["support"]["checked"]
+    assert report["not_checked"] == ["joint limits (the body has none for this clip's channels)"]
+
+
+def test_a_write_error_names_the_users_file_not_a_temporary_one(plain, tmp_path):
+    target = tmp_path / "squat.amc"
+    with pytest.raises(ClipFormatError) as e:
+        save_clip(plain, target)  # a BVH body cannot become AMC
+    assert e.value.path == str(target) and ".tmp" not in str(e.value.message) and "ASF" in e.value.message
+    assert not list(tmp_path.iterdir())  # and nothing is left behind
+
+
+# ---------------------------------------------------------------------------- Blender, the real client
+def _blender():
+    import shutil
+
+    return shutil.which("blender")
+
+
+@pytest.mark.skipif(_blender() is None, reason="Blender is not installed (Debian: apt-get install blender; "
+                                                "`make test` installs it when CI=true)")
+def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain, tmp_path):
+    import json
+    import subprocess
+    from pathlib import Path
+
+    ours = tmp_path / "ours.bvh"
+    clip = plain.frames(0, 30)
+    save_clip(clip, ours)
+    script = Path(__file__).parent / "blender" / "bvh_round_trip.py"
+    r = subprocess.run([_blender(), "-b", "--factory-startup", "--python-exit-code", "3", "--python", str(script), "--",
+                        str(ours), str(tmp_path / "blender.json"), str(tmp_path / "blender.bvh")],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    got = json.loads((tmp_path / "blender.json").read_text())
+    mine = load_clip(ours)
+    p = mine.positions() / mine.skeleton.unit_m  # file units, Y up
+    names = [j.name for j in mine.skeleton.joints]
+    frames = sorted(got["frames"], key=int)
+    assert len(frames) == mine.n_frames and got["fps"] == pytest.approx(mine.fps)
+    for t, f in enumerate(frames):
+        for k, name in enumerate(names):
+            x, y, z = got["frames"][f][name]  # Blender: Z up, Y back (axis_forward -Z, axis_up Y)
+            assert np.allclose([x, z, -y], p[t, k], atol=1e-3 * max(1.0, np.abs(p).max()) * 1e-1), (f, name)
+    # Blender's own export, read back: the same body and motion, and the same proto-symbol
+    back = load_clip(tmp_path / "blender.bvh")
+    pb = back.positions()
+    rows = [back.skeleton.index(n) for n in names]
+    assert np.abs(pb[:, rows] - mine.positions()[:, :len(names)]).max() < 2e-3

@@ -57,7 +57,7 @@ class BusCoachPorts:
     def perform(self, clip):
         if self.skeleton is None:
             return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames,
-                    "feasible": True}, None
+                    "not_checked": ["joint limits and balance (the target has no skeleton)"], "feasible": None}, None
         r = self.c.request("simulator", "perform", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False)})
         out = clip_from_wire(r["clip"])
         return r["report"], out.select(["cog.x", "cog.y", "cog.z"])

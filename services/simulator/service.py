@@ -81,7 +81,8 @@ def make_service(settings: Settings | None = None) -> Service:
         b = bodies.get(req["body"], req["skeleton"], req["mass"])
         clip = clip_from_wire(req["clip"], getattr(b, "skeleton", None))
         out, report = perform(b, clip)
-        svc.publish("performed", {"body": b.name, "frames": out.n_frames, "feasible": bool(report["feasible"])})
+        svc.publish("performed", {"body": b.name, "frames": out.n_frames, "feasible": report["feasible"] is True,
+                                  "checked": report["feasible"] is not None})
         return {"clip": clip_to_wire(out, with_skeleton=False), "report": report, "body": b.describe()}
 
     # ------------------------------------------------------------------ others

@@ -59,6 +59,8 @@ class Body:
     root: str | None = None
     feet: list[str] = field(default_factory=list)
     up_axis: int = 2
+    unmapped: list[str] = field(default_factory=list)  # bones no naming scheme names (human bodies)
+    missing_segments: list[str] = field(default_factory=list)  # de Leva segments the skeleton lacks
 
     @property
     def channels(self) -> list[str]:
@@ -66,7 +68,8 @@ class Body:
 
     def describe(self) -> dict:
         return {"name": self.name, "kind": self.kind, "mass": float(self.mass), "channels": self.channels,
-                "n_bodies": int(self.model.nbody - 1), "floating": self.root is not None}
+                "n_bodies": int(self.model.nbody - 1), "floating": self.root is not None, "feet": list(self.feet),
+                "unmapped_bones": list(self.unmapped), "missing_segments": list(self.missing_segments)}
 
 
 def smooth_window(fps: float, n: int) -> int:
@@ -198,18 +201,25 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
     q = _qpos_trajectory(body, clip)
     _, _, tau, cog = inverse_dynamics(body, q, clip.fps)
     limits = {}
-    for d in body.dofs:
-        if d.limits is None or d.channel not in clip.channels:
-            continue
+    limited = [d for d in body.dofs if d.limits is not None and d.channel in clip.channels]
+    for d in limited:
         x = clip.column(d.channel)
         lo, hi = d.limits
         bad = int(np.sum((x < lo - 1.0) | (x > hi + 1.0)))
         if bad:
             limits[d.channel] = {"frames": bad, "min": float(x.min()), "max": float(x.max()), "limits": [lo, hi]}
     support = _support_report(body, q, cog)
+    not_checked = []
+    if not limited:
+        not_checked.append("joint limits (the body has none for this clip's channels)")
+    if not support.get("checked"):
+        not_checked.append("balance (no feet found on the body"
+                           + (f"; unnamed bones: {', '.join(body.unmapped[:5])}" if body.unmapped else "") + ")")
+    failed = bool(limits) or bool(support.get("checked") and support["frames_outside_support"] > 0)
     report = {"body": body.name, "mass": float(body.mass), "frames": clip.n_frames,
-              "joint_limit_violations": limits, "support": support,
-              "feasible": not limits and not (support.get("checked") and support["frames_outside_support"] > 0)}
+              "joint_limit_violations": limits, "support": support, "not_checked": not_checked,
+              # nothing checked is not "feasible": None says so (and not_checked says what)
+              "feasible": False if failed else (None if len(not_checked) == 2 else True)}
     names = [f"tau.{d.channel}" for d in body.dofs] + ["cog.x", "cog.y", "cog.z"]
     values = np.column_stack([tau[:, [d.dof for d in body.dofs]], cog])
     base = clip.select(clip.group("motion")) if clip.group("motion") else clip.data

@@ -11,8 +11,9 @@ skeleton's up axis, so no axis conversion is needed.
 
 Segment masses: de Leva (1996), *Adjustments to Zatsiorsky-Seluyanov's segment inertia
 parameters*, J. Biomechanics 29(9):1223-1230, table 4 (male), as fractions of the body mass;
-a segment split over several bones (trunk, head and neck, hand, foot) is shared as documented
-in ``SEGMENT_SHARE``. Inertias come from capsule geometry along each bone with that mass.
+a segment is shared equally by the bones a naming scheme maps to it (:func:`map_segments`;
+fingers belong to the hand, toes to the foot), and the mass of segments a skeleton lacks is
+spread over the others so that the body weighs what was asked. Inertias come from capsule geometry along each bone with that mass.
 Joint limits are the skeleton's (ASF ``limits``), checked in the feasibility report.
 """
 
@@ -27,36 +28,116 @@ from shared.bodies.body import Body, DofMap, check_mass
 from shared.errors import BadInput
 from shared.skeleton import Skeleton
 
-# de Leva (1996) male segment masses, percent of body mass
-DE_LEVA = {"head": 6.94, "upper_trunk": 15.96, "middle_trunk": 16.33, "lower_trunk": 11.17, "upper_arm": 2.71,
-           "forearm": 1.62, "hand": 0.61, "thigh": 14.16, "shank": 4.33, "foot": 1.37}
-
-# bone name (side prefix l/r removed, lower case) -> (segment, share of the segment, capsule radius m)
-SEGMENT_SHARE = {
-    "root": ("lower_trunk", 1.0, 0.12), "hips": ("lower_trunk", 1.0, 0.12), "pelvis": ("lower_trunk", 1.0, 0.12),
-    "lowerback": ("middle_trunk", 0.5, 0.12), "upperback": ("middle_trunk", 0.5, 0.12),
-    "spine": ("middle_trunk", 0.5, 0.12), "spine1": ("middle_trunk", 0.5, 0.12),
-    "thorax": ("upper_trunk", 15.96 / 15.96 - 2 * 0.5 / 15.96, 0.12), "chest": ("upper_trunk", 0.94, 0.12),
-    "clavicle": ("upper_trunk", 0.5 / 15.96, 0.04), "collar": ("upper_trunk", 0.03, 0.04), "shoulder": ("upper_trunk", 0.03, 0.04),
-    "lowerneck": ("head", 0.15, 0.05), "upperneck": ("head", 0.15, 0.05), "neck": ("head", 0.3, 0.05),
-    "head": ("head", 0.70, 0.09),
-    "humerus": ("upper_arm", 1.0, 0.045), "uparm": ("upper_arm", 1.0, 0.045), "arm": ("upper_arm", 1.0, 0.045),
-    "radius": ("forearm", 1.0, 0.035), "lowarm": ("forearm", 1.0, 0.035), "forearm": ("forearm", 1.0, 0.035),
-    "wrist": ("hand", 0.33, 0.03), "hand": ("hand", 0.49, 0.03), "fingers": ("hand", 0.10, 0.015),
-    "thumb": ("hand", 0.08, 0.015),
-    "femur": ("thigh", 1.0, 0.07), "upleg": ("thigh", 1.0, 0.07), "thigh": ("thigh", 1.0, 0.07),
-    "tibia": ("shank", 1.0, 0.05), "leg": ("shank", 1.0, 0.05), "shin": ("shank", 1.0, 0.05),
-    "foot": ("foot", 0.8, 0.04), "toes": ("foot", 0.2, 0.025), "toebase": ("foot", 0.2, 0.025),
-    "hipjoint": ("lower_trunk", 0.0, 0.02),
-}
 MIN_MASS = 0.01  # kg: a bone with joints but no segment of its own (MuJoCo needs mass to move)
 
+# ---------------------------------------------------------------------------- naming schemes
+# Skeletons name bones after the bone (Mixamo ``LeftUpLeg``, ASF ``lfemur``, UE ``thigh_l``,
+# Character Creator ``CC_Base_L_Thigh``) or after the joint the bone starts at (CMU BVH
+# ``LeftHip`` is the thigh, ``LeftShoulder`` the upper arm). A name is reduced to a side and a
+# keyword, and the keyword is read in the scheme the whole skeleton uses.
+_PREFIX = re.compile(r"^(mixamorig\d*[:_]|cc_base_|bip0?1[ _]|def[-_]|org[-_]|joint[-_]|jnt[-_]|bone[-_])+")
+_BONE_NAMED = {
+    "hips": "pelvis", "hip": "pelvis", "pelvis": "pelvis", "root": "pelvis",
+    "spine": "spine", "waist": "spine", "chest": "spine", "abdomen": "spine", "torso": "spine", "lowerback": "spine",
+    "upperback": "spine", "thorax": "spine", "back": "spine",
+    "neck": "neck", "lowerneck": "neck", "upperneck": "neck", "necktwist": "neck", "head": "head",
+    "clavicle": "clavicle", "collar": "clavicle", "shoulder": "clavicle",
+    "upperarm": "upper_arm", "uparm": "upper_arm", "arm": "upper_arm", "humerus": "upper_arm",
+    "forearm": "forearm", "lowerarm": "forearm", "lowarm": "forearm", "radius": "forearm", "elbow": "forearm",
+    "hand": "hand", "wrist": "hand", "fingers": "hand", "finger": "hand", "thumb": "hand",
+    "upleg": "thigh", "upperleg": "thigh", "thigh": "thigh", "femur": "thigh",
+    "leg": "shank", "lowerleg": "shank", "calf": "shank", "shin": "shank", "tibia": "shank", "knee": "shank",
+    "foot": "foot", "ankle": "foot", "toe": "foot", "toes": "foot", "toebase": "foot", "ball": "foot",
+    "hipjoint": "hipjoint",
+}
+_BONE_PREFIXES = (("spine", "spine"), ("chest", "spine"), ("neck", "neck"), ("hand", "hand"), ("finger", "hand"),
+                  ("thumb", "hand"), ("index", "hand"), ("middle", "hand"), ("ring", "hand"), ("pinky", "hand"),
+                  ("toe", "foot"), ("foot", "foot"))
+# joint-named schemes (CMU BVH): the bone that starts at the joint
+_JOINT_NAMED = {"hip": "thigh", "knee": "shank", "ankle": "foot", "shoulder": "upper_arm", "elbow": "forearm",
+                "wrist": "hand", "collar": "clavicle"}
+# segment -> (de Leva share, capsule radius m)
+_SEGMENTS = {
+    "pelvis": ("lower_trunk", 0.12), "spine": ("trunk", 0.12), "neck": ("neck", 0.05), "head": ("head", 0.09),
+    "clavicle": ("clavicle", 0.04), "upper_arm": ("upper_arm", 0.045), "forearm": ("forearm", 0.035),
+    "hand": ("hand", 0.03), "thigh": ("thigh", 0.07), "shank": ("shank", 0.05), "foot": ("foot", 0.04),
+    "hipjoint": ("", 0.02),
+}
+# de Leva (1996) male, percent of body mass; the middle and upper trunk shared by the spine
+# bones less what the clavicles take; head 6.94 % split head 70 % / neck 30 %
+_PERCENT = {"lower_trunk": 11.17, "trunk": 16.33 + 15.96 - 2 * 0.5, "clavicle": 0.5, "neck": 0.3 * 6.94,
+            "head": 0.7 * 6.94, "upper_arm": 2.71, "forearm": 1.62, "hand": 0.61, "thigh": 14.16, "shank": 4.33,
+            "foot": 1.37}
+_SIDED = {"clavicle", "upper_arm", "forearm", "hand", "thigh", "shank", "foot"}
 
-def _segment(bone: str) -> tuple[str, float, float] | None:
-    key = bone.lower()
-    if key not in SEGMENT_SHARE:
-        key = re.sub(r"^(l|r|left|right)_?", "", key)
-    return SEGMENT_SHARE.get(key)
+
+def name_parts(bone: str) -> tuple[str, str]:
+    """(side ``"l"``/``"r"``/``""``, keyword) of a bone name in any of the schemes above."""
+    n = _PREFIX.sub("", bone.lower())
+    side = ""
+    for pat in (r"^(left|right)[_. ]?", r"[_. ](left|right)$", r"^(l|r)[_. ]", r"[_. ](l|r)$", r"[_. ](l|r)[_. ]"):
+        m = re.search(pat, n)
+        if m:
+            side, n = m.group(1)[0], (n[:m.start()] + " " + n[m.end():]).strip()
+            break
+    else:
+        m = re.match(r"^(l|r)(?=[a-z]{3})", n)  # ASF lfemur, CMU lhand
+        if m and re.sub(r"\d+$", "", n[1:]) in set(_BONE_NAMED) | set(_JOINT_NAMED) | {"fingers", "thumb", "toes"}:
+            side, n = m.group(1), n[1:]
+    n = re.sub(r"[^a-z0-9]+", "", n)
+    n = re.sub(r"(end|twist\d*|roll|nub|site)$", "", n)
+    return side, n
+
+
+def map_segments(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
+    """Every bone's (segment, side) and the bones no scheme names. A bone no scheme names
+    belongs to its parent's segment (fingers to the hand, toes to the foot)."""
+    parts = {j.name: name_parts(j.name) for j in sk.joints}
+    words = {w for _, w in parts.values()}
+    joint_named = "knee" in words or "elbow" in words  # CMU BVH and the like name bones after joints
+    out: dict[str, tuple[str, str]] = {}
+    unmapped = []
+    for i, j in enumerate(sk.joints):
+        side, w = parts[j.name]
+        base = re.sub(r"\d+$", "", w)
+        seg = None
+        for cand in (w, base):
+            if joint_named and cand in _JOINT_NAMED:
+                seg = _JOINT_NAMED[cand]
+            elif cand in _BONE_NAMED:
+                seg = _BONE_NAMED[cand]
+            if seg:
+                break
+        if seg is None:
+            seg = next((s for p, s in _BONE_PREFIXES if base.startswith(p)), None)
+        if i == 0:
+            seg = "pelvis"
+        if seg is None:
+            unmapped.append(j.name)
+            seg, side = out[sk.joints[j.parent].name]
+        out[j.name] = (seg, side if seg in _SIDED else "")
+    return out, unmapped
+
+
+def segment_masses(sk: Skeleton, mass: float) -> tuple[dict[str, float], list[str], list[str]]:
+    """Every bone's mass (kg): de Leva's percentage of each segment shared equally by its
+    bones; the bones no scheme names; the segments the skeleton lacks (their mass is spread
+    over the others in proportion, so that the body weighs ``mass``)."""
+    seg_of, unmapped = map_segments(sk)
+    groups: dict[tuple[str, str], list[str]] = {}
+    for bone, (seg, side) in seg_of.items():
+        if _SEGMENTS[seg][0]:
+            groups.setdefault((_SEGMENTS[seg][0], side), []).append(bone)
+    sided = {_SEGMENTS[k][0] for k in _SIDED}
+    want = [(p, s) for p in _PERCENT for s in (("l", "r") if p in sided else ("",))]
+    missing = [f"{s + ' ' if s else ''}{p}" for p, s in want if (p, s) not in groups]
+    present = sum(_PERCENT[p] for p, s in want if (p, s) in groups)
+    out = {b: 0.0 for b in seg_of}
+    for (p, s), bones in groups.items():
+        if (p, s) in want:
+            for b in bones:
+                out[b] = mass * _PERCENT[p] / present / len(bones)
+    return out, unmapped, missing
 
 
 def _hinge_order(seq: str, dofs: list[str]) -> list[str]:
@@ -86,7 +167,8 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
     g[sk.up_axis] = -9.81
     spec.option.gravity = g
     bodies = {}
-    unknown = []
+    masses, unmapped, missing = segment_masses(sk, mass)
+    seg_of = map_segments(sk)[0]
     for i, j in enumerate(sk.joints):
         kids = sk.children(i)
         if kids:
@@ -109,12 +191,8 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
         for a in ([] if j.parent < 0 else _hinge_order(j.euler, j.dofs)):  # the root turns with its free joint
             axis = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}[a]
             b.add_joint(name=f"{j.name}.r{a}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis)
-        seg = _segment(j.name)
-        if seg is None:
-            unknown.append(j.name)
-            seg = ("", 0.0, 0.02)
-        segment, share, radius = seg
-        m = max(mass * DE_LEVA.get(segment, 0.0) / 100.0 * share, MIN_MASS if (j.dofs or j.parent < 0) else 0.0)
+        radius = _SEGMENTS.get(seg_of[j.name][0], ("", 0.02))[1]
+        m = max(masses[j.name], MIN_MASS if (j.dofs or j.parent < 0) else 0.0)
         local = pre.T @ (seg_vec * unit)
         length = float(np.linalg.norm(local))
         if m > 0:
@@ -137,7 +215,8 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
                 lim = j.limits.get(f"r{a}") if j.limits else None
                 dofs.append(DofMap(ch, int(model.jnt_qposadr[jid]), int(model.jnt_dofadr[jid]),
                                    None if lim is None else (float(lim[0]), float(lim[1]))))
-    feet = [j.name for j in sk.joints if re.sub(r"^(l|r|left|right)_?", "", j.name.lower()) in ("foot", "toes", "toebase")]
+    feet = [b for b, (seg, _) in seg_of.items() if seg == "foot"]
     root = sk.joints[0].name
     return Body(name=name or f"human:{sk.name}", kind="human", model=model, dofs=dofs,
-                mass=float(model.body_subtreemass[0]), skeleton=sk, root=root, feet=feet, up_axis=sk.up_axis)
+                mass=float(model.body_subtreemass[0]), skeleton=sk, root=root, feet=feet, up_axis=sk.up_axis,
+                unmapped=unmapped, missing_segments=missing)

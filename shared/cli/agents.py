@@ -48,12 +48,13 @@ def sim_perform(body: str = typer.Argument(..., help="A robot's name (self, othe
 
     if out.suffix.lower() != ".npz":
         _fail("--out must be a .npz file (BVH and AMC hold motion only; NPZ keeps the torque channels' names)")
-    req = {**_body_request(body), "clip": _wire(read_clip(clip, skeleton=skeleton), with_skeleton=False)}
+    motion = read_clip(clip, skeleton=skeleton)
+    req = {**_body_request(body), "clip": _wire(motion, with_skeleton=False)}
     if mass is not None:
         req["mass"] = mass
     with _client() as c:
         r = c.request("simulator", "perform", req)
-    performed = clip_from_wire(r["clip"])
+    performed = clip_from_wire(r["clip"], motion.skeleton)  # the file keeps its body: it can become BVH again
     save_clip(performed, out)
     rep = r["report"]
     if as_json:
@@ -63,10 +64,13 @@ def sim_perform(body: str = typer.Argument(..., help="A robot's name (self, othe
     typer.echo(f"wrote {out}: {performed.n_frames} frames, {len(sensors)} sensor channels "
                f"({sensors[0]} ... {sensors[-1]}) for {r['body']['name']} ({r['body']['mass']:.1f} kg)")
     lim = rep["joint_limit_violations"]
-    typer.echo(f"feasible: {'yes' if rep['feasible'] else 'no'}; joint limits exceeded on {len(lim)} channel(s)"
+    verdict = {True: "yes", False: "no", None: "not known (nothing could be checked)"}[rep["feasible"]]
+    typer.echo(f"feasible: {verdict}; joint limits exceeded on {len(lim)} channel(s)"
                + (f" ({', '.join(list(lim)[:4])})" if lim else "")
                + (f"; centre of gravity outside the support on {rep['support']['frames_outside_support']} frame(s)"
                   if rep["support"].get("checked") else ""))
+    for what in rep.get("not_checked", []):
+        typer.echo(f"  not checked: {what}")
 
 
 # ---------------------------------------------------------------------------- others

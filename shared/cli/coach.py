@@ -87,10 +87,11 @@ def coach_attempt(session: str = typer.Argument(...),
     from schemas.common import clip_from_wire
     from shared.io import save_clip
 
-    reps = [_wire(read_clip(p, skeleton=skeleton)) for p in clips]
+    attempts = [read_clip(p, skeleton=skeleton) for p in clips]
     with _client() as c:
-        r = c.request("coach", "attempt", {"session": session, "clips": reps})
-    demo = clip_from_wire(r["emphatic"])
+        r = c.request("coach", "attempt", {"session": session, "clips": [_wire(a) for a in attempts]})
+    # the emphatic motion comes at the space's rate; it is written at the rate the person recorded at
+    demo = clip_from_wire(r["emphatic"]).resample(attempts[0].fps)
     out.mkdir(parents=True, exist_ok=True)
     file = out / f"{session}_trial{r['trial']}.bvh"
     if demo.skeleton is not None:

@@ -241,10 +241,14 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
     if alpha <= 0:
         reason = "no emphasis"
     elif not session.check:
-        reason = "not checked"
+        reason = "not checked (the session was started without the check)"
     else:
         first = why_not(demo)
-        reason = "feasible"
+        unchecked = (session.target_report or {}).get("not_checked") or []
+        reason = "feasible" + (f" (not checked: {'; '.join(unchecked)})" if unchecked else "")
+        if session.target_report is None or (session.target_report.get("feasible") is None and "not_checked" in
+                                             session.target_report):
+            reason = "not checked: " + ("; ".join(unchecked) or "no simulator body for this target")
         if first is not None:
             # the largest feasible alpha on the grid 0.25, 0.5, ... below the policy's, by
             # bisection (feasibility falls with alpha): log2 checks instead of one per step
