@@ -371,3 +371,34 @@ def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain,
     pb = back.positions()
     rows = [back.skeleton.index(n) for n in names]
     assert np.abs(pb[:, rows] - mine.positions()[:, :len(names)]).max() < 2e-3
+
+
+def test_a_six_channel_body_slides_its_bones_in_mujoco_as_in_our_kinematics(plain, tmp_path):
+    import mujoco
+
+    from shared.bodies.body import _qpos_trajectory, perform
+    from shared.bodies.human import human_body
+    from tests.test_bodies import _replay_accelerations
+
+    sk, data, chans = _variant(plain, every_joint_moves=True)
+    _write_raw(tmp_path / "six.bvh", sk, data, chans, plain.fps)
+    clip = load_clip(tmp_path / "six.bvh")
+    moved = clip.data.copy()
+    k = clip.channels.index("ltibia.ty")
+    moved[:, k] += 5.0 * np.sin(np.linspace(0, np.pi, clip.n_frames))  # the shank slides up to 5 cm
+    clip = clip.with_data(moved)
+    body = human_body(clip.skeleton)
+    assert "ltibia.ty" in body.channels and body.describe()["mass"] == pytest.approx(70.0, abs=0.05)
+    q = _qpos_trajectory(body, clip)
+    ours = clip.skeleton.forward_kinematics(clip.data, clip.channels, ends=False)
+    ids = [mujoco.mj_name2id(body.model, mujoco.mjtObj.mjOBJ_BODY, j.name) for j in clip.skeleton.joints]
+    d = mujoco.MjData(body.model)
+    worst = 0.0
+    for t in range(5, clip.n_frames - 5, 3):
+        d.qpos[:] = q[t]
+        mujoco.mj_kinematics(body.model, d)
+        worst = max(worst, float(np.abs(d.xpos[ids] - ours[t]).max()))
+    assert worst < 0.01, f"{worst:.4f} m"  # positions smoothed before differentiation, as for every body
+    assert _replay_accelerations(body, clip) < 1e-8
+    performed, _ = perform(body, clip)
+    assert "tau.ltibia.ty" in performed.channels  # the force that slides the shank, in N

@@ -34,12 +34,14 @@ GRAVITY = 9.81
 
 @dataclass
 class DofMap:
-    """One motion channel driving one hinge of the model."""
+    """One motion channel driving one joint of the model: a hinge (degrees) or a slide
+    (``scale``: metres per channel unit, for the position channels of 6-channel skeletons)."""
 
     channel: str  # e.g. "rhumerus.rx" or "shoulder_pitch"
     qpos: int
     dof: int
     limits: tuple[float, float] | None = None  # degrees
+    scale: float | None = None  # a slide joint: metres per channel unit
 
 
 @dataclass
@@ -97,7 +99,7 @@ def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
     if driven:  # one filter call for every channel: the edge fits are shared
         angles = savgol_filter(clip.select([d.channel for d in driven]), w, 3, axis=0, mode="interp")
         for k, d in enumerate(driven):
-            q[:, d.qpos] = np.radians(angles[:, k])
+            q[:, d.qpos] = np.radians(angles[:, k]) if d.scale is None else angles[:, k] * d.scale
     if body.root is not None:
         sk = body.skeleton
         r = body.root
@@ -133,8 +135,10 @@ def _derivatives(model, q: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarr
     return v, a
 
 
-def mj_inverse_series(model, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``mj_inverse`` frame by frame: generalised forces (T, nv) and the centre of gravity (T, 3)."""
+def mj_inverse_series(model, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                      warnings: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``mj_inverse`` frame by frame: generalised forces (T, nv) and the centre of gravity (T, 3).
+    ``warnings``, if given, receives MuJoCo's warning counts (``inertia``, ``badqacc``, ...)."""
     data = mujoco.MjData(model)
     tau = np.empty((len(q), model.nv))
     cog = np.empty((len(q), 3))
@@ -145,13 +149,17 @@ def mj_inverse_series(model, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> tup
         mujoco.mj_inverse(model, data)
         tau[t] = data.qfrc_inverse
         cog[t] = data.subtree_com[0]
+    if warnings is not None:
+        for name, w in mujoco.mjtWarning.__members__.items():
+            if w != mujoco.mjtWarning.mjNWARNING and data.warning[int(w)].number:
+                warnings[name.removeprefix("mjWARN_").lower()] = int(data.warning[int(w)].number)
     return tau, cog
 
 
-def inverse_dynamics(body: Body, q: np.ndarray, fps: float):
+def inverse_dynamics(body: Body, q: np.ndarray, fps: float, warnings: dict | None = None):
     """(qvel, qacc, qfrc_inverse, centre of gravity (T, 3)) for a joint trajectory."""
     v, a = _derivatives(body.model, q, fps)
-    tau, cog = mj_inverse_series(body.model, q, v, a)
+    tau, cog = mj_inverse_series(body.model, q, v, a, warnings)
     return v, a, tau, cog
 
 
@@ -199,7 +207,8 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
 def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
     """The clip performed by ``body``: torques, centre of gravity and a feasibility report."""
     q = _qpos_trajectory(body, clip)
-    _, _, tau, cog = inverse_dynamics(body, q, clip.fps)
+    warned: dict = {}
+    _, _, tau, cog = inverse_dynamics(body, q, clip.fps, warned)
     limits = {}
     limited = [d for d in body.dofs if d.limits is not None and d.channel in clip.channels]
     for d in limited:
@@ -215,11 +224,14 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
     if not support.get("checked"):
         not_checked.append("balance (no feet found on the body"
                            + (f"; unnamed bones: {', '.join(body.unmapped[:5])}" if body.unmapped else "") + ")")
+    if warned:  # MuJoCo's numbers are suspect: the reply says so instead of a log line only
+        not_checked.append("dynamics (MuJoCo warned: " + ", ".join(f"{k} x{n}" for k, n in warned.items()) + ")")
     failed = bool(limits) or bool(support.get("checked") and support["frames_outside_support"] > 0)
     report = {"body": body.name, "mass": float(body.mass), "frames": clip.n_frames,
               "joint_limit_violations": limits, "support": support, "not_checked": not_checked,
-              # nothing checked is not "feasible": None says so (and not_checked says what)
-              "feasible": False if failed else (None if len(not_checked) == 2 else True)}
+              "mujoco_warnings": warned,
+              # nothing checked (or numbers MuJoCo warned about) is not "feasible": None says so
+              "feasible": False if failed else (None if len(not_checked) >= 2 or warned else True)}
     names = [f"tau.{d.channel}" for d in body.dofs] + ["cog.x", "cog.y", "cog.z"]
     values = np.column_stack([tau[:, [d.dof for d in body.dofs]], cog])
     base = clip.select(clip.group("motion")) if clip.group("motion") else clip.data

@@ -188,6 +188,11 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
             quat = np.zeros(4)
             mujoco.mju_mat2Quat(quat, rel.reshape(-1))
             b = bodies[j.parent].add_body(name=j.name, pos=ppre.T @ (j.offset * unit), quat=quat)
+        if j.parent >= 0:  # position channels (6-channel skeletons) slide the bone in its parent's frame: p =
+            for a in "xyz":  # p_parent + G_parent (offset + t); in the bone's own frame that axis is C_j^T e_a
+                if f"t{a}" in j.dofs:
+                    b.add_joint(name=f"{j.name}.t{a}", type=mujoco.mjtJoint.mjJNT_SLIDE,
+                                axis=pre.T @ np.eye(3)["xyz".index(a)])
         for a in ([] if j.parent < 0 else _hinge_order(j.euler, j.dofs)):  # the root turns with its free joint
             axis = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}[a]
             b.add_joint(name=f"{j.name}.r{a}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis)
@@ -207,6 +212,12 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
     except ValueError as e:
         raise BadInput(f"cannot build a MuJoCo body from skeleton {sk.name!r}: {e}") from None
     dofs = []
+    for j in sk.joints[1:]:
+        for a in "xyz":
+            jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{j.name}.t{a}")
+            if jid >= 0:
+                dofs.append(DofMap(f"{j.name}.t{a}", int(model.jnt_qposadr[jid]), int(model.jnt_dofadr[jid]),
+                                   scale=sk.unit_m))
     for j in sk.joints:
         for a in "xyz":
             ch = f"{j.name}.r{a}"
