@@ -97,6 +97,11 @@ def test_simulator_cli_on_the_cluster(cluster, bundled, tmp_path):
     assert rep["body"]["kind"] == "human" and "feasible" in rep["report"]
     performed = load_clip(tmp_path / "k.npz")
     assert "tau.lfemur.rx" in performed.group("sensor") and "cog.y" in performed.group("sensor")
+    r = cli(env, "clip", "convert", tmp_path / "k.npz", tmp_path / "k.bvh")  # it kept its body: it becomes BVH again
+    assert r.returncode == 0, r.stderr
+    a, b = load_clip(amc), load_clip(tmp_path / "k.bvh")  # a BVH lists the joints depth first
+    rows = [b.skeleton.index(j.name) for j in a.skeleton.joints]
+    assert np.abs(b.positions()[:, rows] - a.positions()[:, :len(rows)]).max() < 1e-4
     r = cli(env, "sim", "perform", "self", amc, "--out", tmp_path / "k.bvh")
     assert r.returncode == 2 and ".npz" in r.stderr
 
@@ -155,7 +160,8 @@ def test_coaching_from_the_cli(cluster, bundled, tmp_path):
     assert {"alpha", "adverb", "d_p", "file"} <= set(j) and j["d_p"] > 0
     from shared.io import load_clip
 
-    assert load_clip(j["file"]).n_frames > 10
+    emph = load_clip(j["file"])
+    assert emph.n_frames > 10 and emph.fps == 120  # written at the rate the attempt was recorded at (issue 12)
     r = cli(env, "coach", "show", session)
     assert r.returncode == 0 and "trial 1: d_p" in r.stdout
     r = cli(env, "coach", "attempt", session, bundled / "amc/squat1Reps", "--out", out)  # a folder is not a clip

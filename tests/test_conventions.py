@@ -228,6 +228,17 @@ def test_the_same_motion_is_recognised_alike_whatever_file_carried_it(bundled, t
     assert ra.nearest[0][0] == rb.nearest[0][0] == rn.nearest[0][0] == amc.name
     assert np.abs(ra.recognition_distances - rb.recognition_distances).max() < 1e-3 * scale
     assert np.array_equal(ra.recognition_distances, rn.recognition_distances)
+    # and the same proto-symbol in the space's geometry: the BVH's ZXY angles are read back as the
+    # space's own ASF angles (eq. 2.4 distance ~0 where the raw angles gave ~270)
+    from shared.pss.distance import hmm_distance
+
+    geo = space.features.group_indices(("motion", "sensor"))
+    h = [space.abstract(c).marginal(geo) for c in (amc, bvh, npz)]
+    g_scale = float(np.median(space.distances[np.triu_indices(len(space.symbols), 1)]))
+    assert hmm_distance(h[0], h[1]) < 1e-3 * g_scale and hmm_distance(h[0], h[2]) < 1e-9
+    assert np.allclose(ra.point, rb.point, atol=1e-3 * g_scale)
+    mixed = ProtoSymbolSpace.build([bvh] + [c for c in clips if c.name != amc.name][:6])  # formats mixed in one space
+    assert mixed.recognize(amc).nearest[0][0] == bvh.name  # the AMC clip finds its own BVH
     # the rotation-matrix encoding (not the default yet, see shared/pss/features.py) makes the
     # generation channels agree as well: Euler order and axis convention do not enter
     rot6 = MotionFeatures(amc.skeleton, amc.group("motion"), rotations="rot6")

@@ -4,7 +4,12 @@ HDM05 angles run continuously past 360 degrees and differ between actors by whol
 raw angles make poor HMM outputs (DESIGN.md: 1-NN DTW 44 % on raw angles, 64 % on sin/cos).
 The representation here is turn-invariant and invertible:
 
-* every joint rotation channel ``theta`` -> ``(sin theta, cos theta)`` (the default). The
+* every joint rotation channel ``theta`` -> ``(sin theta, cos theta)`` (the default), read in
+  the space's own convention: a clip whose skeleton composes a joint's rotation otherwise (a
+  BVH written from an AMC clip: ZXY angles of the folded rotation) has that joint's rotation
+  re-expressed as the reference skeleton's Euler angles, on the branch nearest the previous
+  frame (the first frame: nearest the space's mean angles), so the same motion gives the same
+  numbers whatever file carried it. The
   alternative ``rotations="rot6"`` encodes each joint's local rotation in the world-aligned
   rest frame, ``L = C M C^T``, by the first two columns of its matrix (Zhou et al. 2019), so
   that an AMC clip and the BVH written from it (other Euler order, no axis pre-rotation) are
@@ -128,7 +133,7 @@ class MotionFeatures:
 
     def __init__(self, skeleton: Skeleton | None, motion_channels: list[str], sensor_channels: list[str] | None = None,
                  sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None,
-                 rotations: str | None = None):
+                 rotations: str | None = None, angle_mean=None):
         self.skeleton = skeleton
         self.motion_channels = list(motion_channels)
         self.sensor_channels = list(sensor_channels or [])
@@ -166,6 +171,10 @@ class MotionFeatures:
         if self.root_rot and self.root_trans:
             names += ["root.yaw_rate"]
         self.motion_feature_names = names
+        n_a = len(self.angle_channels)
+        self.angle_mean = np.zeros(n_a) if angle_mean is None else np.asarray(angle_mean, float)  # degrees
+        if self.angle_mean.shape != (n_a,):
+            raise BadInput(f"angle means need {n_a} values")
         self.position_feature_names = self._position_names() if position_mean is not None else []
         n_p = len(self.position_feature_names)
         self.position_mean = np.zeros(n_p) if position_mean is None else np.asarray(position_mean, float)
@@ -238,12 +247,63 @@ class MotionFeatures:
             mean = allv.mean(axis=0)
             scale = np.maximum(allv.std(axis=0), 1e-6 * max(1.0, float(np.abs(allv).max())))
         base = cls(first.skeleton, motion, sensors, mean, scale)
+        a_mean = None
+        if base.angle_channels and first.skeleton is not None:  # circular means, the branch choice's anchor
+            a = np.deg2rad(np.vstack([base._angles(c) for c in clips]))
+            a_mean = np.rad2deg(np.arctan2(np.sin(a).mean(axis=0), np.cos(a).mean(axis=0)))
         if not base._position_names():
-            return base
+            return cls(first.skeleton, motion, sensors, mean, scale, angle_mean=a_mean)
         raw = np.vstack([base._raw_positions(c, *base._root_terms(c)) for c in clips])
         p_mean = raw.mean(axis=0)
         p_scale = np.maximum(raw.std(axis=0), 1e-3)
-        return cls(first.skeleton, motion, sensors, mean, scale, p_mean, p_scale)
+        return cls(first.skeleton, motion, sensors, mean, scale, p_mean, p_scale, angle_mean=a_mean)
+
+    # ---------------------------------------------------------------- other conventions
+    def _foreign(self, clip: Clip) -> Skeleton | None:
+        """The clip's own skeleton when it composes some joint's rotation otherwise than the
+        space's (another Euler order or axis pre-rotation), else None."""
+        body = self.body(clip)
+        if body is self.skeleton or self.skeleton is None:
+            return None
+        for c in self.angle_channels:
+            name = c.rsplit(".", 1)[0]
+            a, b = body.joints[body.index(name)], self.skeleton.joints[self.skeleton.index(name)]
+            if a.euler != b.euler or not np.allclose(a.pre, b.pre, atol=1e-6):
+                return body
+        return None
+
+    def _angles(self, clip: Clip) -> np.ndarray:
+        """The angle channels (T, n) in degrees, in the space's convention (module docstring)."""
+        body = self._foreign(clip)
+        if body is None:
+            return clip.select(self.angle_channels)
+        from scipy.spatial.transform import Rotation
+
+        local = body.local_matrices(clip.data, clip.channels)
+        out = np.zeros((clip.n_frames, len(self.angle_channels)))
+        col = {c: i for i, c in enumerate(self.angle_channels)}
+        for name in dict.fromkeys(c.rsplit(".", 1)[0] for c in self.angle_channels):
+            ref = self.skeleton.joints[self.skeleton.index(name)]
+            m = ref.pre.T @ local[:, body.index(name)] @ ref.pre
+            seq = ref.euler
+            one = Rotation.from_matrix(m).as_euler(seq)
+            axes = seq.lower()
+            have = np.array([f"{name}.r{a}" in col for a in axes])
+            anchor = np.array([np.deg2rad(self.angle_mean[col[f"{name}.r{a}"]]) if h else 0.0
+                               for a, h in zip(axes, have)])
+            if len(set(axes)) == 3:  # Tait-Bryan: the twin (a + pi, pi - b, c + pi) is the same rotation
+                two = one + np.array([np.pi, 0.0, np.pi])
+                two[:, 1] = np.pi - one[:, 1]
+                # per frame the branch nearer the space's mean angles; a channel the joint does not
+                # have must stay at 0, so the branch that keeps it there wins first
+                target = np.where(have, anchor, 0.0)
+                cost = [np.sum(np.abs(np.angle(np.exp(1j * (x - target)))) * np.where(have, 1.0, 10.0), axis=1)
+                        for x in (one, two)]
+                one = np.where((cost[1] < cost[0])[:, None], two, one)
+            for k, a in enumerate(axes):
+                if have[k]:
+                    out[:, col[f"{name}.r{a}"]] = np.rad2deg(one[:, k])
+        return out
 
     @property
     def n_features(self) -> int:
@@ -274,6 +334,13 @@ class MotionFeatures:
             known = {j.name for j in body.joints if any(f"{j.name}.r{a}" in clip.channels for a in "xyz")}
             missing = [f"{j}.r*" for j in self.rotation_joints if j not in known]
             missing += [c for c in self.motion_channels if c not in clip.channels and c not in self.angle_channels]
+        elif self._foreign(clip) is not None:  # the same joints carry the rotations under their own
+            # channel names (a joint without rotation channels in the clip's skeleton does not turn)
+            body = self._foreign(clip)
+            joints = dict.fromkeys(c.rsplit(".", 1)[0] for c in self.angle_channels)
+            missing = [f"{j}.{d}" for j in joints for d in body.joints[body.index(j)].dofs
+                       if d.startswith("r") and f"{j}.{d}" not in clip.channels]
+            missing += [c for c in self.motion_channels if c not in clip.channels and c not in self.angle_channels]
         else:
             missing = [c for c in self.motion_channels if c not in clip.channels]
         if missing:
@@ -284,7 +351,7 @@ class MotionFeatures:
             local = body.local_matrices(clip.data, clip.channels)[:, [body.index(j) for j in self.rotation_joints]]
             cols.append(local[:, :, :, :2].reshape(clip.n_frames, -1))
         elif self.angle_channels:
-            a = np.deg2rad(clip.select(self.angle_channels))
+            a = np.deg2rad(self._angles(clip))
             cols.append(np.stack([np.sin(a), np.cos(a)], axis=2).reshape(len(a), -1))
         if self.plain_channels:
             cols.append(clip.select(self.plain_channels))
@@ -423,6 +490,7 @@ class MotionFeatures:
             **({"position_mean": self.position_mean.tolist(), "position_scale": self.position_scale.tolist()}
                if self.has_position else {}),
             "rotations": self.rotations,
+            "angle_mean": self.angle_mean.tolist(),
         })
 
     @classmethod
@@ -430,4 +498,4 @@ class MotionFeatures:
         d = json.loads(text)
         sk = Skeleton.from_json(d["skeleton"]) if d["skeleton"] else None
         return cls(sk, d["motion_channels"], d["sensor_channels"], d["sensor_mean"], d["sensor_scale"],
-                   d.get("position_mean"), d.get("position_scale"), d.get("rotations", "sincos"))
+                   d.get("position_mean"), d.get("position_scale"), d.get("rotations", "sincos"), d.get("angle_mean"))
