@@ -101,3 +101,18 @@ def test_a_local_session_coaches_and_refuses_bad_attempts(squat):
     with pytest.raises(BadInput, match="too short"):
         check_attempts(s, [squat.frames(0, 5)])
     assert len(s.trials) == 4
+
+
+def test_the_coach_says_when_nothing_could_be_checked(squat):
+    from shared.agents.learner import SimulatedLearner, population
+
+    s = Session("u", squat, Policy("fixed", alpha=2.0, adverb="table"))
+    ports = LocalCoachPorts(None)  # no simulator body for this target
+    start(s, ports)
+    rec, _ = trial(s, SimulatedLearner("l", squat, population(4, 0)[1]).imitate(squat, None), ports)
+    assert rec.feasibility.startswith("not checked: joint limits and balance")
+    s2 = Session("v", squat, Policy("fixed", alpha=2.0, adverb="table"))
+    ports2 = LocalCoachPorts(squat.skeleton)  # an ASF body: limits and feet, both checked
+    start(s2, ports2)
+    rec2, _ = trial(s2, SimulatedLearner("l", squat, population(4, 0)[1]).imitate(squat, None), ports2)
+    assert "not checked" not in rec2.feasibility

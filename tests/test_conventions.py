@@ -354,7 +354,7 @@ def _blender():
 
 @pytest.mark.skipif(_blender() is None, reason="Blender is not installed (Debian: apt-get install blender; "
                                                 "`make test` installs it when CI=true)")
-def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain, tmp_path):
+def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain, mixed_space, tmp_path):
     import json
     import subprocess
     from pathlib import Path
@@ -382,6 +382,7 @@ def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain,
     pb = back.positions()
     rows = [back.skeleton.index(n) for n in names]
     assert np.abs(pb[:, rows] - mine.positions()[:, :len(names)]).max() < 2e-3
+    _same_proto_symbol(mixed_space, back, mine)
 
 
 def test_a_six_channel_body_slides_its_bones_in_mujoco_as_in_our_kinematics(plain, tmp_path):
@@ -413,3 +414,37 @@ def test_a_six_channel_body_slides_its_bones_in_mujoco_as_in_our_kinematics(plai
     assert _replay_accelerations(body, clip) < 1e-8
     performed, _ = perform(body, clip)
     assert "tau.ltibia.ty" in performed.channels  # the force that slides the shank, in N
+
+
+@pytest.fixture(scope="module")
+def mixed_space(plain, bundled):
+    from shared.io import find_clips
+    from shared.pss.space import ProtoSymbolSpace
+
+    others = [load_clip(f) for f in find_clips([bundled / "amc"]) if "_bd_" in f.name and "squat" not in f.name][:5]
+    return ProtoSymbolSpace.build([plain] + others)
+
+
+def _same_proto_symbol(space, a, b):
+    """Eq. 2.4 between the two clips' HMMs on the space's geometry, against the space's own scale."""
+    from shared.pss.distance import hmm_distance
+
+    geo = space.features.group_indices(("motion", "sensor"))
+    d = hmm_distance(space.abstract(a).marginal(geo), space.abstract(b).marginal(geo))
+    scale = float(np.median(space.distances[np.triu_indices(len(space.symbols), 1)]))
+    assert d < 2e-3 * scale, f"distance {d:.3g} (space median {scale:.3g})"
+
+
+@pytest.mark.parametrize("variant", ["m", "in", "cmu", "z-up", "six-replace", "six-add", "root-offset-add"])
+def test_every_convention_gives_the_same_body_mass_and_proto_symbol(plain, mixed_space, tmp_path, variant):
+    from shared.bodies.human import human_body
+
+    kw = {"m": dict(scale=0.01), "in": dict(scale=0.01 / 0.0254), "cmu": dict(scale=0.01 / UNITS["cmu"]),
+          "z-up": dict(turn=ROT_Z_UP), "six-replace": dict(every_joint_moves=True),
+          "six-add": dict(every_joint_moves=True, add_form=True),
+          "root-offset-add": dict(root_offset=[0.0, 95.0, 0.0], add_form=True)}[variant]
+    sk, data, chans = _variant(plain, **kw)
+    _write_raw(tmp_path / "v.bvh", sk, data, chans, plain.fps)
+    clip = load_clip(tmp_path / "v.bvh")
+    assert human_body(clip.skeleton).describe()["mass"] == pytest.approx(70.0, abs=0.05)
+    _same_proto_symbol(mixed_space, clip, plain)

@@ -39,6 +39,7 @@ class LocalCoachPorts:
 
     def perform(self, clip):
         if self.body is None:
-            return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames}, None
+            return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames,
+                    "not_checked": ["joint limits and balance (no body for this target)"], "feasible": None}, None
         out, report = perform(self.body, clip)
         return report, out.select(["cog.x", "cog.y", "cog.z"])

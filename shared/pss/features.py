@@ -7,9 +7,9 @@ The representation here is turn-invariant and invertible:
 * every joint rotation channel ``theta`` -> ``(sin theta, cos theta)`` (the default), read in
   the space's own convention: a clip whose skeleton composes a joint's rotation otherwise (a
   BVH written from an AMC clip: ZXY angles of the folded rotation) has that joint's rotation
-  re-expressed as the reference skeleton's Euler angles, on the branch nearest the previous
-  frame (the first frame: nearest the space's mean angles), so the same motion gives the same
-  numbers whatever file carried it. The
+  re-expressed as the reference skeleton's Euler angles (scipy's principal branch, or its
+  twin where only the twin keeps a channel the joint lacks at 0), so the same motion gives the
+  same numbers whatever file carried it. The
   alternative ``rotations="rot6"`` encodes each joint's local rotation in the world-aligned
   rest frame, ``L = C M C^T``, by the first two columns of its matrix (Zhou et al. 2019), so
   that an AMC clip and the BVH written from it (other Euler order, no axis pre-rotation) are
@@ -133,7 +133,7 @@ class MotionFeatures:
 
     def __init__(self, skeleton: Skeleton | None, motion_channels: list[str], sensor_channels: list[str] | None = None,
                  sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None,
-                 rotations: str | None = None, angle_mean=None):
+                 rotations: str | None = None):
         self.skeleton = skeleton
         self.motion_channels = list(motion_channels)
         self.sensor_channels = list(sensor_channels or [])
@@ -171,10 +171,6 @@ class MotionFeatures:
         if self.root_rot and self.root_trans:
             names += ["root.yaw_rate"]
         self.motion_feature_names = names
-        n_a = len(self.angle_channels)
-        self.angle_mean = np.zeros(n_a) if angle_mean is None else np.asarray(angle_mean, float)  # degrees
-        if self.angle_mean.shape != (n_a,):
-            raise BadInput(f"angle means need {n_a} values")
         self.position_feature_names = self._position_names() if position_mean is not None else []
         n_p = len(self.position_feature_names)
         self.position_mean = np.zeros(n_p) if position_mean is None else np.asarray(position_mean, float)
@@ -247,16 +243,12 @@ class MotionFeatures:
             mean = allv.mean(axis=0)
             scale = np.maximum(allv.std(axis=0), 1e-6 * max(1.0, float(np.abs(allv).max())))
         base = cls(first.skeleton, motion, sensors, mean, scale)
-        a_mean = None
-        if base.angle_channels and first.skeleton is not None:  # circular means, the branch choice's anchor
-            a = np.deg2rad(np.vstack([base._angles(c) for c in clips]))
-            a_mean = np.rad2deg(np.arctan2(np.sin(a).mean(axis=0), np.cos(a).mean(axis=0)))
         if not base._position_names():
-            return cls(first.skeleton, motion, sensors, mean, scale, angle_mean=a_mean)
+            return base
         raw = np.vstack([base._raw_positions(c, *base._root_terms(c)) for c in clips])
         p_mean = raw.mean(axis=0)
         p_scale = np.maximum(raw.std(axis=0), 1e-3)
-        return cls(first.skeleton, motion, sensors, mean, scale, p_mean, p_scale, angle_mean=a_mean)
+        return cls(first.skeleton, motion, sensors, mean, scale, p_mean, p_scale)
 
     # ---------------------------------------------------------------- other conventions
     def _foreign(self, clip: Clip) -> Skeleton | None:
@@ -289,17 +281,12 @@ class MotionFeatures:
             one = Rotation.from_matrix(m).as_euler(seq)
             axes = seq.lower()
             have = np.array([f"{name}.r{a}" in col for a in axes])
-            anchor = np.array([np.deg2rad(self.angle_mean[col[f"{name}.r{a}"]]) if h else 0.0
-                               for a, h in zip(axes, have)])
-            if len(set(axes)) == 3:  # Tait-Bryan: the twin (a + pi, pi - b, c + pi) is the same rotation
+            if len(set(axes)) == 3 and not have.all():  # Tait-Bryan with a channel the joint lacks: the
+                # twin (a + pi, pi - b, c + pi) is the same rotation; take it where it keeps that channel at 0
                 two = one + np.array([np.pi, 0.0, np.pi])
                 two[:, 1] = np.pi - one[:, 1]
-                # per frame the branch nearer the space's mean angles; a channel the joint does not
-                # have must stay at 0, so the branch that keeps it there wins first
-                target = np.where(have, anchor, 0.0)
-                cost = [np.sum(np.abs(np.angle(np.exp(1j * (x - target)))) * np.where(have, 1.0, 10.0), axis=1)
-                        for x in (one, two)]
-                one = np.where((cost[1] < cost[0])[:, None], two, one)
+                off = [np.sum(np.abs(np.angle(np.exp(1j * x[:, ~have]))), axis=1) for x in (one, two)]
+                one = np.where((off[1] < off[0])[:, None], two, one)
             for k, a in enumerate(axes):
                 if have[k]:
                     out[:, col[f"{name}.r{a}"]] = np.rad2deg(one[:, k])
@@ -383,7 +370,8 @@ class MotionFeatures:
             out.append(up)
         if self.root_trans:
             t = np.column_stack([clip.column(f"{r}.{d}") if f"{r}.{d}" in clip.channels else np.zeros(clip.n_frames)
-                                 for d in ("tx", "ty", "tz")]) * sk.unit_m
+                                 for d in ("tx", "ty", "tz")])
+            t = (sk.root.offset + t) * sk.unit_m  # the root's position: its offset plus its channels
             heading = np.unwrap(psi) if self.root_rot else np.zeros(clip.n_frames)
             vel = _forward_diff(t) * clip.fps
             c, s = np.cos(heading), np.sin(heading)
@@ -466,7 +454,7 @@ class MotionFeatures:
             px = _integrate(s * v_fwd + c * v_lat, fps)
             pz = _integrate(c * v_fwd - s * v_lat, fps)
             for d, v in zip(("tx", "ty", "tz"), (px, height, pz)):
-                values[f"{root.name}.{d}"] = v / sk.unit_m
+                values[f"{root.name}.{d}"] = v / sk.unit_m - root.offset["xyz".index(d[1])]
         if self.root_rot:
             from scipy.spatial.transform import Rotation
 
@@ -490,7 +478,6 @@ class MotionFeatures:
             **({"position_mean": self.position_mean.tolist(), "position_scale": self.position_scale.tolist()}
                if self.has_position else {}),
             "rotations": self.rotations,
-            "angle_mean": self.angle_mean.tolist(),
         })
 
     @classmethod
@@ -498,4 +485,4 @@ class MotionFeatures:
         d = json.loads(text)
         sk = Skeleton.from_json(d["skeleton"]) if d["skeleton"] else None
         return cls(sk, d["motion_channels"], d["sensor_channels"], d["sensor_mean"], d["sensor_scale"],
-                   d.get("position_mean"), d.get("position_scale"), d.get("rotations", "sincos"), d.get("angle_mean"))
+                   d.get("position_mean"), d.get("position_scale"), d.get("rotations", "sincos"))
