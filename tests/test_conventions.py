@@ -448,3 +448,20 @@ def test_every_convention_gives_the_same_body_mass_and_proto_symbol(plain, mixed
     clip = load_clip(tmp_path / "v.bvh")
     assert human_body(clip.skeleton).describe()["mass"] == pytest.approx(70.0, abs=0.05)
     _same_proto_symbol(mixed_space, clip, plain)
+
+
+def test_mujoco_warnings_reach_the_report_instead_of_a_log_line_only(tmp_path, monkeypatch):
+    from shared.bodies.body import perform
+    from shared.bodies.robot import robot
+    from tests.test_bodies import _robot_motion
+
+    monkeypatch.chdir(tmp_path)
+    body = robot("self")
+    body.model.body_mass[2:] = 1e-14  # a body MuJoCo cannot trust: inertia matrix near singular
+    body.model.body_inertia[2:] = 1e-16
+    _, report = perform(body, _robot_motion())
+    assert report["mujoco_warnings"].get("inertia", 0) > 0
+    assert report["feasible"] is not True and any("MuJoCo warned" in w for w in report["not_checked"])
+    _, fine = perform(robot("other"), _robot_motion())
+    assert fine["mujoco_warnings"] == {}
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()  # the warning went to the log, not into the working folder

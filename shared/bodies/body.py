@@ -23,11 +23,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import logging
+
 import mujoco
 import numpy as np
 
 from shared.clip import Clip
 from shared.errors import BadInput
+
+
+def _mujoco_warning(message: str) -> None:
+    """MuJoCo's warnings go to the process log (not to a MUJOCO_LOG.TXT in whatever folder the
+    process runs in); the run-time ones also reach the perform report (``mujoco_warnings``)."""
+    logging.getLogger("mujoco").warning(message.strip())
+
+
+mujoco.set_mju_user_warning(_mujoco_warning)
 
 GRAVITY = 9.81
 
