@@ -153,6 +153,41 @@ def peers_available() -> dict[str, str | None]:
     return out
 
 
+def pss_alternatives(space: ProtoSymbolSpace, recs, truth: list[str]) -> dict[str, RecognitionResult]:
+    """Decisions the space could take instead of the nearest proto-symbol, on the same
+    recognition distances: k-NN (k = 3, 5) and a logistic regression (scikit-learn) on the
+    per-class nearest distances, trained on the space's own proto-symbols across performers."""
+    from sklearn.linear_model import LogisticRegression
+
+    from shared.pss.recognition import class_distances
+
+    labels = np.array(space.labels)
+    out = {}
+    for k in (3, 5):
+        pred = []
+        for r in recs:
+            order = np.argsort(r.recognition_distances)[:k]
+            votes = defaultdict(float)
+            for rank, i in enumerate(order):
+                votes[labels[i]] += 1.0 + 1e-3 * (k - rank)  # ties go to the nearer
+            pred.append(max(votes, key=votes.get))
+        out[f"pss_knn{k}"] = _summarise(f"PSS {k}-NN", truth, pred, [])
+    classes = sorted(set(labels))
+    perf = np.array([s.performers[0] if s.performers else "" for s in space.symbols])
+    d = space.recognition_matrix
+    rows, ys = [], []
+    for i in range(len(labels)):
+        other = (perf != perf[i]) if len(set(perf)) > 1 else (np.arange(len(labels)) != i)
+        rows.append(class_distances(d[i, other], labels[other], classes))
+        ys.append(labels[i])
+    x = np.array(rows)
+    scale = float(np.median(x[np.isfinite(x)]))
+    clf = LogisticRegression(max_iter=5000).fit(np.nan_to_num(-x / scale, neginf=-1e3), ys)
+    xt = np.array([class_distances(r.recognition_distances, labels, classes) for r in recs])
+    out["pss_logreg"] = _summarise("PSS logistic regression", truth, list(clf.predict(np.nan_to_num(-xt / scale, neginf=-1e3))), [])
+    return out
+
+
 # ---------------------------------------------------------------------------- open set
 def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.ndarray] | None = None,
              progress=None) -> dict:
@@ -229,7 +264,8 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
         conf = np.array([r.confidence for r in recs])
         correct = np.array([r.nearest_label == t for r, t in zip(recs, truth)], dtype=float)
         split = {"train": len(train), "test": len(test), "n_states": space.params.n_states, "build_s": build_s,
-                 "methods": {"pss": ours.__dict__, "pss_point": point.__dict__},
+                 "methods": {"pss": ours.__dict__, "pss_point": point.__dict__,
+                             **{k: v.__dict__ for k, v in pss_alternatives(space, recs, truth).items()}},
                  "calibration": {"ece": _ece(conf, correct), "mean_confidence": float(conf.mean()),
                                  "scheme": space.calibration.scheme,
                                  "rejected_in_class": int(sum(r.label is None for r in recs))}}
@@ -297,8 +333,11 @@ def report_markdown(res: dict) -> str:
     """The report's text; every verdict word comes from :func:`verdicts`."""
     splits = res["splits"]
     names = {"pss": "PSS: nearest proto-symbol on positions (ours)", "pss_point": "PSS: nearest point in the 3-D space (eq. 2.6)",
-             "minirocket": "MiniRocket + ridge (aeon)", "dtw": "1-NN DTW (band 0.1), positions"}
-    methods = [m for m in ("pss", "minirocket", "dtw", "pss_point") if all(m in s["methods"] for s in splits.values())]
+             "minirocket": "MiniRocket + ridge (aeon)", "dtw": "1-NN DTW (band 0.1), positions",
+             "pss_knn3": "PSS, same distances: 3-NN", "pss_knn5": "PSS, same distances: 5-NN",
+             "pss_logreg": "PSS, same distances: logistic regression on per-class distances (sklearn)"}
+    methods = [m for m in ("pss", "minirocket", "dtw", "pss_point", "pss_knn3", "pss_knn5", "pss_logreg")
+               if all(m in s["methods"] for s in splits.values())]
     who = list(splits)
     lines = ["# Recognition: the proto-symbol space against its peers (issue 11)", "",
              f"HDM05, {res['n_clips']} clips, {len(res['classes'])} classes, performers {', '.join(res['performers'])}; "
@@ -314,7 +353,7 @@ def report_markdown(res: dict) -> str:
             ok = sum(a for a, _ in r["per_class"].values())
             cells.append(f"{100 * r['accuracy']:.1f} % ({ok}/{splits[w]['test']})")
         ms = np.mean([splits[w]["methods"][m]["seconds_per_clip"] for w in who]) * 1e3
-        lines.append(f"| {names[m]} | " + " | ".join(cells) + f" | {ms:.1f} |")
+        lines.append(f"| {names[m]} | " + " | ".join(cells) + (f" | {ms:.1f} |" if np.isfinite(ms) else " | - |"))
     for name, why in res["peers"].items():
         if why:
             lines.append(f"\n{names[name]}: not run ({why}).")

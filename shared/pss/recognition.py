@@ -3,11 +3,10 @@
 The thesis recognises a motion by its point in the space. Measured on HDM05 (issue 11,
 ``reports/recognition/report.md``), the label is best decided before the point: by the eq.
 2.4 distance between the motion's HMM and every proto-symbol *on the position channel group*
-(:mod:`shared.pss.features`), nearest proto-symbol first. The same report measured the
-alternatives this module does not use: k-NN with k = 3 or 5 (worse by 1-5 clips per split),
-a logistic regression on per-class distances (worse by 6-14 clips: within a space, clips of
-the same performer sit closer than a new performer's, so a learnt weighting overfits them)
-and the nearest point of the 3-D space (64 %).
+(:mod:`shared.pss.features`), nearest proto-symbol first. The same report measures the
+alternatives this module does not use on the same distances (k-NN with k = 3 and 5, a
+logistic regression on per-class distances, :func:`shared.evaluation.pss_alternatives`) and
+the nearest point of the 3-D space; none did better.
 
 On top of the nearest proto-symbol:
 
