@@ -53,7 +53,12 @@ def test_errors_are_one_line_without_traceback(bundled, tmp_path):
         ("clip", "convert", bundled / SQUAT, tmp_path / "x.txt"),
         ("offline", "recognize", tmp_path / "nospace.npz", bundled / SQUAT),
         ("offline", "generate", tmp_path / "nospace.npz", "--point", "a,b", "--out", tmp_path / "g.bvh"),
+        ("--units", "furlong", "clip", "info", bundled / SQUAT),
+        ("--up", "x", "clip", "info", tmp_path / "s.bvh"),
+        ("--translations", "both", "clip", "info", tmp_path / "s.bvh"),
     ]
+    r = run("clip", "convert", bundled / SQUAT, tmp_path / "s.bvh")
+    assert r.returncode == 0, r.stderr
     for args in cases:
         r = run(*args)
         assert r.returncode == 2, (args, r.stderr)

@@ -180,6 +180,8 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
     :mod:`shared.io.conventions`); returns the skeleton, the data and what was decided."""
     from shared.io import conventions as cv
 
+    if translations not in (None, "auto", "add", "replace"):
+        raise ClipFormatError(path, f"translations must be add, replace or auto, got {translations!r}")
     col = {c: i for i, c in enumerate(channels)}
     size = max(cv.rest_extent(sk, a) for a in range(3))
     modes = {}
