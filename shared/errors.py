@@ -49,6 +49,7 @@ class ClipFormatError(BadInput):
         super().__init__(f"{where}: {message}", path=str(path), line=line)
         self.path = str(path)
         self.line = line
+        self.reason = message
 
 
 class ModelError(MirrorcoachError):

@@ -14,26 +14,15 @@ import numpy as np
 
 @numba.njit(cache=True, nogil=True)
 def _axis(code, a, out):
+    """Rotation by ``a`` about axis ``code`` (0 x, 1 y, 2 z) into ``out``."""
     c, s = np.cos(a), np.sin(a)
+    i, j = (code + 1) % 3, (code + 2) % 3
     out[:] = 0.0
-    if code == 0:
-        out[0, 0] = 1.0
-        out[1, 1] = c
-        out[2, 2] = c
-        out[1, 2] = -s
-        out[2, 1] = s
-    elif code == 1:
-        out[1, 1] = 1.0
-        out[0, 0] = c
-        out[2, 2] = c
-        out[2, 0] = -s
-        out[0, 2] = s
-    else:
-        out[2, 2] = 1.0
-        out[0, 0] = c
-        out[1, 1] = c
-        out[0, 1] = -s
-        out[1, 0] = s
+    out[code, code] = 1.0
+    out[i, i] = c
+    out[j, j] = c
+    out[i, j] = -s
+    out[j, i] = s
 
 
 @numba.njit(cache=True, nogil=True)

@@ -187,27 +187,9 @@ class Skeleton:
         return cache[key]
 
     def root_matrices(self, data: np.ndarray, channels: list[str]) -> np.ndarray:
-        """The root's rotation matrices (T, 3, 3) ``C M C^T`` in numpy (no scipy import):
-        the same map as :meth:`global_root_rotation`, which it is tested against."""
-        data = np.asarray(data, dtype=float)
-        n = data.shape[0]
-        root = self.root
-        col = {c: i for i, c in enumerate(channels)}
-        m = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-        for ax in root.euler.lower():  # extrinsic: each next axis turns what came before
-            ch = f"{root.name}.r{ax}"
-            a = np.deg2rad(data[:, col[ch]]) if ch in col else np.zeros(n)
-            c, s = np.cos(a), np.sin(a)
-            r = np.zeros((n, 3, 3))
-            i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[ax]
-            k = 3 - i - j
-            r[:, k, k] = 1.0
-            r[:, i, i] = c
-            r[:, j, j] = c
-            r[:, i, j] = -s
-            r[:, j, i] = s
-            m = m @ r if root.euler.isupper() else r @ m
-        return root.pre @ m @ root.pre.T
+        """The root's rotation matrices (T, 3, 3) ``C M C^T`` (no scipy import): the same map
+        as :meth:`global_root_rotation`."""
+        return self.local_matrices(data, channels)[:, 0]
 
     def rest_height(self) -> float:
         """The body's height in its rest pose (all channels 0), in metres, along its up axis."""

@@ -22,6 +22,15 @@ def hdm05() -> Path:
 
 
 @pytest.fixture(scope="session")
+def cmu() -> Path:
+    """The CMU BVH sample in two unit conventions (``../shared/data/cmu``, see its SOURCE.md)."""
+    path = SHARED_HDM05.parent / "cmu"
+    if not (path / "131_01.bvh").is_file():
+        pytest.fail(f"the CMU BVH sample is not at {path}")
+    return path
+
+
+@pytest.fixture(scope="session")
 def dev_clips(hdm05):
     from shared.io import find_clips, load_clip
 

@@ -28,6 +28,11 @@ def test_compiled_forward_kinematics_equals_the_scipy_reference(dev_clips, tmp_p
         fast = c.skeleton.forward_kinematics(c.data, c.channels)
         ref = c.skeleton.forward_kinematics_reference(c.data, c.channels)
         assert fast.shape == ref.shape and np.abs(fast - ref).max() < 1e-9
+        values = {ch: c.data[:, i] for i, ch in enumerate(c.channels)}
+        ref_local = np.stack([r.as_matrix() for r in c.skeleton.local_rotations(values, c.n_frames)], axis=1)
+        assert np.abs(c.skeleton.local_matrices(c.data, c.channels) - ref_local).max() < 1e-12
+        assert np.abs(c.skeleton.root_matrices(c.data, c.channels)
+                      - c.skeleton.global_root_rotation(c.data, c.channels).as_matrix()).max() < 1e-12
     # BVH: intrinsic upper-case Euler orders and no ASF axis pre-rotation
     save_clip(dev_clips[0], tmp_path / "a.bvh")
     b = load_clip(tmp_path / "a.bvh")

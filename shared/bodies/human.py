@@ -13,7 +13,8 @@ Segment masses: de Leva (1996), *Adjustments to Zatsiorsky-Seluyanov's segment i
 parameters*, J. Biomechanics 29(9):1223-1230, table 4 (male), as fractions of the body mass;
 a segment is shared equally by the bones a naming scheme maps to it (:func:`map_segments`;
 fingers belong to the hand, toes to the foot), and the mass of segments a skeleton lacks is
-spread over the others so that the body weighs what was asked. Inertias come from capsule geometry along each bone with that mass.
+spread over the others so that the body weighs what was asked. Inertias come from capsule
+geometry along each bone with that mass.
 Joint limits are the skeleton's (ASF ``limits``), checked in the feasibility report.
 """
 
@@ -119,11 +120,10 @@ def map_segments(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
     return out, unmapped
 
 
-def segment_masses(sk: Skeleton, mass: float) -> tuple[dict[str, float], list[str], list[str]]:
-    """Every bone's mass (kg): de Leva's percentage of each segment shared equally by its
-    bones; the bones no scheme names; the segments the skeleton lacks (their mass is spread
+def segment_masses(seg_of: dict[str, tuple[str, str]], mass: float) -> tuple[dict[str, float], list[str]]:
+    """Every bone's mass (kg) from :func:`map_segments`: de Leva's percentage of each segment
+    shared equally by its bones; and the segments the skeleton lacks (their mass is spread
     over the others in proportion, so that the body weighs ``mass``)."""
-    seg_of, unmapped = map_segments(sk)
     groups: dict[tuple[str, str], list[str]] = {}
     for bone, (seg, side) in seg_of.items():
         if _SEGMENTS[seg][0]:
@@ -137,7 +137,7 @@ def segment_masses(sk: Skeleton, mass: float) -> tuple[dict[str, float], list[st
         if (p, s) in want:
             for b in bones:
                 out[b] = mass * _PERCENT[p] / present / len(bones)
-    return out, unmapped, missing
+    return out, missing
 
 
 def _hinge_order(seq: str, dofs: list[str]) -> list[str]:
@@ -167,8 +167,8 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
     g[sk.up_axis] = -9.81
     spec.option.gravity = g
     bodies = {}
-    masses, unmapped, missing = segment_masses(sk, mass)
-    seg_of = map_segments(sk)[0]
+    seg_of, unmapped = map_segments(sk)
+    masses, missing = segment_masses(seg_of, mass)
     for i, j in enumerate(sk.joints):
         kids = sk.children(i)
         if kids:

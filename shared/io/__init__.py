@@ -64,8 +64,9 @@ def save_clip(clip: Clip, path) -> None:
     except OSError as e:
         raise ClipFormatError(path, f"cannot write file: {e.strerror or e}") from None
     except ClipFormatError as e:  # a writer names the file it wrote: the user's, not the temporary one
-        msg = e.message.split(": ", 1)[1] if e.path == str(tmp) and ": " in e.message else e.message
-        raise ClipFormatError(path, msg) if e.path == str(tmp) else e from None
+        if e.path != str(tmp):
+            raise
+        raise ClipFormatError(path, e.reason, e.line) from None
     finally:
         tmp.unlink(missing_ok=True)
 

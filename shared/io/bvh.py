@@ -183,7 +183,7 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
     if translations not in (None, "auto", "add", "replace"):
         raise ClipFormatError(path, f"translations must be add, replace or auto, got {translations!r}")
     col = {c: i for i, c in enumerate(channels)}
-    size = max(cv.rest_extent(sk, a) for a in range(3))
+    size = float(np.ptp(cv.rest_points(sk), axis=0).max())
     modes = {}
     for j in sk.joints:
         t = [col.get(f"{j.name}.t{a}") for a in "xyz"]

@@ -36,11 +36,15 @@ FOOT_RE = re.compile(r"foot|ankle|toe", re.IGNORECASE)
 Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
+def rest_points(skeleton, ends: bool = True) -> np.ndarray:
+    """Joint (and end-site) positions of the rest pose (all channels 0) in the file's own units."""
+    chans = skeleton.channels()
+    return skeleton.forward_kinematics(np.zeros((1, len(chans))), chans, ends=ends)[0] / skeleton.unit_m
+
+
 def rest_extent(skeleton, up_axis: int = 1) -> float:
     """Height of the rest pose along ``up_axis`` in the file's own units."""
-    chans = skeleton.channels()
-    p = skeleton.forward_kinematics(np.zeros((1, len(chans))), chans)[0] / skeleton.unit_m
-    return float(np.ptp(p[:, up_axis])) if len(p) else 0.0
+    return float(np.ptp(rest_points(skeleton)[:, up_axis]))
 
 
 def choose_unit(path, height_units: float, units: str | None, declared_m: float | None = None) -> float:
@@ -66,8 +70,7 @@ def detect_up(skeleton, path=None) -> int:
     feet = [i for i, j in enumerate(skeleton.joints) if FOOT_RE.search(j.name)]
     if not feet:
         return 1
-    chans = skeleton.channels()
-    p = skeleton.forward_kinematics(np.zeros((1, len(chans))), chans, ends=False)[0]
+    p = rest_points(skeleton, ends=False)
     down = p[feet].mean(axis=0) - p[0]
     axis = int(np.argmax(np.abs(down)))
     if down[axis] >= 0 or axis == 0:
@@ -99,8 +102,6 @@ def translation_mode(joint, first: np.ndarray, height_units: float, mode: str | 
     """``"add"`` or ``"replace"`` for one joint's position channels (see module docstring)."""
     if mode in ("add", "replace"):
         return mode
-    if mode not in (None, "auto"):
-        raise ClipFormatError(joint.name, f"translations must be add, replace or auto, got {mode!r}")
     off = np.asarray(joint.offset, float)
     scale = max(float(np.linalg.norm(off)), 1e-9)
     if scale < 1e-6 * max(height_units, 1e-9):

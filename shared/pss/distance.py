@@ -94,7 +94,13 @@ class ModelBank:
             self.vars = np.ascontiguousarray(np.stack([m.covars for m in models]), dtype=float)
             self.logdet = np.log(self.vars).sum(axis=2)
 
-    def distances(self, model: LeftToRightHMM) -> np.ndarray:
+    def distances(self, model: LeftToRightHMM, start: int = 0) -> np.ndarray:
+        """Eq. 2.4 from ``model`` to the bank's HMMs from ``start`` on."""
+        if start:
+            if not self.diag:
+                return ModelBank(self.models[start:]).distances(model)
+            if start >= len(self.models):
+                return np.zeros(0)
         if not self.models:
             return np.zeros(0)
         _check(model, self.models[0])
@@ -108,7 +114,7 @@ class ModelBank:
             raise ModelError(f"HMMs have different shapes ({self.means.shape[1:]} and {model.means.shape})")
         var1 = np.ascontiguousarray(model.covars, dtype=float)
         return _diag_hmm_distances(np.ascontiguousarray(model.means, dtype=float), var1, np.log(var1).sum(axis=1),
-                                   self.means, self.vars, self.logdet)
+                                   self.means[start:], self.vars[start:], self.logdet[start:])
 
 
 def distances_to(model: LeftToRightHMM, models: list[LeftToRightHMM] | ModelBank) -> np.ndarray:
@@ -123,6 +129,5 @@ def distance_matrix(models: list[LeftToRightHMM]) -> np.ndarray:
     out = np.zeros((n, n))
     bank = ModelBank(models)
     for i in range(n - 1):
-        out[i] = bank.distances(models[i])
-    out = np.triu(out, 1)
+        out[i, i + 1:] = bank.distances(models[i], start=i + 1)
     return out + out.T

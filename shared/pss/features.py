@@ -4,18 +4,12 @@ HDM05 angles run continuously past 360 degrees and differ between actors by whol
 raw angles make poor HMM outputs (DESIGN.md: 1-NN DTW 44 % on raw angles, 64 % on sin/cos).
 The representation here is turn-invariant and invertible:
 
-* every joint rotation channel ``theta`` -> ``(sin theta, cos theta)`` (the default), read in
+* every joint rotation channel ``theta`` -> ``(sin theta, cos theta)``, read in
   the space's own convention: a clip whose skeleton composes a joint's rotation otherwise (a
   BVH written from an AMC clip: ZXY angles of the folded rotation) has that joint's rotation
   re-expressed as the reference skeleton's Euler angles (scipy's principal branch, or its
   twin where only the twin keeps a channel the joint lacks at 0), so the same motion gives the
-  same numbers whatever file carried it. The
-  alternative ``rotations="rot6"`` encodes each joint's local rotation in the world-aligned
-  rest frame, ``L = C M C^T``, by the first two columns of its matrix (Zhou et al. 2019), so
-  that an AMC clip and the BVH written from it (other Euler order, no axis pre-rotation) are
-  one motion; it is not the default yet: measured on HDM05 it raised the eq. 3.9 association
-  error from 27 % to 38 % and its decoding picks Euler branches other than the source's
-  (issue 12 notes);
+  same numbers whatever file carried it;
 * the root's orientation without its heading: the root's swing (its rotation with the twist
   about the vertical removed) as the unit vector it turns the vertical into (3 values);
 * the root's height in metres;
@@ -38,10 +32,8 @@ alike and near poses far; DESIGN.md), so a space of clips with a skeleton also m
 One HMM models all groups (its states align on every channel); :meth:`feature_indices`
 says which outputs belong to which group.
 
-:meth:`MotionFeatures.decode` inverts the map: a rotation from its 6 values by Gram-Schmidt,
-then ``M = C^T L C`` in the reference skeleton's own Euler order (angles unwrapped over time;
-sin/cos by ``atan2``), heading and floor position integrated from the yaw rate and the
-velocity (starting at 0).
+:meth:`MotionFeatures.decode` inverts the map: angles by ``atan2`` then unwrapped over time,
+heading and floor position integrated from the yaw rate and the velocity (starting at 0).
 """
 
 from __future__ import annotations
@@ -132,8 +124,7 @@ class MotionFeatures:
     """
 
     def __init__(self, skeleton: Skeleton | None, motion_channels: list[str], sensor_channels: list[str] | None = None,
-                 sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None,
-                 rotations: str | None = None):
+                 sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None):
         self.skeleton = skeleton
         self.motion_channels = list(motion_channels)
         self.sensor_channels = list(sensor_channels or [])
@@ -143,13 +134,6 @@ class MotionFeatures:
                                if c.split(".")[-1] in ("rx", "ry", "rz") and c.rsplit(".", 1)[0] != root]
         self.plain_channels = [c for c in self.motion_channels
                                if c not in self.angle_channels and c.rsplit(".", 1)[0] != root]
-        # "rot6" (a skeleton's joints as rotations) or "sincos" (per channel: no skeleton, format 1)
-        self.rotations = rotations or "sincos"
-        if self.rotations not in ("rot6", "sincos") or (self.rotations == "rot6" and skeleton is None):
-            raise BadInput(f"unknown rotation features {self.rotations!r}")
-        has = set(self.angle_channels)
-        self.rotation_joints = [j.name for j in skeleton.joints[1:] if any(f"{j.name}.r{a}" in has for a in "xyz")] \
-            if self.rotations == "rot6" else []
         rdofs = set(skeleton.root.dofs) if skeleton is not None else set()
         self.root_rot = bool(rdofs & {"rx", "ry", "rz"}) and any(c.startswith(f"{root}.r") for c in self.motion_channels)
         self.root_trans = bool(rdofs & {"tx", "ty", "tz"}) and any(c.startswith(f"{root}.t") for c in self.motion_channels)
@@ -157,12 +141,8 @@ class MotionFeatures:
         self.sensor_mean = np.zeros(n_s) if sensor_mean is None else np.asarray(sensor_mean, float)
         self.sensor_scale = np.ones(n_s) if sensor_scale is None else np.asarray(sensor_scale, float)
         names = []
-        if self.rotations == "rot6":
-            for j in self.rotation_joints:
-                names += [f"rot6({j}).{k}" for k in range(6)]
-        else:
-            for c in self.angle_channels:
-                names += [f"sin({c})", f"cos({c})"]
+        for c in self.angle_channels:
+            names += [f"sin({c})", f"cos({c})"]
         names += list(self.plain_channels)
         if self.root_rot:
             names += ["root.up_x", "root.up_y", "root.up_z"]
@@ -264,9 +244,9 @@ class MotionFeatures:
                 return body
         return None
 
-    def _angles(self, clip: Clip) -> np.ndarray:
-        """The angle channels (T, n) in degrees, in the space's convention (module docstring)."""
-        body = self._foreign(clip)
+    def _angles(self, clip: Clip, body: Skeleton | None) -> np.ndarray:
+        """The angle channels (T, n) in degrees, in the space's convention (module docstring);
+        ``body`` is :meth:`_foreign`'s answer for the clip."""
         if body is None:
             return clip.select(self.angle_channels)
         from scipy.spatial.transform import Rotation
@@ -316,16 +296,11 @@ class MotionFeatures:
     def encode(self, clip: Clip, groups: tuple[str, ...] = ("motion", "position", "sensor")) -> np.ndarray:
         """Feature frames (T, D) of a clip, its groups in output order; ``groups=("motion",)``
         gives the motion part only."""
-        if self.rotations == "rot6":  # joints, not channel names: a BVH of an AMC clip names its channels otherwise
-            body = self.body(clip)
-            known = {j.name for j in body.joints if any(f"{j.name}.r{a}" in clip.channels for a in "xyz")}
-            missing = [f"{j}.r*" for j in self.rotation_joints if j not in known]
-            missing += [c for c in self.motion_channels if c not in clip.channels and c not in self.angle_channels]
-        elif self._foreign(clip) is not None:  # the same joints carry the rotations under their own
+        foreign = self._foreign(clip)
+        if foreign is not None:  # the same joints carry the rotations under their own
             # channel names (a joint without rotation channels in the clip's skeleton does not turn)
-            body = self._foreign(clip)
             joints = dict.fromkeys(c.rsplit(".", 1)[0] for c in self.angle_channels)
-            missing = [f"{j}.{d}" for j in joints for d in body.joints[body.index(j)].dofs
+            missing = [f"{j}.{d}" for j in joints for d in foreign.joints[foreign.index(j)].dofs
                        if d.startswith("r") and f"{j}.{d}" not in clip.channels]
             missing += [c for c in self.motion_channels if c not in clip.channels and c not in self.angle_channels]
         else:
@@ -333,12 +308,8 @@ class MotionFeatures:
         if missing:
             raise BadInput(f"clip {clip.name!r} lacks {len(missing)} channels of this space, e.g. {missing[:3]}")
         cols = []
-        if self.rotation_joints:
-            body = self.body(clip)
-            local = body.local_matrices(clip.data, clip.channels)[:, [body.index(j) for j in self.rotation_joints]]
-            cols.append(local[:, :, :, :2].reshape(clip.n_frames, -1))
-        elif self.angle_channels:
-            a = np.deg2rad(self._angles(clip))
+        if self.angle_channels:
+            a = np.deg2rad(self._angles(clip, foreign))
             cols.append(np.stack([np.sin(a), np.cos(a)], axis=2).reshape(len(a), -1))
         if self.plain_channels:
             cols.append(clip.select(self.plain_channels))
@@ -393,12 +364,9 @@ class MotionFeatures:
         n = len(x)
         values: dict[str, np.ndarray] = {}
         k = 0
-        if self.rotation_joints:
-            k = self._decode_rotations(x, values)
-        else:
-            for c in self.angle_channels:
-                values[c] = np.rad2deg(np.unwrap(np.arctan2(x[:, k], x[:, k + 1])))
-                k += 2
+        for c in self.angle_channels:
+            values[c] = np.rad2deg(np.unwrap(np.arctan2(x[:, k], x[:, k + 1])))
+            k += 2
         for c in self.plain_channels:
             values[c] = x[:, k]
             k += 1
@@ -415,25 +383,6 @@ class MotionFeatures:
             chans += self.sensor_channels
             groups["sensor"] = list(self.sensor_channels)
         return Clip(np.column_stack(data), chans, fps, self.skeleton, groups, name=name)
-
-    def _decode_rotations(self, x, values) -> int:
-        """Joint angles of the reference skeleton from the 6-value rotations (module docstring)."""
-        from scipy.spatial.transform import Rotation
-
-        n, nj = len(x), len(self.rotation_joints)
-        a = x[:, :6 * nj].reshape(n, nj, 3, 2)
-        b1 = a[..., 0] / np.maximum(np.linalg.norm(a[..., 0], axis=-1, keepdims=True), 1e-12)
-        c2 = a[..., 1] - np.sum(b1 * a[..., 1], axis=-1, keepdims=True) * b1
-        b2 = c2 / np.maximum(np.linalg.norm(c2, axis=-1, keepdims=True), 1e-12)
-        local = np.stack([b1, b2, np.cross(b1, b2)], axis=-1)  # columns
-        for i, name in enumerate(self.rotation_joints):
-            j = self.skeleton.joints[self.skeleton.index(name)]
-            m = j.pre.T @ local[:, i] @ j.pre
-            ang = np.rad2deg(np.unwrap(np.deg2rad(Rotation.from_matrix(m).as_euler(j.euler, degrees=True)), axis=0))
-            for k, ax in enumerate(j.euler.lower()):
-                if f"{name}.r{ax}" in self.angle_channels:
-                    values[f"{name}.r{ax}"] = ang[:, k]
-        return 6 * nj
 
     def _decode_root(self, x, k, fps, values) -> int:
         sk = self.skeleton
@@ -477,7 +426,6 @@ class MotionFeatures:
             "sensor_scale": self.sensor_scale.tolist(),
             **({"position_mean": self.position_mean.tolist(), "position_scale": self.position_scale.tolist()}
                if self.has_position else {}),
-            "rotations": self.rotations,
         })
 
     @classmethod
@@ -485,4 +433,4 @@ class MotionFeatures:
         d = json.loads(text)
         sk = Skeleton.from_json(d["skeleton"]) if d["skeleton"] else None
         return cls(sk, d["motion_channels"], d["sensor_channels"], d["sensor_mean"], d["sensor_scale"],
-                   d.get("position_mean"), d.get("position_scale"), d.get("rotations", "sincos"))
+                   d.get("position_mean"), d.get("position_scale"))
