@@ -51,7 +51,7 @@ def _stages(space, clips) -> dict:
         h = fit_hmm([x], p.n_states, var_floor=p.var_floor, n_iter=p.n_iter)
         t3 = time.perf_counter()
         d = space.bank_on(GEOMETRY_GROUPS).distances(h.marginal(geo))
-        dr = space.bank_on(space.recognition_groups).distances(h.marginal(pos))
+        dr = space.recognition_bank().distances(h.marginal(pos))
         t4 = time.perf_counter()
         space._place(h, d, 5, dr)
         t5 = time.perf_counter()

@@ -19,17 +19,24 @@ from shared.errors import ModelError
 from shared.pss.hmm import LeftToRightHMM
 
 
-def bhattacharyya(mu_p, var_p, mu_q, var_q) -> np.ndarray:
+def bhattacharyya(mu_p, var_p, mu_q, var_q, weights=None) -> np.ndarray:
     """Eq. 2.3 for Gaussians. ``var`` is either variances (..., D) (diagonal) or covariance
-    matrices (..., D, D) (full), chosen by the number of dimensions of ``var`` relative to ``mu``."""
+    matrices (..., D, D) (full), chosen by the number of dimensions of ``var`` relative to ``mu``.
+
+    ``weights`` (D,), diagonal only: each channel's share of the mean term,
+    ``1/8 sum_d w_d (mu_p - mu_q)_d^2 / s_d`` (recognition's channel weights,
+    :func:`shared.pss.recognition.channel_weights`); ``None`` is eq. 2.3 itself."""
     mu_p, mu_q = np.asarray(mu_p, float), np.asarray(mu_q, float)
     var_p, var_q = np.asarray(var_p, float), np.asarray(var_q, float)
     diff = mu_p - mu_q
     if var_p.ndim == mu_p.ndim:  # diagonal
         s = 0.5 * (var_p + var_q)
-        term1 = 0.125 * np.sum(diff * diff / s, axis=-1)
+        w = 1.0 if weights is None else np.asarray(weights, float)
+        term1 = 0.125 * np.sum(w * diff * diff / s, axis=-1)
         term2 = 0.5 * np.sum(np.log(s) - 0.5 * (np.log(var_p) + np.log(var_q)), axis=-1)
         return np.maximum(term1 + term2, 0.0)
+    if weights is not None:
+        raise ModelError("channel weights need diagonal covariances")
     s = 0.5 * (var_p + var_q)
     sol = np.linalg.solve(s, diff[..., None])[..., 0]
     term1 = 0.125 * np.sum(diff * sol, axis=-1)
@@ -48,16 +55,16 @@ def _check(a: LeftToRightHMM, b: LeftToRightHMM):
         raise ModelError("HMMs have different covariance types")
 
 
-def hmm_distance(a: LeftToRightHMM, b: LeftToRightHMM) -> float:
-    """Eq. 2.4: ``sum_i sqrt(BD(b_1i, b_2i))``."""
+def hmm_distance(a: LeftToRightHMM, b: LeftToRightHMM, weights=None) -> float:
+    """Eq. 2.4: ``sum_i sqrt(BD(b_1i, b_2i))`` (with channel ``weights``, see :func:`bhattacharyya`)."""
     _check(a, b)
-    return float(np.sum(np.sqrt(bhattacharyya(a.means, a.covars, b.means, b.covars))))
+    return float(np.sum(np.sqrt(bhattacharyya(a.means, a.covars, b.means, b.covars, weights))))
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
-def _diag_hmm_distances(mu1, var1, logdet1, mu, var, logdet):
+def _diag_hmm_distances(mu1, var1, logdet1, mu, var, logdet, w):
     """Eq. 2.4 from one diagonal HMM (S, D) to N of them (N, S, D); ``logdet`` = per-state
-    sums of log variances."""
+    sums of log variances, ``w`` (D,) the channel weights of the mean term (ones: eq. 2.4)."""
     n_models, n_states, n_dims = mu.shape
     out = np.zeros(n_models)
     for n in range(n_models):
@@ -70,7 +77,7 @@ def _diag_hmm_distances(mu1, var1, logdet1, mu, var, logdet):
                 for d in range(d0, min(d0 + 32, n_dims)):
                     v = 0.5 * (var1[s, d] + var[n, s, d])
                     diff = mu1[s, d] - mu[n, s, d]
-                    maha += diff * diff / v
+                    maha += w[d] * diff * diff / v
                     prod *= v
                 if 1e-300 < prod < 1e300:
                     logdet_mean += np.log(prod)
@@ -86,8 +93,9 @@ def _diag_hmm_distances(mu1, var1, logdet1, mu, var, logdet):
 class ModelBank:
     """Many HMMs of one space stacked for eq. 2.4 against a new one (built once, reused)."""
 
-    def __init__(self, models: list[LeftToRightHMM]):
+    def __init__(self, models: list[LeftToRightHMM], weights=None):
         self.models = models
+        self.weights = None if weights is None else np.ascontiguousarray(weights, dtype=float)
         self.diag = bool(models) and all(m.covariance_type == "diag" for m in models)
         if self.diag:
             self.means = np.ascontiguousarray(np.stack([m.means for m in models]), dtype=float)
@@ -96,6 +104,8 @@ class ModelBank:
 
     def distances(self, model: LeftToRightHMM, start: int = 0) -> np.ndarray:
         """Eq. 2.4 from ``model`` to the bank's HMMs from ``start`` on."""
+        if self.weights is not None and not self.diag:
+            raise ModelError("channel weights need diagonal covariances")
         if start:
             if not self.diag:
                 return ModelBank(self.models[start:]).distances(model)
@@ -112,9 +122,12 @@ class ModelBank:
             return np.sum(np.sqrt(bhattacharyya(model.means[None], model.covars[None], mu, cov)), axis=1)
         if self.means.shape[1:] != model.means.shape:
             raise ModelError(f"HMMs have different shapes ({self.means.shape[1:]} and {model.means.shape})")
+        if self.weights is not None and len(self.weights) != model.n_features:
+            raise ModelError(f"{len(self.weights)} channel weights for HMMs of {model.n_features} channels")
         var1 = np.ascontiguousarray(model.covars, dtype=float)
+        w = np.ones(model.n_features) if self.weights is None else self.weights
         return _diag_hmm_distances(np.ascontiguousarray(model.means, dtype=float), var1, np.log(var1).sum(axis=1),
-                                   self.means[start:], self.vars[start:], self.logdet[start:])
+                                   self.means[start:], self.vars[start:], self.logdet[start:], w)
 
 
 def distances_to(model: LeftToRightHMM, models: list[LeftToRightHMM] | ModelBank) -> np.ndarray:
@@ -123,11 +136,11 @@ def distances_to(model: LeftToRightHMM, models: list[LeftToRightHMM] | ModelBank
     return bank.distances(model)
 
 
-def distance_matrix(models: list[LeftToRightHMM]) -> np.ndarray:
-    """Symmetric matrix of eq. 2.4 distances with a zero diagonal."""
+def distance_matrix(models: list[LeftToRightHMM], weights=None) -> np.ndarray:
+    """Symmetric matrix of eq. 2.4 distances (with channel ``weights``) with a zero diagonal."""
     n = len(models)
     out = np.zeros((n, n))
-    bank = ModelBank(models)
+    bank = ModelBank(models, weights)
     for i in range(n - 1):
         out[i, i + 1:] = bank.distances(models[i], start=i + 1)
     return out + out.T

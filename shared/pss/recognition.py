@@ -8,6 +8,13 @@ alternatives this module does not use on the same distances (k-NN with k = 3 and
 logistic regression on per-class distances, :func:`shared.evaluation.pss_alternatives`) and
 the nearest point of the 3-D space; none did better.
 
+The distance is eq. 2.4 with **channel weights** on the mean term (:func:`channel_weights`,
+a Fisher ratio per channel from the space's own proto-symbols): a joint coordinate that
+differs between classes more than between performers of one class counts more. Measured on
+HDM05 leave-one-actor-out (issue 11): the same 100 % closed-set accuracy, and the held-out
+class's clips stand out more (nearest / second class ratio: AUC 0.93 -> 0.95; out-of-class
+rejection at 5 % in-class rejection 62 -> 74 %).
+
 On top of the nearest proto-symbol:
 
 * **confidence**: a softmax over the classes of ``-d_c / T`` where ``d_c`` is the distance to
@@ -44,6 +51,44 @@ def conformal_threshold(scores, q: float) -> float:
     s = np.sort(np.asarray(scores, float))
     k = int(np.ceil((len(s) + 1) * q))
     return float(s[k - 1]) if 1 <= k <= len(s) else np.inf
+
+
+def channel_weights(means: np.ndarray, covars: np.ndarray, labels, performers) -> np.ndarray:
+    """Per-channel weights of the recognition distance (see module docstring).
+
+    ``means``, ``covars``: the proto-symbols' diagonal state parameters (N, S, D). For every
+    channel ``d``, ``B_d`` is the mean over pairs of proto-symbols of different classes, and
+    ``W_d`` over pairs of one class from different performers (any two of one class when the
+    space has one performer), of eq. 2.3's per-channel terms summed over states; the weight
+    is ``sqrt(B_d / W_d)``, scaled to mean 1, and 0 for a channel that never varies.
+    All ones (eq. 2.4 itself) when the space has no same-class pair or only one class."""
+    mu = np.asarray(means, float)
+    var = np.asarray(covars, float)
+    n, _, dim = mu.shape
+    labels = np.asarray(labels)
+    perf = np.asarray(performers) if performers is not None and len(performers) == n else np.array([""] * n)
+    across = len(set(perf)) > 1
+    within, between = np.zeros(dim), np.zeros(dim)
+    n_within = n_between = 0
+    logv = np.log(var)
+    for i in range(n - 1):
+        s = 0.5 * (var[i] + var[i + 1:])
+        diff = mu[i] - mu[i + 1:]
+        bd = (0.125 * diff * diff / s + 0.5 * (np.log(s) - 0.5 * (logv[i] + logv[i + 1:]))).sum(axis=1)  # (n-i-1, D)
+        same = labels[i + 1:] == labels[i]
+        if across:
+            same &= perf[i + 1:] != perf[i]
+        other = labels[i + 1:] != labels[i]
+        within += bd[same].sum(axis=0)
+        between += bd[other].sum(axis=0)
+        n_within += int(same.sum())
+        n_between += int(other.sum())
+    if not n_within or not n_between:
+        return np.ones(dim)
+    within /= n_within
+    between /= n_between
+    w = np.where(within > 1e-12, np.sqrt((between + 1e-9) / (within + 1e-9)), 0.0)
+    return w / w.mean() if w.mean() > 0 else np.ones(dim)
 
 
 @dataclass

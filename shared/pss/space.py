@@ -130,6 +130,7 @@ class ProtoSymbolSpace:
         self._group_models: dict[tuple, list[LeftToRightHMM] | ModelBank] = {}
         self._calibration = None
         self._recognition_matrix = None
+        self._recognition_weights = None  # computed on first use, or read from the file
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -304,11 +305,37 @@ class ProtoSymbolSpace:
         return ("position",) if self.features.has_position else GEOMETRY_GROUPS
 
     @property
+    def recognition_weights(self) -> np.ndarray | None:
+        """Channel weights of the recognition distance on the position group
+        (:func:`shared.pss.recognition.channel_weights`); ``None`` where recognition uses the
+        geometry groups (format 1, no skeleton: eq. 2.4 unweighted, as those spaces always did)."""
+        if self.recognition_groups == GEOMETRY_GROUPS:
+            return None
+        if self._recognition_weights is None:
+            from shared.pss.recognition import channel_weights
+
+            ms = self.models_on(self.recognition_groups)
+            self._recognition_weights = channel_weights(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms]),
+                                                        self.labels, [s.performers[0] if s.performers else "" for s in self.symbols])
+        return self._recognition_weights
+
+    def recognition_bank(self) -> ModelBank:
+        """The proto-symbols on the recognition groups, stacked with the channel weights (cached)."""
+        rg = self.recognition_groups
+        if rg == GEOMETRY_GROUPS:
+            return self.bank_on(rg)
+        key = ("weighted bank",) + rg
+        if key not in self._group_models:
+            self._group_models[key] = ModelBank(self.models_on(rg), self.recognition_weights)
+        return self._group_models[key]
+
+    @property
     def recognition_matrix(self) -> np.ndarray:
-        """Eq. 2.4 between the proto-symbols on the recognition groups."""
+        """Weighted eq. 2.4 between the proto-symbols on the recognition groups."""
         if self._recognition_matrix is None:
             self._recognition_matrix = (self.distances if self.recognition_groups == GEOMETRY_GROUPS
-                                        else distance_matrix(self.models_on(self.recognition_groups)))
+                                        else distance_matrix(self.models_on(self.recognition_groups),
+                                                             self.recognition_weights))
         return self._recognition_matrix
 
     @property
@@ -332,7 +359,7 @@ class ProtoSymbolSpace:
         geo = self.features.group_indices(GEOMETRY_GROUPS)
         f = self.bank_on(GEOMETRY_GROUPS).distances(hmm.marginal(geo))
         rg = self.recognition_groups
-        fr = f if rg == GEOMETRY_GROUPS else self.bank_on(rg).distances(hmm.marginal(self.features.group_indices(rg)))
+        fr = f if rg == GEOMETRY_GROUPS else self.recognition_bank().distances(hmm.marginal(self.features.group_indices(rg)))
         rec = self._place(hmm, f, top, fr)
         rec.seconds = time.perf_counter() - t0
         return rec
@@ -509,6 +536,8 @@ class ProtoSymbolSpace:
             "points": self.points,
             "header": np.array(json.dumps(header)),
         }
+        if self.recognition_weights is not None:
+            arrays["recognition_weights"] = self.recognition_weights
         atomic_write(path, lambda f: np.savez(f, **arrays))
         return path
 
@@ -519,6 +548,7 @@ class ProtoSymbolSpace:
             with np.load(path, allow_pickle=False) as z:
                 header = json.loads(str(z["header"]))
                 arrays = {k: np.array(z[k]) for k in ("means", "covars", "stay", "distances", "points")}
+                weights = np.array(z["recognition_weights"]) if "recognition_weights" in z.files else None
         except FileNotFoundError:
             raise NotFound(f"no space file {path}") from None
         except (OSError, KeyError, ValueError) as e:
@@ -538,6 +568,11 @@ class ProtoSymbolSpace:
         emb = Embedding(arrays["points"], e["stress"], e["stress1"], e["n_iter"], e["converged"])
         space = cls(params, features, symbols, arrays["distances"], emb, name=header["name"])
         space.format = header["format"]
+        if space.recognition_groups != GEOMETRY_GROUPS:
+            # a file written before the channel weights recognises as it did when written (its
+            # calibration was fitted on unweighted distances); rebuilding it gives the weights
+            space._recognition_weights = weights if weights is not None else np.ones(len(space.features.group_indices(
+                space.recognition_groups)))
         if header.get("calibration"):
             from shared.pss.recognition import Calibration
 
