@@ -59,6 +59,41 @@ def test_hmm_distance_zero_identical_symmetric(full):
     assert hmm_distance(a, b) == pytest.approx(manual)  # eq. 2.4: sum over states of sqrt(BD)
 
 
+def test_weighted_distance_bank_matches_reference_and_ones_are_eq_2_4():
+    rng = np.random.default_rng(5)
+    models = [_random_hmm(rng, d=6) for _ in range(5)]
+    w = rng.uniform(0.0, 3.0, 6)
+    f = distance_matrix(models, w)
+    for i in range(5):
+        for j in range(5):
+            assert f[i, j] == pytest.approx(hmm_distance(models[i], models[j], w), abs=1e-9)
+    manual = sum(np.sqrt(max(0.125 * np.sum(w * (a - b) ** 2 / (0.5 * (va + vb)))
+                             + 0.5 * np.sum(np.log(0.5 * (va + vb)) - 0.5 * (np.log(va) + np.log(vb))), 0))
+                 for a, b, va, vb in zip(models[0].means, models[1].means, models[0].covars, models[1].covars))
+    assert f[0, 1] == pytest.approx(manual, rel=1e-9)
+    assert np.allclose(distance_matrix(models, np.ones(6)), distance_matrix(models))
+    with pytest.raises(ModelError, match="channel weights"):
+        distance_matrix(models, np.ones(4))
+
+
+def test_channel_weights_favour_channels_that_separate_classes_not_performers():
+    """Channel 0 tells the classes apart, channel 1 the performers, channel 2 never varies."""
+    from shared.pss.recognition import channel_weights
+
+    rng = np.random.default_rng(6)
+    means, labels, perf = [], [], []
+    for cls, c0 in (("a", 0.0), ("b", 3.0)):
+        for who, c1 in (("p", 0.0), ("q", 3.0)):
+            for _ in range(3):
+                means.append(np.stack([c0 + rng.normal(0, 0.1, 4), c1 + rng.normal(0, 0.1, 4), np.zeros(4)], axis=1))
+                labels.append(cls)
+                perf.append(who)
+    means = np.array(means)
+    w = channel_weights(means, np.full(means.shape, 0.1), labels, perf)
+    assert w[0] > 3 * w[1] and w[2] == 0 and w.mean() == pytest.approx(1.0)
+    assert np.all(channel_weights(means, np.full(means.shape, 0.1), ["a"] * len(labels), perf) == 1.0)  # one class
+
+
 def test_hmm_distance_needs_equal_state_counts():
     rng = np.random.default_rng(2)
     with pytest.raises(ModelError, match="state"):

@@ -163,3 +163,25 @@ def test_a_space_file_of_an_unknown_format_is_a_clear_error(tmp_path):
         ProtoSymbolSpace.load(tmp_path / "future.npz")
     shutil.copy(FORMAT1, tmp_path / "copy.npz")
     assert ProtoSymbolSpace.load(tmp_path / "copy.npz").format != FORMAT
+
+
+def test_channel_weights_are_saved_with_the_space_and_older_files_recognise_unweighted(dev_space, dev_split, tmp_path):
+    from shared.pss.distance import ModelBank
+
+    w = dev_space.recognition_weights
+    assert w is not None and w.shape == (len(dev_space.features.group_indices(("position",))),)
+    assert np.isfinite(w).all() and w.min() >= 0 and w.max() > 1.5 * w.min()  # the channels are not all alike
+    clip = dev_split[1][0]
+    r = dev_space.recognize(clip)
+    back = ProtoSymbolSpace.load(dev_space.save(tmp_path / "w.npz"))
+    assert np.array_equal(back.recognition_weights, w)
+    assert np.allclose(back.recognize(clip).recognition_distances, r.recognition_distances)
+    # a format-2 file written before the weights: recognised with eq. 2.4 unweighted, as when it was written
+    with np.load(tmp_path / "w.npz", allow_pickle=False) as z:
+        arrays = {k: np.array(z[k]) for k in z.files if k != "recognition_weights"}
+    np.savez(tmp_path / "old.npz", **arrays)
+    old = ProtoSymbolSpace.load(tmp_path / "old.npz")
+    assert np.all(old.recognition_weights == 1.0)
+    idx = old.features.group_indices(("position",))
+    hmm = old.abstract(clip).marginal(idx)
+    assert np.allclose(old.recognize(clip).recognition_distances, ModelBank(old.models_on(("position",))).distances(hmm))
