@@ -142,15 +142,18 @@ class Skeleton:
                            k["end_offset"])
         return pos * self.unit_m
 
-    def local_matrices(self, data: np.ndarray, channels: list[str]) -> np.ndarray:
-        """Every joint's local rotation ``L_j = C_j M_j C_j^T`` (T, J, 3, 3): the rotation in
-        the world-aligned rest frame, whatever Euler order or axis convention the file used."""
+    def local_matrices(self, data: np.ndarray, channels: list[str], joints: slice = slice(None)) -> np.ndarray:
+        """Every joint's (or the ``joints`` slice's) local rotation ``L_j = C_j M_j C_j^T``
+        (T, J, 3, 3): the rotation in the world-aligned rest frame, whatever Euler order or
+        axis convention the file used."""
         from shared.kinematics import local_rotations
 
         data = np.asarray(data, dtype=float)
         k = self._fk_arrays(tuple(channels), False)
         padded = np.concatenate([data, np.zeros((data.shape[0], 1))], axis=1)
-        return local_rotations(np.ascontiguousarray(np.deg2rad(padded[:, k["cols"]])), k["axes"], k["intrinsic"], k["pre"])
+        return local_rotations(np.ascontiguousarray(np.deg2rad(padded[:, k["cols"][joints]])),
+                               np.ascontiguousarray(k["axes"][joints]), np.ascontiguousarray(k["intrinsic"][joints]),
+                               np.ascontiguousarray(k["pre"][joints]))
 
     def _fk_arrays(self, channels: tuple[str, ...], ends: bool) -> dict:
         """The skeleton packed for :func:`shared.kinematics.fk_positions`, cached per channel
@@ -189,7 +192,7 @@ class Skeleton:
     def root_matrices(self, data: np.ndarray, channels: list[str]) -> np.ndarray:
         """The root's rotation matrices (T, 3, 3) ``C M C^T`` (no scipy import): the same map
         as :meth:`global_root_rotation`."""
-        return self.local_matrices(data, channels)[:, 0]
+        return self.local_matrices(data, channels, slice(0, 1))[:, 0]
 
     def rest_height(self) -> float:
         """The body's height in its rest pose (all channels 0), in metres, along its up axis."""

@@ -237,11 +237,21 @@ class MotionFeatures:
         body = self.body(clip)
         if body is self.skeleton or self.skeleton is None:
             return None
-        for c in self.angle_channels:
-            name = c.rsplit(".", 1)[0]
-            a, b = body.joints[body.index(name)], self.skeleton.joints[self.skeleton.index(name)]
-            if a.euler != b.euler or not np.allclose(a.pre, b.pre, atol=1e-6):
-                return body
+        ref = getattr(self, "_angle_joints", None)
+        if ref is None:  # the space's own convention of the joints that carry angle channels, once
+            names = list(dict.fromkeys(c.rsplit(".", 1)[0] for c in self.angle_channels))
+            joints = [self.skeleton.joints[self.skeleton.index(n)] for n in names]
+            ref = self._angle_joints = (names, [j.euler for j in joints],
+                                        np.array([j.pre for j in joints]).reshape(len(joints), 3, 3))
+        names, eulers, pres = ref
+        index = {j.name: i for i, j in enumerate(body.joints)}
+        if any(n not in index for n in names):
+            return body  # encode() names the missing channels
+        theirs = [body.joints[index[n]] for n in names]
+        if [j.euler for j in theirs] != eulers:
+            return body
+        if names and np.abs(np.array([j.pre for j in theirs]).reshape(len(names), 3, 3) - pres).max() > 1e-6:
+            return body
         return None
 
     def _angles(self, clip: Clip, body: Skeleton | None) -> np.ndarray:
