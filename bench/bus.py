@@ -5,11 +5,12 @@ On a private cluster (free loopback port, temporary home) started with ``shared.
 * request overhead for a 100 KB payload, (a) raw Zenoh get/reply through the router and
   (b) the full service stack (msgpack codec, contract validation, worker pool, reply
   validation) on the ``echo`` service of ``bench/echo.py`` (target <= 1 ms median);
-* recognition through the CLI end to end (``mirrorcoach space recognize``, a subprocess per
-  call): the command's own time (it prints it with ``MIRRORCOACH_TIMING=1``: reading the clip,
-  opening the session, the request, the reply) minus the library's time reported by the
-  service (target <= 150 ms); the rest of the wall time is start-up and exit (interpreter,
-  imports, typer's argument parsing), reported separately;
+* recognition through the CLI end to end (``mirrorcoach space recognize``, the installed
+  command, a subprocess per call): the wall time of one call including start-up (target <= 150
+  ms, issue 11); the command's own time (``MIRRORCOACH_TIMING=1``: reading the file's bytes,
+  opening the session, the request with the service's reading of the file, the reply) and the
+  library's time reported by the service; the rest is start-up and exit (interpreter,
+  imports, typer's argument parsing);
 * 20 concurrent recognitions on one space: throughput and 95th-percentile latency.
 
 Writes ``bench/results/bus.json`` and ``bench/results/bus.md``.
@@ -23,6 +24,7 @@ import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -85,10 +87,11 @@ def main(argv=None) -> int:
             probe_file = next(f for f in files if "_dg_" in f.name and "squat1Reps" in f.name)
             c.request("pss", "build", {"space": "bench", "clips": [clip_to_wire(x.resample(30)) for x in train]})
             env = dict(os.environ)
-            cmd = [sys.executable, "-m", "shared.cli"]
+            script = Path(sys.executable).parent / "mirrorcoach"  # what a user runs (`make install` puts it there)
+            cmd = [str(script)] if script.exists() else [sys.executable, "-m", "shared.cli"]
             env["MIRRORCOACH_TIMING"] = "1"
             walls, cmds, libs = [], [], []
-            for _ in range(12):
+            for _ in range(32):  # the first two are a warm-up
                 t0 = time.perf_counter()
                 out = subprocess.run(cmd + ["space", "recognize", "bench", str(probe_file), "--json"], env=env,
                                      capture_output=True, check=True, text=True)
@@ -97,14 +100,12 @@ def main(argv=None) -> int:
                 cmds.append(float(m.group(1)) / 1e3)
                 libs.append(float(m.group(2)) / 1e3)
             ee, cm, lb = (statistics.median(v[2:]) for v in (walls, cmds, libs))
-            t0 = time.perf_counter()
-            load_clip(probe_file)
-            amc = time.perf_counter() - t0
-            res["cli_recognize"] = {"startup_ms": 1e3 * (ee - cm), "wall_ms": 1e3 * ee, "command_ms": 1e3 * cm,
-                                    "library_ms": 1e3 * lb, "over_library_ms": 1e3 * (cm - lb), "amc_read_ms": 1e3 * amc,
-                                    "space_clips": len(train)}
-            print(f"CLI recognition: wall {1e3 * ee:.0f} ms = start-up and exit {1e3 * (ee - cm):.0f} + command {1e3 * cm:.0f} "
-                  f"(library {1e3 * lb:.0f} + {1e3 * (cm - lb):.0f} ms over the library; reading the AMC alone: {1e3 * amc:.0f} ms)")
+            p90 = float(np.percentile(walls[2:], 90))
+            res["cli_recognize"] = {"startup_ms": 1e3 * (ee - cm), "wall_ms": 1e3 * ee, "wall_p90_ms": 1e3 * p90,
+                                    "command_ms": 1e3 * cm, "library_ms": 1e3 * lb, "over_library_ms": 1e3 * (cm - lb),
+                                    "space_clips": len(train), "command": Path(cmd[0]).name}
+            print(f"CLI recognition: wall {1e3 * ee:.0f} ms (p90 {1e3 * p90:.0f}) = start-up and exit {1e3 * (ee - cm):.0f} "
+                  f"+ command {1e3 * cm:.0f} (library {1e3 * lb:.0f} + {1e3 * (cm - lb):.0f} ms over the library)")
 
             # ---- 20 concurrent recognitions on one space
             probe = clip_to_wire(load_clip(probe_file), with_skeleton=False)
@@ -127,10 +128,9 @@ def main(argv=None) -> int:
         "| what | measured | target |", "|---|---|---|",
         f"| 100 KB get/reply, raw Zenoh through the router | {res['raw_zenoh_100KB']['median_ms']:.2f} ms (p95 {res['raw_zenoh_100KB']['p95_ms']:.2f}) | - |",
         f"| 100 KB request, full service stack (codec, contract, pool) | {res['service_stack_100KB']['median_ms']:.2f} ms (p95 {res['service_stack_100KB']['p95_ms']:.2f}) | <= 1 ms |",
-        f"| CLI recognition over the library's time (start-up excluded) | {cr['over_library_ms']:.0f} ms | <= 150 ms |",
-        f"| CLI start-up and exit (interpreter, imports, typer parsing) | {cr['startup_ms']:.0f} ms | reported |",
-        f"| CLI recognition: wall / command / library | {cr['wall_ms']:.0f} / {cr['command_ms']:.0f} / {cr['library_ms']:.0f} ms | - |",
-        f"| reading the AMC clip in the CLI (part of the overhead) | {cr['amc_read_ms']:.0f} ms | - |",
+        f"| `mirrorcoach space recognize` of one AMC clip, wall including start-up (median of 30) | {cr['wall_ms']:.0f} ms (p90 {cr['wall_p90_ms']:.0f}) | <= 150 ms |",
+        f"| of which start-up and exit (interpreter, imports, typer parsing) | {cr['startup_ms']:.0f} ms | reported |",
+        f"| of which the command (file bytes, session, request incl. the service reading the file, reply) / library | {cr['command_ms']:.0f} / {cr['library_ms']:.0f} ms | - |",
         f"| 20 concurrent recognitions ({cr['space_clips']}-clip space) | {cc['throughput_per_s']:.0f} /s, p95 {cc['p95_ms']:.0f} ms, median {cc['median_ms']:.0f} ms | reported |",
     ]
     write_results(args.out, "bus", res, md)

@@ -67,6 +67,22 @@ class Str(Spec):
 
 
 @dataclass
+class Bytes(Spec):
+    max_len: int = 64 * 1024 * 1024
+    doc: str = ""
+
+    def check(self, value, path):
+        if not isinstance(value, (bytes, bytearray)):
+            _fail(path, f"must be bytes, got {type(value).__name__}")
+        if len(value) > self.max_len:
+            _fail(path, f"is longer than {self.max_len} bytes")
+        return bytes(value)
+
+    def describe(self):
+        return f"bytes (<= {self.max_len})"
+
+
+@dataclass
 class Int(Spec):
     min: int | None = None
     max: int | None = None

@@ -5,8 +5,9 @@ Keys: ``<prefix>/pss/<verb>`` for requests; ``<prefix>/events/pss/space`` for ch
 
 from __future__ import annotations
 
-from schemas.base import AnyMap, Array, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str, NAME_PATTERN
+from schemas.base import AnyMap, Array, Bool, Bytes, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str, NAME_PATTERN
 from schemas.common import CLIP, name
+from shared.clipfiles import FILE_PATTERN, READING_CHOICES
 from shared.errors import BadInput
 
 SERVICE = "pss"
@@ -48,6 +49,23 @@ INFO = Map({
 NEAREST = Map({"name": F(Str(max_len=64)), "label": F(Str(max_len=64)), "distance": F(Float(0.0), "eq. 2.4 distance")})
 
 
+CLIP_FILE = Map({
+    "name": F(Str(pattern=FILE_PATTERN, max_len=68), "the file's name: NAME.amc, NAME.bvh or NAME.npz (never a path)"),
+    "data": F(Bytes(), "the file's bytes"),
+    "skeleton": F(Bytes(), "an AMC file's skeleton: the ASF file's bytes", required=False),
+})
+
+#: how clip files are read (the CLI's --units, --up, --translations; README "Files from other tools")
+READING = {k: F(Str(choices=v), f"clip files' {k} (default: read off the file)", required=False)
+           for k, v in READING_CHOICES.items()}
+
+
+def _clips_or_files(req: dict, path: str):
+    """exactly one of clips and files is given."""
+    if (req["clips"] is None) == (req["files"] is None):
+        raise BadInput("recognize: give exactly one of clips and files", field="clips")
+
+
 def _point_or_mix(req: dict, path: str):
     """exactly one of point and mix is given."""
     if (req["point"] is None) == (req["mix"] is None):
@@ -86,9 +104,12 @@ RECOGNIZE = Endpoint(
     "recognize",
     Message("pss.recognize", Map({
         "space": SPACE,
-        "clips": F(List(CLIP, min_len=1, max_len=50), "one clip, or the repetitions of one trial"),
+        "clips": F(List(CLIP, min_len=1, max_len=50), "one clip, or the repetitions of one trial", required=False),
+        "files": F(List(CLIP_FILE, min_len=1, max_len=50), "the same as clip files, unread (the service reads them)",
+                   required=False),
+        **READING,
         "top": F(Int(1, 100), "how many nearest proto-symbols to return", required=False, default=5),
-    }), doc="place a motion in the space (eq. 2.6)"),
+    }, checks=[_clips_or_files]), doc="place a motion in the space (eq. 2.6)"),
     Message("pss.recognize.reply", Map({
         "space": SPACE,
         "label": F(Str(max_len=64), "the recognised class; absent when the motion is none of the space's classes",

@@ -61,6 +61,29 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     assert r.returncode == 0, r.stderr
     rec = json.loads(r.stdout)
     assert rec["label"] == "squat1Reps" and len(rec["point"]) == 3 and rec["nearest"][0]["label"] == "squat1Reps"
+    # the command sends the files unread and starts without numpy (its start-up, README "CLI"); the
+    # service reads the AMC with the ASF the command found beside it, and a BVH alike
+    probe = ("import sys; from shared.cli.app import main; sys.argv = ['mirrorcoach'] + sys.argv[1:]\n"
+             "try:\n    main()\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
+             "print('numpy imported' if 'numpy' in sys.modules else 'no numpy', file=sys.stderr)")
+    r = subprocess.run([sys.executable, "-c", probe, "space", "recognize", "moves", str(held), "--json"], capture_output=True,
+                       text=True, env=env, cwd=REPO, timeout=120)
+    assert r.returncode == 0 and "no numpy" in r.stderr, r.stderr
+    assert json.loads(r.stdout)["label"] == "squat1Reps"
+    from shared.io import load_clip, save_clip
+
+    save_clip(load_clip(held), tmp_path / "held.bvh")
+    r = cli(env, "space", "recognize", "moves", tmp_path / "held.bvh", "--json")
+    assert r.returncode == 0 and json.loads(r.stdout)["label"] == "squat1Reps", r.stderr
+    (tmp_path / "lonely").mkdir()
+    (tmp_path / "lonely" / "x.amc").write_bytes(held.read_bytes())
+    for args, says in (((tmp_path / "nothere.bvh",), "no such file"), ((tmp_path / "lonely" / "x.amc",), "no skeleton found"),
+                       ((tmp_path / "held.bvh", "--skeleton", tmp_path / "none.asf"), None)):
+        r = cli(env, "space", "recognize", "moves", *args)
+        if says is None:  # --skeleton is for AMC files: a BVH carries its own (the option is ignored)
+            assert r.returncode == 0, r.stderr
+            continue
+        assert r.returncode == 2 and r.stderr.startswith("error: ") and says in r.stderr and "Traceback" not in r.stderr
 
     squat = next(p["name"] for p in info["proto_symbols"] if p["label"] == "squat1Reps")
     kick = next(p["name"] for p in info["proto_symbols"] if p["label"] == "kickLFront1Reps")

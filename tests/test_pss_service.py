@@ -59,7 +59,7 @@ def built(pss_service, clips):
     return info
 
 
-def test_every_verb_answers_within_its_contract(pss_service, clips, built, client_of):
+def test_every_verb_answers_within_its_contract(pss_service, clips, built, client_of, tmp_path):
     env, _ = pss_service
     c = client_of(env)
     train, test, motion_only = clips
@@ -77,6 +77,19 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
         assert r["label"] == clip.label and r["point"].shape == (3,) and len(r["nearest"]) == 5
         assert r["known"] and r["nearest_label"] == clip.label and 0.0 <= r["confidence"] <= 1.0
         assert [n["distance"] for n in r["nearest"]] == sorted(n["distance"] for n in r["nearest"])
+
+    # the same clips as files, unread (what `mirrorcoach space recognize` sends): read by the
+    # service as the library reads them, so the same answer
+    from shared.clipfiles import wire_file
+    from shared.io import save_clip
+
+    for clip in test:  # NPZ carries the arm torques the space was built with
+        save_clip(clip, tmp_path / f"{clip.name}.npz")
+        by_clip = c.request("pss", "recognize", {"space": "base", "clips": [clip_to_wire(clip)]})
+        by_file = _checked(contract.RECOGNIZE, c.request("pss", "recognize", {
+            "space": "base", "files": [wire_file(tmp_path / f"{clip.name}.npz")]}))
+        assert by_file["label"] == by_clip["label"] == clip.label
+        assert np.allclose([n["distance"] for n in by_file["nearest"]], [n["distance"] for n in by_clip["nearest"]])
 
     names = [p["name"] for p in info["proto_symbols"]]
     # generate from a point and from a mix
@@ -119,8 +132,9 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
         contract.EVENTS["space"].validate(e)
 
 
-def _bad_cases(clip, other_clip):
-    """(name, verb, raw payload, expected code): the bad-input list of the issue."""
+def _bad_cases(clip, other_clip, amc_file):
+    """(name, verb, raw payload, expected code): the bad-input list of the issue (``amc_file``: a
+    clip file as `space recognize` sends it)."""
     w = clip_to_wire(clip)
     nan = dict(w, data=np.where(np.arange(w["data"].size).reshape(w["data"].shape) == 7, np.nan, w["data"]))
     inf = dict(w, data=np.full(w["data"].shape, np.inf))
@@ -130,7 +144,25 @@ def _bad_cases(clip, other_clip):
     mismatch = dict(w, channels=w["channels"][:-1])
     foreign = dict(w, channels=[f"x{i}.rx" for i in range(len(w["channels"]))])
     big = {"space": "base", "clips": [dict(w, data=np.zeros((20_000, 62)))]}  # ~10 MB > 8 MB limit
+    from shared.clipfiles import wire_file
+
+    f = wire_file(amc_file)
     return [
+        ("clips and files at once", "recognize", pack({"space": "base", "clips": [w], "files": [f]}), "bad_request"),
+        ("a file name that is a path", "recognize", pack({"space": "base", "files": [dict(f, name="../x.amc")]}),
+         "bad_request"),
+        ("a file that is no clip format", "recognize", pack({"space": "base", "files": [dict(f, name="x.txt")]}),
+         "bad_request"),
+        ("an AMC file without its skeleton", "recognize",
+         pack({"space": "base", "files": [{"name": f["name"], "data": f["data"]}]}), "bad_request"),
+        ("garbage in a BVH file", "recognize", pack({"space": "base", "files": [{"name": "x.bvh", "data": b"\x00HIER"}]}),
+         "bad_request"),
+        ("an AMC file read with the wrong skeleton", "recognize",
+         pack({"space": "base", "files": [dict(f, skeleton=b"not an asf")]}), "bad_request"),
+        ("unknown unit for the files", "recognize", pack({"space": "base", "files": [f], "units": "furlong"}),
+         "bad_request"),
+        ("file data of the wrong type", "recognize", pack({"space": "base", "files": [dict(f, data="text")]}),
+         "bad_request"),
         ("not msgpack", "recognize", b"\xc1\xc1\xc1garbage", "bad_request"),
         ("not a map", "recognize", pack([1, 2, 3]), "bad_request"),
         ("missing field", "recognize", pack({"space": "base"}), "bad_request"),
@@ -172,7 +204,7 @@ def test_bad_input_gets_a_clear_error_and_changes_nothing(pss_service, clips, bu
     before_list = c.request("pss", "list")
     before_disk = _state(env)
     assert_refused(c, procs, [(name, "pss", verb, payload, code)
-                              for name, verb, payload, code in _bad_cases(clips[1][0], built["proto_symbols"][0]["name"])])
+                              for name, verb, payload, code in _bad_cases(clips[1][0], built["proto_symbols"][0]["name"], clips[2][0].source)])
     assert c.request("pss", "list") == before_list
     assert _state(env) == before_disk
     assert "Traceback" not in procs.log("pss")

@@ -74,7 +74,12 @@ def make_service(settings: Settings | None = None) -> Service:
     @svc.handler("recognize")
     def recognize(req):
         space = store.get(req["space"])
-        clips = [clip_from_wire(c, space.features.skeleton) for c in req["clips"]]
+        if req["files"] is not None:
+            from shared.clipfiles import read_wire_files
+
+            clips = read_wire_files(req["files"], {k: req[k] for k in ("units", "up", "translations")})
+        else:
+            clips = [clip_from_wire(c, space.features.skeleton) for c in req["clips"]]
         rec = space.recognize(clips[0] if len(clips) == 1 else clips, top=req["top"])
         decided = {"label": rec.label} if rec.label is not None else {}
         return {"space": req["space"], **decided, "known": rec.label is not None, "nearest_label": rec.nearest_label,

@@ -31,9 +31,12 @@ class RemoteError(MirrorcoachError):
 class Client:
     """A Zenoh client session for requests, liveliness and event subscriptions."""
 
-    def __init__(self, settings: Settings | None = None, connect_timeout_s: float = 3.0):
+    def __init__(self, settings: Settings | None = None, connect_timeout_s: float = 3.0, arrays: str = "numpy"):
+        """``arrays="lists"``: replies' arrays as nested lists, so that a short command never
+        imports numpy (``mirrorcoach space recognize``)."""
         import zenoh
 
+        self.arrays = arrays
         self.settings = settings or Settings()
         try:
             self.session = zenoh.open(client_config(self.settings, wait=False, connect_timeout_s=connect_timeout_s))
@@ -63,7 +66,7 @@ class Client:
         replies = self.session.get(self.settings.key(service, verb), payload=payload, timeout=timeout)
         for r in replies:
             if r.ok is not None:
-                return unpack(r.ok.payload.to_bytes())
+                return unpack(r.ok.payload.to_bytes(), arrays=self.arrays)
             try:
                 err = unpack(r.err.payload.to_bytes())
                 raise RemoteError(str(err.get("code", "internal")), str(err.get("message", "")), err.get("details") or {})

@@ -13,7 +13,6 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import typer
 
 from shared.errors import MirrorcoachError
@@ -61,6 +60,8 @@ def clip_info(file: Path = typer.Argument(..., help="Clip file: .amc, .bvh or .n
               skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
               as_json: bool = typer.Option(False, "--json", help="Machine-readable output.")):
     """Frames, frame rate, duration, skeleton and channel groups of a clip."""
+    import numpy as np
+
     c = read_clip(file, skeleton=skeleton)
     info = {
         "file": str(file), "name": c.name, "label": c.label, "frames": c.n_frames, "fps": c.fps,
@@ -120,7 +121,9 @@ def _load_clips(paths: list[Path], skeleton, label: str | None = None):
     return clips
 
 
-def _parse_point(point: str) -> np.ndarray:
+def _parse_point(point: str):
+    import numpy as np
+
     try:
         x = np.array([float(v) for v in point.split(",")])
     except ValueError:

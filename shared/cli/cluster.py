@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import typer
 
 from shared.cli.app import SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app, read_clip, recognition_text
@@ -20,10 +19,10 @@ app.add_typer(space_app, name="space")
 TIMEOUT_HELP = "Seconds to wait for the service (default: $MIRRORCOACH_TIMEOUT or 120)."
 
 
-def _client():
+def _client(**kw):
     from shared.bus.client import Client
 
-    return Client()
+    return Client(**kw)
 
 
 def _wire_name(name: str) -> str:
@@ -63,7 +62,7 @@ def _print_info(info: dict) -> None:
 
 
 def _jsonable(obj):
-    if isinstance(obj, np.ndarray):
+    if hasattr(obj, "tolist") and not isinstance(obj, (list, dict)):  # numpy arrays and scalars (numpy not imported)
         return obj.tolist()
     if isinstance(obj, dict):
         return {k: _jsonable(v) for k, v in obj.items() if k != "v"}
@@ -139,10 +138,16 @@ def space_recognize(name: str = typer.Argument(..., help="Space name."),
     import os
     import time
 
+    from shared.cli.app import READING
+    from shared.clipfiles import wire_file
+
     t_body = time.perf_counter()
-    reps = [_wire(read_clip(p, skeleton=skeleton)) for p in clips]  # the performer's own body: positions are theirs
-    with _client() as c:
-        r = c.request("pss", "recognize", {"space": name, "clips": reps, "top": top}, timeout=timeout)
+    # the files go as they are (the performer's own body: positions are theirs); the service
+    # reads them, so this command starts without numpy (README "How a motion is recognised")
+    files = [wire_file(p, skeleton=skeleton) for p in clips]
+    with _client(arrays="lists") as c:
+        r = c.request("pss", "recognize", {"space": name, "files": files, "top": top,
+                                           **{k: v for k, v in READING.items() if v is not None}}, timeout=timeout)
     if os.environ.get("MIRRORCOACH_TIMING"):  # for bench/bus.py: the command's own time, start-up excluded
         typer.echo(f"timing: command {1e3 * (time.perf_counter() - t_body):.2f} ms, library {1e3 * r['seconds']:.2f} ms",
                    err=True)

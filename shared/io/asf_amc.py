@@ -8,12 +8,14 @@ Bad files raise :class:`~shared.errors.ClipFormatError` naming the file and line
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
 import numpy as np
 
 from shared.clip import Clip
+from shared.clipfiles import find_skeleton  # noqa: F401  (kept here: where readers look for it)
 from shared.errors import ClipFormatError
 from shared.skeleton import Joint, Skeleton, euler_matrix
 
@@ -36,7 +38,7 @@ def _floats(path, lineno, parts, n=None) -> list[float]:
         raise ClipFormatError(path, f"expected numbers, got {' '.join(parts)!r}", lineno) from None
     if n is not None and len(vals) != n:
         raise ClipFormatError(path, f"expected {n} numbers, got {len(vals)}", lineno)
-    if not np.all(np.isfinite(vals)):
+    if not all(map(math.isfinite, vals)):
         raise ClipFormatError(path, "non-finite number", lineno)
     return vals
 
@@ -199,6 +201,7 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
     dofs = {j.name: j.dofs for j in skeleton.joints}
     channels = skeleton.channels()
     col = {c: i for i, c in enumerate(channels)}
+    bone_cols = {j.name: [col[f"{j.name}.{d}"] for d in j.dofs] for j in skeleton.joints}
     frames: list[np.ndarray] = []
     cur: np.ndarray | None = None
     seen: set[str] = set()
@@ -224,8 +227,8 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
         if bone not in dofs:
             raise ClipFormatError(path, f"bone {bone!r} is not in skeleton {skeleton.name!r}", lineno)
         vals = _floats(path, lineno, parts[1:], len(dofs[bone]))
-        for d, v in zip(dofs[bone], vals):
-            cur[col[f"{bone}.{d}"]] = v
+        for c, v in zip(bone_cols[bone], vals):
+            cur[c] = v
         seen.add(bone)
     if cur is not None:
         frames.append(cur)
@@ -253,30 +256,3 @@ def write_amc(clip: Clip, path) -> None:
     Path(path).write_text("\n".join(out) + "\n", encoding="latin-1")
 
 
-def find_skeleton(amc_path) -> Path:
-    """The ASF of an AMC file in the usual layouts: beside it or in a sibling ``asf/`` folder
-    (also one level up, as in ``amc/<class>/x.amc`` + ``asf/``), named after the actor:
-    ``HDM_bd_..._120.amc`` -> ``HDM_bd.asf``; CMU ``07_01.amc`` -> ``07.asf``."""
-    amc_path = Path(amc_path)
-    stem = amc_path.stem
-    names = []
-    m = re.match(r"^(HDM_[A-Za-z]+)_", stem)
-    if m:
-        names.append(m.group(1) + ".asf")
-    m = re.match(r"^(\d+)_\d+$", stem)
-    if m:
-        names.append(m.group(1) + ".asf")
-    names.append(stem + ".asf")
-    parts = stem.split("_")
-    for k in range(len(parts) - 1, 0, -1):
-        names.append("_".join(parts[:k]) + ".asf")
-    folders = [amc_path.parent, amc_path.parent / "asf", amc_path.parent.parent / "asf", amc_path.parent.parent.parent / "asf"]
-    for folder in folders:
-        for n in names:
-            cand = folder / n
-            if cand.is_file():
-                return cand
-    asfs = sorted(amc_path.parent.glob("*.asf"))
-    if len(asfs) == 1:
-        return asfs[0]
-    raise ClipFormatError(amc_path, "no skeleton found: put the actor's .asf beside it or in a sibling asf/ folder, or pass --skeleton FILE")

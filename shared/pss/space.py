@@ -309,8 +309,8 @@ class ProtoSymbolSpace:
         """Channel weights of the recognition distance on the position group
         (:func:`shared.pss.recognition.channel_weights`); ``None`` where recognition uses the
         geometry groups (format 1, no skeleton: eq. 2.4 unweighted, as those spaces always did)."""
-        if self.recognition_groups == GEOMETRY_GROUPS:
-            return None
+        if self.recognition_groups == GEOMETRY_GROUPS or self.params.covariance_type != "diag":
+            return None  # full covariances: eq. 2.4 unweighted (the weights are per channel)
         if self._recognition_weights is None:
             from shared.pss.recognition import channel_weights
 
@@ -322,7 +322,7 @@ class ProtoSymbolSpace:
     def recognition_bank(self) -> ModelBank:
         """The proto-symbols on the recognition groups, stacked with the channel weights (cached)."""
         rg = self.recognition_groups
-        if rg == GEOMETRY_GROUPS:
+        if self.recognition_weights is None:
             return self.bank_on(rg)
         key = ("weighted bank",) + rg
         if key not in self._group_models:
@@ -568,7 +568,7 @@ class ProtoSymbolSpace:
         emb = Embedding(arrays["points"], e["stress"], e["stress1"], e["n_iter"], e["converged"])
         space = cls(params, features, symbols, arrays["distances"], emb, name=header["name"])
         space.format = header["format"]
-        if space.recognition_groups != GEOMETRY_GROUPS:
+        if space.recognition_groups != GEOMETRY_GROUPS and params.covariance_type == "diag":
             # a file written before the channel weights recognises as it did when written (its
             # calibration was fitted on unweighted distances); rebuilding it gives the weights
             space._recognition_weights = weights if weights is not None else np.ones(len(space.features.group_indices(

@@ -1,0 +1,136 @@
+"""Clip files as they lie on disk, without reading them: where an AMC file's skeleton is, and
+a clip's files packed raw for the bus (the pss service reads them, :func:`read_wire_files`).
+
+Nothing here imports numpy: ``mirrorcoach space recognize`` sends the files as they are and
+starts in well under 150 ms (issue 11); the reading happens once, in the service.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+from collections import OrderedDict
+from pathlib import Path
+
+from shared.errors import BadInput, ClipFormatError
+
+#: what the bus accepts as a clip file's name: a plain name with a clip suffix (never a path)
+FILE_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}\.(amc|bvh|npz|AMC|BVH|NPZ)"
+READING_CHOICES = {"units": ("m", "cm", "mm", "in", "cmu"), "up": ("y", "z"), "translations": ("replace", "add", "auto")}
+
+
+def find_skeleton(amc_path) -> Path:
+    """The ASF of an AMC file in the usual layouts: beside it or in a sibling ``asf/`` folder
+    (also one level up, as in ``amc/<class>/x.amc`` + ``asf/``), named after the actor:
+    ``HDM_bd_..._120.amc`` -> ``HDM_bd.asf``; CMU ``07_01.amc`` -> ``07.asf``."""
+    amc_path = Path(amc_path)
+    stem = amc_path.stem
+    names = []
+    m = re.match(r"^(HDM_[A-Za-z]+)_", stem)
+    if m:
+        names.append(m.group(1) + ".asf")
+    m = re.match(r"^(\d+)_\d+$", stem)
+    if m:
+        names.append(m.group(1) + ".asf")
+    names.append(stem + ".asf")
+    parts = stem.split("_")
+    for k in range(len(parts) - 1, 0, -1):
+        names.append("_".join(parts[:k]) + ".asf")
+    folders = [amc_path.parent, amc_path.parent / "asf", amc_path.parent.parent / "asf", amc_path.parent.parent.parent / "asf"]
+    for folder in folders:
+        for n in names:
+            cand = folder / n
+            if cand.is_file():
+                return cand
+    asfs = sorted(amc_path.parent.glob("*.asf"))
+    if len(asfs) == 1:
+        return asfs[0]
+    raise ClipFormatError(amc_path, "no skeleton found: put the actor's .asf beside it or in a sibling asf/ folder, or pass --skeleton FILE")
+
+
+def _wire_file_name(path: Path) -> str:
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)[:59] or "clip"
+    stem = stem if stem[:1].isalnum() else ("c" + stem)[:59]
+    return f"{stem}{path.suffix.lower()}"
+
+
+def _read_bytes(path: Path, limit: int) -> bytes:
+    try:
+        size = path.stat().st_size
+        if size > limit:
+            raise ClipFormatError(path, f"is {size} bytes, over the bus limit of {limit} bytes")
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise ClipFormatError(path, "no such file") from None
+    except IsADirectoryError:
+        raise ClipFormatError(path, "is a folder, not a clip file") from None
+    except OSError as e:
+        raise ClipFormatError(path, f"cannot be read ({e.strerror or e})") from None
+
+
+def wire_file(path, skeleton=None, limit: int = 64 * 1024 * 1024) -> dict:
+    """One clip file for the bus, unread: ``{name, data[, skeleton]}`` (an AMC file carries its ASF)."""
+    path = Path(path)
+    if path.suffix.lower() not in (".amc", ".bvh", ".npz"):
+        raise ClipFormatError(path, f"unknown clip format {path.suffix!r} (expected one of .amc, .bvh, .npz)")
+    out = {"name": _wire_file_name(path), "data": _read_bytes(path, limit)}
+    if path.suffix.lower() == ".amc":
+        out["skeleton"] = _read_bytes(Path(skeleton) if skeleton is not None else find_skeleton(path), limit)
+    return out
+
+
+_SKELETONS: OrderedDict = OrderedDict()  # ASF bytes + unit -> Skeleton (a skeleton is not changed once read)
+_SKELETONS_LOCK = threading.Lock()
+SKELETON_CACHE = 32
+
+
+def _skeleton(path: Path, data: bytes, units: str | None):
+    """The ASF read once per content: a performer sends the same skeleton with every clip."""
+    import hashlib
+
+    from shared.io.asf_amc import read_asf
+
+    key = (hashlib.sha256(data).digest(), units)
+    with _SKELETONS_LOCK:
+        if key in _SKELETONS:
+            _SKELETONS.move_to_end(key)
+            return _SKELETONS[key]
+    sk = read_asf(path, units=units)
+    with _SKELETONS_LOCK:
+        _SKELETONS[key] = sk
+        while len(_SKELETONS) > SKELETON_CACHE:
+            _SKELETONS.popitem(last=False)
+    return sk
+
+
+def read_wire_files(files: list[dict], reading: dict | None = None) -> list:
+    """The clips of :func:`wire_file` entries, read as :func:`shared.io.load_clip` reads files
+    (``reading``: units, up, translations), from a private temporary folder."""
+    import tempfile
+
+    from shared.io import load_clip
+
+    reading = {k: v for k, v in (reading or {}).items() if v is not None}
+    clips = []
+    with tempfile.TemporaryDirectory(prefix="mc-files-") as tmp:
+        for i, f in enumerate(files):
+            if not re.fullmatch(FILE_PATTERN, f["name"]):
+                raise BadInput(f"files[{i}].name: {f['name']!r} is not a clip file name (NAME.amc, .bvh or .npz)",
+                               field=f"files[{i}].name")
+            folder = Path(tmp) / str(i)
+            folder.mkdir()
+            path = folder / f["name"]
+            path.write_bytes(f["data"])
+            skeleton = None
+            if path.suffix.lower() == ".amc":
+                if f.get("skeleton") is None:
+                    raise BadInput(f"files[{i}]: an AMC file needs its skeleton (the ASF file's bytes)",
+                                   field=f"files[{i}].skeleton")
+                (folder / "skeleton.asf").write_bytes(f["skeleton"])
+            try:
+                if path.suffix.lower() == ".amc":  # read here, not through load_skeleton's cache of paths
+                    skeleton = _skeleton(folder / "skeleton.asf", f["skeleton"], reading.get("units"))
+                clips.append(load_clip(path, skeleton=skeleton, **reading))
+            except ClipFormatError as e:  # name the user's file, not the temporary copy
+                raise BadInput(f"{f['name']}: {e.reason}", field=f"files[{i}]") from None
+    return clips
