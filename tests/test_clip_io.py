@@ -121,6 +121,12 @@ def test_resample_keeps_duration_and_values(hdm05):
         ("bone.amc", ":FULLY-SPECIFIED\n1\nnosuchbone 1 2 3\n", 3, "nosuchbone"),
         ("empty.amc", "", None, "no frames"),
         ("nan.amc", "1\nroot 0 0 0 0 0 nan\n", 2, "non-finite"),
+        # the numbers are converted at once: a bad one is still traced to its own line
+        ("late.amc", "1\nroot 0 0 0 0 0 0\nlfemur 1 2 3\n2\nroot 0 0 0 0 0 0\nlfemur 1 x 3\nrfemur 1 2 3\n", 6, "numbers"),
+        ("lateinf.amc", "1\nroot 0 0 0 0 0 0\n2\nroot 0 0 0 0 0 0\nrfemur 1 2 1e999\n", 5, "non-finite"),
+        ("count.amc", "1\nroot 0 0 0 0 0 0\nlfemur 1 2\n", 3, "expected 3 numbers"),
+        ("order.amc", "1\nroot 0 0 0 0 0 0\n3\n", 3, "frame 3 where frame 2"),
+        ("early.amc", ":DEGREES\nroot 0 0 0 0 0 0\n", 2, "before the first frame"),
     ],
 )
 def test_bad_files_name_file_and_line(hdm05, tmp_path, name, content, line, words):

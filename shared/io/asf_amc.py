@@ -8,6 +8,7 @@ Bad files raise :class:`~shared.errors.ClipFormatError` naming the file and line
 
 from __future__ import annotations
 
+import bisect
 import math
 import re
 from pathlib import Path
@@ -193,48 +194,66 @@ def _limit(tok: str) -> float:
     return float(tok)
 
 
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+        return True
+    except ValueError:
+        return False
+
+
 def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = None) -> Clip:
     """Read an AMC motion for ``skeleton``. HDM05 and CMU AMC files carry no frame rate:
     HDM05 is 120 fps (the default), CMU 120 fps as well."""
     path = Path(path)
     lines = _lines(path)
-    dofs = {j.name: j.dofs for j in skeleton.joints}
     channels = skeleton.channels()
     col = {c: i for i, c in enumerate(channels)}
     bone_cols = {j.name: [col[f"{j.name}.{d}"] for d in j.dofs] for j in skeleton.joints}
-    frames: list[np.ndarray] = []
-    cur: np.ndarray | None = None
-    seen: set[str] = set()
+    nch = len(channels)
+    # one pass over the lines checks the layout; the numbers are converted at once at the end
+    tokens: list[str] = []  # every value, in file order
+    where: list[int] = []  # its flat index frame * nch + column
+    starts: list[tuple[int, int]] = []  # (first token, line number) of every bone line, for errors
+    n_frames = 0
     expected_frame = None
     for lineno, line in enumerate(lines, 1):
-        s = line.strip()
-        if not s or s.startswith("#") or s.startswith(":"):
+        parts = line.split()
+        if not parts or parts[0][0] in "#:":
             continue
-        parts = s.split()
         if len(parts) == 1 and parts[0].isdigit():
             n = int(parts[0])
             if expected_frame is not None and n != expected_frame:
                 raise ClipFormatError(path, f"frame {n} where frame {expected_frame} was expected", lineno)
-            if cur is not None:
-                frames.append(cur)
-            cur = np.zeros(len(channels))
-            seen = set()
+            n_frames += 1
             expected_frame = n + 1
             continue
-        if cur is None:
+        if not n_frames:
             raise ClipFormatError(path, f"bone line {parts[0]!r} before the first frame number", lineno)
-        bone = parts[0]
-        if bone not in dofs:
-            raise ClipFormatError(path, f"bone {bone!r} is not in skeleton {skeleton.name!r}", lineno)
-        vals = _floats(path, lineno, parts[1:], len(dofs[bone]))
-        for c, v in zip(bone_cols[bone], vals):
-            cur[c] = v
-        seen.add(bone)
-    if cur is not None:
-        frames.append(cur)
-    if not frames:
+        cols = bone_cols.get(parts[0])
+        if cols is None:
+            raise ClipFormatError(path, f"bone {parts[0]!r} is not in skeleton {skeleton.name!r}", lineno)
+        if len(parts) - 1 != len(cols):
+            raise ClipFormatError(path, f"expected {len(cols)} numbers, got {len(parts) - 1}", lineno)
+        starts.append((len(tokens), lineno))
+        tokens += parts[1:]
+        base = (n_frames - 1) * nch
+        where += [base + c for c in cols]
+    if not n_frames:
         raise ClipFormatError(path, "no frames found (is this an AMC file?)")
-    data = np.vstack(frames)
+    try:
+        values = np.array(tokens, dtype=float)
+        bad = None if np.all(np.isfinite(values)) else int(np.flatnonzero(~np.isfinite(values))[0])
+    except ValueError:
+        bad = next(k for k, t in enumerate(tokens) if not _is_number(t))
+    if bad is not None:  # name the line, as a reader of the file would look for it
+        k = bisect.bisect_right(starts, (bad, float("inf"))) - 1
+        end = starts[k + 1][0] if k + 1 < len(starts) else len(tokens)
+        _floats(path, starts[k][1], tokens[starts[k][0]:end])  # raises, naming the number and the line
+        raise ClipFormatError(path, "unreadable number", starts[k][1])
+    data = np.zeros(n_frames * nch)
+    data[np.array(where, dtype=np.int64)] = values
+    data = data.reshape(n_frames, nch)
     cls = label if label is not None else path.parent.name
     return Clip(data=data, channels=channels, fps=fps, skeleton=skeleton, groups={"motion": list(channels)},
                 name=path.stem, label=cls, source=str(path))
