@@ -246,6 +246,9 @@ class Map(Spec):
     def check(self, value, path):
         if not isinstance(value, dict):
             _fail(path, f"must be a map, got {type(value).__name__}")
+        odd = [k for k in value if not isinstance(k, str)]
+        if odd:  # msgpack keeps bytes keys as bytes: a map of field names has text keys only
+            _fail(path, f"field names must be text, got {type(odd[0]).__name__} {odd[0]!r:.40}")
         unknown = sorted(set(value) - set(self.fields))
         if unknown:
             _fail(path, f"unknown field(s) {', '.join(map(str, unknown))}; expected {', '.join(self.fields)}")

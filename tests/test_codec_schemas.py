@@ -113,3 +113,24 @@ def test_settings_accept_loopback_only():
     with pytest.raises(BadInput, match="PREFIX"):
         Settings(prefix="a/b")
     assert Settings(prefix="mc2").key("pss", "build") == "mc2/pss/build"
+
+
+def test_every_request_with_bytes_field_names_is_bad_input_not_internal():
+    """msgpack keeps bytes keys as bytes; a map mixing them with text must be refused as bad
+    input by every endpoint's contract (issue 17, row 14), not crash while listing the fields."""
+    msg = unpack(msgpack.packb({b"a": 1, "b": 2}))
+    checked = 0
+    for contract in CONTRACTS.values():
+        for ep in contract.ENDPOINTS.values():
+            with pytest.raises(BadInput, match="field names must be text"):
+                ep.request.validate(msg)
+            checked += 1
+    assert checked >= 40  # every request key of the five services
+
+
+def test_arrays_decode_to_lists_without_numpy_alike():
+    a = np.arange(12, dtype="<f8").reshape(3, 4) / 7
+    back = unpack(pack({"x": a, "b": np.array([True, False]), "i": np.array([-3, 5], dtype="<i2")}), arrays="lists")
+    assert back["x"] == a.tolist() and back["b"] == [True, False] and back["i"] == [-3, 5]
+    with pytest.raises(BadInput):
+        unpack(pack({"__nd__": True, "dtype": "<f8", "shape": [2], "data": b"\x00" * 8}), arrays="lists")

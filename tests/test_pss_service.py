@@ -185,6 +185,8 @@ def _bad_cases(clip, other_clip, amc_file):
         ("name with /", "info", pack({"space": "a/b"}), "bad_request"),
         ("existing space without replace", "build", pack({"space": "base", "clips": [w]}), "conflict"),
         ("unknown field", "info", pack({"space": "base", "spaec": 1}), "bad_request"),
+        ("bytes and text keys mixed (issue 17, row 14)", "list", pack({b"a": 1, "b": 2}), "bad_request"),
+        ("a bytes field name", "info", pack({b"space": "base"}), "bad_request"),
         ("future schema version", "info", pack({"v": 9, "space": "base"}), "bad_request"),
         ("unknown verb", "explode", pack({}), "not_found"),
         ("associate without a clip", "associate", pack({"space": "base"}), "bad_request"),
