@@ -9,7 +9,7 @@ import pytest
 
 from shared.clip import Clip
 from shared.errors import BadInput, ClipFormatError
-from shared.io import find_skeleton, load_clip, read_asf, save_clip
+from shared.io import find_clips, find_skeleton, load_clip, read_asf, save_clip
 
 SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
 PAST_360 = "amc/depositFloorR/HDM_bd_depositFloorR_002_120.amc"
@@ -169,3 +169,45 @@ def test_euler_matrix_matches_scipy(seq):
     angles = np.random.default_rng(len(seq) + ord(seq[0])).uniform(-180, 180, size=3)
     np.testing.assert_allclose(euler_matrix(seq, angles), Rotation.from_euler(seq, angles, degrees=True).as_matrix(),
                                atol=1e-12)
+
+
+def _npz_variant(src, dst, meta_change=None, data=None):
+    import json
+
+    with np.load(src, allow_pickle=False) as z:
+        meta, arr = json.loads(str(z["meta"])), np.array(z["data"])
+    meta = meta_change(meta) if meta_change else meta
+    np.savez_compressed(dst, data=arr if data is None else data, meta=np.array(json.dumps(meta)))
+    return dst
+
+
+@pytest.mark.parametrize("name, change, data, words", [
+    ("fps_text", lambda m: dict(m, fps="abc"), None, "'fps' must be a number"),
+    ("fps_nan", lambda m: dict(m, fps=float("nan")), None, "not a frame rate"),
+    ("meta_list", lambda m: [1, 2], None, "must be a JSON object"),
+    ("channels_numbers", lambda m: dict(m, channels=list(range(len(m["channels"])))), None, "channel name must be text"),
+    ("groups_list", lambda m: dict(m, groups=[1]), None, "'groups' must be a map"),
+    ("data_shape", None, np.zeros((3, 5)), "data of shape (3, 5)"),
+    ("skeleton_broken", lambda m: dict(m, skeleton={"joints": "x"}), None, "unreadable skeleton"),
+])
+def test_npz_with_an_odd_header_is_a_clear_error(bundled, tmp_path, name, change, data, words):
+    """Issue 17, row 13: odd NPZ headers were tracebacks."""
+    save_clip(load_clip(next(iter(find_clips([bundled / "amc"])))), tmp_path / "ok.npz")
+    f = _npz_variant(tmp_path / "ok.npz", tmp_path / f"{name}.npz", change, data)
+    with pytest.raises(ClipFormatError) as err:
+        load_clip(f)
+    assert words in str(err.value) and str(f) in str(err.value)
+
+
+def test_npz_zip_bomb_is_refused_before_it_is_inflated(tmp_path, monkeypatch):
+    import zipfile
+
+    from shared.io import npz
+
+    monkeypatch.setattr(npz, "MAX_DATA_BYTES", 1024 * 1024)
+    with zipfile.ZipFile(tmp_path / "bomb.npz", "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("data.npy", b"\0" * (4 * 1024 * 1024))  # 4 MiB of zeros: about 4 KB on disk
+        zf.writestr("meta.npy", b"x")
+    assert (tmp_path / "bomb.npz").stat().st_size < 64 * 1024
+    with pytest.raises(ClipFormatError, match="unpacks to 4194304 bytes, over the limit"):
+        load_clip(tmp_path / "bomb.npz")

@@ -29,19 +29,69 @@ def write_npz(clip: Clip, path) -> None:
         np.savez_compressed(f, data=clip.data, meta=np.array(json.dumps(meta)))
 
 
+#: what an NPZ clip may unpack to: a clip's data (200,000 frames x 1,000 channels is 1.6 GB:
+#: the bus's own limits are far below) and its JSON header; checked before anything is inflated
+MAX_DATA_BYTES = 512 * 1024 * 1024
+MAX_META_BYTES = 16 * 1024 * 1024
+
+
+def _check_sizes(path: Path) -> None:
+    """Refuse a file whose members would inflate beyond the limits (a zip bomb), from the zip's
+    own directory, before numpy reads anything."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            sizes = {i.filename: i.file_size for i in zf.infolist()}
+    except (OSError, zipfile.BadZipFile) as e:
+        raise ClipFormatError(path, f"cannot read NPZ clip: {e}") from None
+    for member, limit in (("data.npy", MAX_DATA_BYTES), ("meta.npy", MAX_META_BYTES)):
+        if sizes.get(member, 0) > limit:
+            raise ClipFormatError(path, f"NPZ member {member!r} unpacks to {sizes[member]} bytes, over the "
+                                        f"limit of {limit} bytes")
+    if len(sizes) > 16:
+        raise ClipFormatError(path, f"not a mirrorcoach clip ({len(sizes)} arrays; a clip has 'data' and 'meta')")
+
+
+def _meta_field(path: Path, meta: dict, key: str, kind, what: str):
+    value = meta.get(key)
+    if not isinstance(value, kind) or isinstance(value, bool):
+        raise ClipFormatError(path, f"NPZ clip header: {key!r} must be {what}, got {type(value).__name__} {value!r:.40}")
+    return value
+
+
 def read_npz(path, label: str | None = None) -> Clip:
     path = Path(path)
+    if path.is_file():
+        _check_sizes(path)
     try:
         with np.load(path, allow_pickle=False) as z:
             if "data" not in z or "meta" not in z:
                 raise ClipFormatError(path, "not a mirrorcoach clip (needs arrays 'data' and 'meta')")
             data = np.array(z["data"], dtype=float)
             meta = json.loads(str(z["meta"]))
-    except (OSError, ValueError, zipfile.BadZipFile, json.JSONDecodeError) as e:
+    except (OSError, ValueError, TypeError, zipfile.BadZipFile, json.JSONDecodeError) as e:
         raise ClipFormatError(path, f"cannot read NPZ clip: {e}") from None
+    if not isinstance(meta, dict):
+        raise ClipFormatError(path, f"NPZ clip header must be a JSON object, got {type(meta).__name__}")
     if meta.get("format") != FORMAT:
-        raise ClipFormatError(path, f"unknown clip format {meta.get('format')!r} (expected {FORMAT})")
-    sk = Skeleton.from_json(meta["skeleton"]) if meta.get("skeleton") else None
-    return Clip(data=data, channels=list(meta["channels"]), fps=float(meta["fps"]), skeleton=sk,
-                groups={k: list(v) for k, v in meta["groups"].items()}, name=meta.get("name") or path.stem,
+        raise ClipFormatError(path, f"unknown clip format {meta.get('format')!r:.60} (expected {FORMAT})")
+    channels = _meta_field(path, meta, "channels", list, "a list of channel names")
+    if not all(isinstance(c, str) for c in channels):
+        raise ClipFormatError(path, "NPZ clip header: every channel name must be text")
+    fps = float(_meta_field(path, meta, "fps", (int, float), "a number (frames per second)"))
+    if not (np.isfinite(fps) and 0 < fps <= 10_000):
+        raise ClipFormatError(path, f"NPZ clip header: fps {fps!r} is not a frame rate (0-10000)")
+    groups = _meta_field(path, meta, "groups", dict, "a map of channel groups")
+    if not all(isinstance(v, list) and all(isinstance(c, str) for c in v) for v in groups.values()):
+        raise ClipFormatError(path, "NPZ clip header: every group must be a list of channel names")
+    if data.ndim != 2 or data.shape[1] != len(channels):
+        raise ClipFormatError(path, f"NPZ clip: data of shape {data.shape} for {len(channels)} channels")
+    for key in ("name", "label"):
+        if meta.get(key) is not None and not isinstance(meta[key], str):
+            raise ClipFormatError(path, f"NPZ clip header: {key!r} must be text")
+    try:
+        sk = Skeleton.from_json(meta["skeleton"]) if meta.get("skeleton") else None
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as e:
+        raise ClipFormatError(path, f"NPZ clip header: unreadable skeleton ({type(e).__name__}: {e})") from None
+    return Clip(data=data, channels=list(channels), fps=fps, skeleton=sk,
+                groups={k: list(v) for k, v in groups.items()}, name=meta.get("name") or path.stem,
                 label=label if label is not None else meta.get("label"), source=str(path))
