@@ -211,3 +211,25 @@ def test_npz_zip_bomb_is_refused_before_it_is_inflated(tmp_path, monkeypatch):
     assert (tmp_path / "bomb.npz").stat().st_size < 64 * 1024
     with pytest.raises(ClipFormatError, match="unpacks to 4194304 bytes, over the limit"):
         load_clip(tmp_path / "bomb.npz")
+
+
+def test_a_bvh_nested_deeper_than_any_body_is_a_clear_error(tmp_path):
+    """Issue 17, row 13: 10,000 nested joints were a RecursionError."""
+    n = 10_000
+    lines = ["HIERARCHY", "ROOT hip", "{", "OFFSET 0 0 0", "CHANNELS 3 Xposition Yposition Zposition"]
+    for i in range(n):
+        lines += [f"JOINT j{i}", "{", "OFFSET 0 0.01 0", "CHANNELS 1 Zrotation"]
+    lines += ["}"] * (n + 1) + ["MOTION", "Frames: 1", "Frame Time: 0.0333", " ".join(["0"] * (3 + n))]
+    (tmp_path / "deep.bvh").write_text("\n".join(lines))
+    with pytest.raises(ClipFormatError, match="nested deeper than 200"):
+        load_clip(tmp_path / "deep.bvh")
+
+
+def test_a_clip_file_too_large_to_read_whole_is_refused_before_reading(tmp_path):
+    from shared.io import MAX_CLIP_FILE_BYTES
+
+    big = tmp_path / "huge.bvh"
+    with open(big, "wb") as f:  # sparse: no disk and no memory spent
+        f.truncate(MAX_CLIP_FILE_BYTES + 1)
+    with pytest.raises(ClipFormatError, match="clip files are read whole, up to 512 MiB"):
+        load_clip(big)

@@ -11,6 +11,8 @@ from shared.io.bvh import read_bvh, write_bvh
 from shared.io.npz import read_npz, write_npz
 
 CLIP_SUFFIXES = (".amc", ".bvh", ".npz")
+#: a clip file is read whole: a larger one is refused before reading (a 2 GB file took 4 GB of memory)
+MAX_CLIP_FILE_BYTES = 512 * 1024 * 1024
 _ASF_CACHE: dict[str, object] = {}
 
 
@@ -30,6 +32,9 @@ def load_clip(path, skeleton=None, label: str | None = None, *, units: str | Non
     path = Path(path)
     if not path.exists():
         raise ClipFormatError(path, "no such file")
+    if path.is_file() and path.stat().st_size > MAX_CLIP_FILE_BYTES:
+        raise ClipFormatError(path, f"is {path.stat().st_size} bytes; clip files are read whole, up to "
+                                    f"{MAX_CLIP_FILE_BYTES // 2**20} MiB (split the take)")
     suffix = path.suffix.lower()
     if suffix == ".amc":
         if skeleton is None:

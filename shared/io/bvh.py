@@ -67,6 +67,11 @@ class _Tokens:
         return v
 
 
+#: limits of a hierarchy a reader accepts: human rigs with fingers and face bones stay far below
+MAX_JOINTS = 1000
+MAX_DEPTH = 200
+
+
 def read_bvh(path, label: str | None = None, *, units: str | None = None, up: str | None = None,
              translations: str | None = None) -> Clip:
     path = Path(path)
@@ -83,7 +88,10 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
     joints: list[Joint] = []
     channels: list[str] = []
 
-    def parse_joint(parent: int):
+    def parse_joint(parent: int, depth: int = 0):
+        if depth > MAX_DEPTH or len(joints) >= MAX_JOINTS:
+            raise ClipFormatError(path, f"more than {MAX_JOINTS} joints or nested deeper than {MAX_DEPTH} "
+                                        "(no body is; is this a BVH file?)", tk.line())
         name = tk.next()
         tk.next("{")
         tk.next("OFFSET")
@@ -111,7 +119,7 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
             t = tk.peek().upper()
             if t == "JOINT":
                 tk.next()
-                parse_joint(idx)
+                parse_joint(idx, depth + 1)
             elif t == "END":
                 tk.next()
                 tk.next("Site")
