@@ -197,6 +197,14 @@ def test_the_dashboard_recording_holds_what_the_cluster_did(cluster, bundled, tm
 
     env = cluster
     s = settings_of(env)
+    # malformed events on every topic the observer draws (issue 17, row 2: it died on each and
+    # every restart opened a new recording): refused one by one, in the log, and it goes on
+    import msgpack
+
+    with Client(s) as c:
+        for payload in (msgpack.packb(5), b"\xc1\xc1", msgpack.packb({"session": 3}), msgpack.packb([1, 2])):
+            for topic in ("coach/trial", "coach/session", "pss/space", "estimator/progress", "dialogue/transcript"):
+                c.session.put(s.key("events", *topic.split("/")), payload)
     squat = bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
     assert cli(env, "coach", "run", "--learner", "obs", "--target", squat, "--trials", "3", "--session", "watched",
                ).returncode == 2  # --session continues an existing session only
@@ -210,6 +218,9 @@ def test_the_dashboard_recording_holds_what_the_cluster_did(cluster, bundled, tm
         lines = len(c.request("dialogue", "transcript", {"dialogue": "watch"})["lines"])
     assert cli(env, "down").returncode == 0  # the observer flushes its recording on SIGTERM
     rec = s.home / "recordings" / "latest.rrd"
+    assert len(list((s.home / "recordings").glob("2*.rrd"))) == 1  # one observer run: never restarted
+    log = (s.home / "logs" / "observer.log").read_text()
+    assert log.count("refused event on") == 20 and "Traceback" not in log and "(20 refused)" in log
     data = read(rec)
     paths = set(data)
     for p in ("/coach/watched/d_p", "/coach/watched/alpha", "/space/coach-watched/path", "/space/coach-watched/emphatic",

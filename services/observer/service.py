@@ -17,10 +17,11 @@ import signal
 import threading
 import time
 
+from schemas import CONTRACTS
 from schemas.common import clip_from_wire
 from shared.bus.config import Settings, client_config
 from shared.codec import unpack
-from shared.errors import MirrorcoachError
+from shared.errors import BadInput, MirrorcoachError
 
 log = logging.getLogger("mirrorcoach.observer")
 
@@ -31,6 +32,7 @@ class Observer:
         self.q: queue.Queue = queue.Queue()
         self.stop = threading.Event()
         self.count = 0
+        self.refused = 0
 
     def recording_path(self):
         d = self.s.home / "recordings"
@@ -45,6 +47,11 @@ class Observer:
         parts = key.split("/")
         service, topic = parts[-2], parts[-1]
         ev = unpack(payload)
+        if not isinstance(ev, dict):
+            raise BadInput(f"an event is a map, got {type(ev).__name__}")
+        contract = CONTRACTS.get(service)
+        if contract is not None and topic in getattr(contract, "EVENTS", {}):
+            ev = contract.EVENTS[topic].validate(ev)  # what its service declared: anything else is refused here
         if service == "coach" and topic == "session":
             dash.session_started(ev["session"], clip_from_wire(ev["target"]))
         elif service == "coach" and topic == "trial":
@@ -82,12 +89,16 @@ class Observer:
                 try:
                     self.handle(dash, key, payload)
                     self.count += 1
-                except (MirrorcoachError, KeyError, TypeError, ValueError) as e:  # a bad event never stops the observer
-                    log.warning("could not log %s: %s", key, e)
+                except MirrorcoachError as e:  # a malformed event: said, and skipped
+                    self.refused += 1
+                    log.warning("refused event on %s: %s", key, e.message)
+                except Exception:  # anything else while logging one event never stops the observer
+                    self.refused += 1
+                    log.exception("could not log the event on %s", key)
         finally:
             sub.undeclare()
             token.undeclare()
             session.close()
             dash.close()
-            log.info("observer stopped after %d events; recording %s", self.count, path)
+            log.info("observer stopped after %d events (%d refused); recording %s", self.count, self.refused, path)
         return 0
