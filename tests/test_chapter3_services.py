@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
 import pytest
 
 from schemas import dialogue as dlg
@@ -72,6 +73,7 @@ def test_bad_requests_get_clear_errors(chapter3_services, client_of):
     c.request("estimator", "start", {"estimate": "ok", "other": "ok", "replace": True})
     m = clip_to_wire(unknown_motions(1)[0])
     human_like = dict(m, channels=["a.rx", "b.rx", "c.rx"])
+    nan_clip = dict(m, data=np.where(np.arange(m["data"].size).reshape(m["data"].shape) == 3, np.nan, m["data"]))
     cases = [
         ("dialogue", "ask_open", {"dialogue": "x", "other": "nobody", "clip": m}, "not_found"),
         ("dialogue", "ask_open", {"dialogue": "x", "other": "ok", "d": 5, "clip": m}, "bad_request"),
@@ -85,8 +87,24 @@ def test_bad_requests_get_clear_errors(chapter3_services, client_of):
         ("estimator", "estimate", {"estimate": "ok", "clip": human_like}, "bad_request"),
         ("estimator", "identify_rule", {"estimate": "ok", "candidates": "weighted", "method": "thesis"}, "bad_request"),
         ("estimator", "info", {"estimate": "a/b"}, "bad_request"),
+        # issue 17, row 5: refused, and nothing written (a transcript, a saved estimate, its space)
+        ("estimator", "start", {"estimate": "ghost", "other": "nobody", "d": 6}, "not_found"),
+        ("dialogue", "ask_open", {"dialogue": "nanclip", "other": "ok", "clip": nan_clip}, "bad_request"),
+        ("dialogue", "ask_compare", {"dialogue": "nobodys", "other": "nobody", "clips": [m, m]}, "not_found"),
     ]
+    before = _state_files(env)
     assert_refused(c, procs, [(f"{service}/{verb}", service, verb, msg, code) for service, verb, msg, code in cases])
+    assert _state_files(env) == before  # every state file byte-identical, none added
+
+
+def _state_files(env) -> dict:
+    """Every file under the cluster's data folder: path -> sha256."""
+    import hashlib
+    from pathlib import Path
+
+    root = Path(env["MIRRORCOACH_HOME"]) / "data"
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(root.rglob("*"))
+            if p.is_file()}
 
 
 @pytest.mark.parametrize("behaviour, reason", [("silent", "no answer"), ("nonsense", "not one of the words"),

@@ -14,10 +14,14 @@ import threading
 import time
 
 from schemas import dialogue as contract
+from shared.bus.client import RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
 from shared.errors import BadInput, MirrorcoachError, NotFound
 from shared.symbols import WORDS, index_of, parse_answer
+
+#: the simulator's refusals: the question was never put to the other
+REFUSED = ("bad_request", "not_found", "conflict")
 
 OPEN_QUESTION = "How heavy did that feel?"
 COMPARE_QUESTION = "Which felt heavier, the first or the second?"
@@ -32,7 +36,7 @@ def make_service(settings: Settings | None = None) -> Service:
     bus = svc.client
 
     def write(line: dict) -> dict:
-        line = {"t": time.time(), **line}
+        line = {"t": time.time(), **line}  # a line that carries its own time keeps it
         contract.EVENTS["transcript"].validate(line)
         with lock, open(root / f"{line['dialogue']}.jsonl", "a") as f:
             f.write(json.dumps(line) + "\n")
@@ -42,14 +46,18 @@ def make_service(settings: Settings | None = None) -> Service:
         return line
 
     def ask(req, kind: str, question: str, clips: list, d: int) -> tuple[str, str | None, str | None]:
-        write({"dialogue": req["dialogue"], "speaker": "self", "kind": "question", "text": question})
+        asked = {"t": time.time(), "dialogue": req["dialogue"], "speaker": "self", "kind": "question", "text": question}
         try:
             r = bus().request("simulator", "other_ask", {"other": req["other"], "kind": kind, "clips": clips,
                                                          "text": question, "timeout": req["timeout"]},
                               timeout=req["timeout"] + 30)
         except MirrorcoachError as e:
+            if isinstance(e, RemoteError) and e.code in REFUSED:  # never put (no such other, a bad clip): no line
+                raise
+            write(asked)  # put and not answered (timeout, the simulator down): the transcript says so
             write({"dialogue": req["dialogue"], "speaker": "self", "kind": "note", "text": f"no answer: {e.message}"})
             raise
+        write(asked)
         raw = r["answer"]
         try:
             return raw, parse_answer(raw, kind, d), None

@@ -129,6 +129,10 @@ def make_service(settings: Settings | None = None) -> Service:
         name = req["estimate"]
         if path(name).exists() and not req["replace"]:
             raise Conflict(f"estimate {name!r} exists; delete it or start with replace", estimate=name)
+        others = {o["other"] for o in bus().request("simulator", "list", {}, timeout=30)["others"]}
+        if req["other"] not in others:  # checked before anything is built or saved (issue 17, row 5)
+            raise NotFound(f"no other named {req['other']!r} (create it with `mirrorcoach other create`)",
+                           other=req["other"])
         joints = req["joints"] or list(ARM)
         lang = Language(d=req["d"], g_max=req["g_max"], tau_max=req["tau_max"], joints=joints, rule=req["rule"])
         lang.k(np.zeros((2, len(joints))))  # validates d
