@@ -135,6 +135,15 @@ class Processes:
                     p.wait()
 
 
+def state_files(env) -> dict:
+    """Every file under a cluster's data folder: path -> sha256 (a refused request changes none)."""
+    import hashlib
+
+    root = Path(env["MIRRORCOACH_HOME"]) / "data"
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(root.rglob("*"))
+            if p.is_file()}
+
+
 def assert_refused(client, procs: "Processes", cases) -> None:
     """Every case ``(name, service, verb, message, code)`` (message: a map, or raw bytes) gets a
     ``reply_err`` with that stable code, a readable message and no traceback; the service

@@ -12,7 +12,7 @@ from schemas import dialogue as dlg
 from schemas import estimator as est
 from schemas.common import clip_to_wire
 from shared.estimation.motions import ALL, unknown_motions
-from tests.conftest import assert_refused, kill_during
+from tests.conftest import assert_refused, kill_during, state_files
 
 
 def _ok(endpoint, reply):
@@ -92,19 +92,10 @@ def test_bad_requests_get_clear_errors(chapter3_services, client_of):
         ("dialogue", "ask_open", {"dialogue": "nanclip", "other": "ok", "clip": nan_clip}, "bad_request"),
         ("dialogue", "ask_compare", {"dialogue": "nobodys", "other": "nobody", "clips": [m, m]}, "not_found"),
     ]
-    before = _state_files(env)
+    before = state_files(env)
     assert_refused(c, procs, [(f"{service}/{verb}", service, verb, msg, code) for service, verb, msg, code in cases])
-    assert _state_files(env) == before  # every state file byte-identical, none added
+    assert state_files(env) == before  # every state file byte-identical, none added
 
-
-def _state_files(env) -> dict:
-    """Every file under the cluster's data folder: path -> sha256."""
-    import hashlib
-    from pathlib import Path
-
-    root = Path(env["MIRRORCOACH_HOME"]) / "data"
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(root.rglob("*"))
-            if p.is_file()}
 
 
 @pytest.mark.parametrize("behaviour, reason", [("silent", "no answer"), ("nonsense", "not one of the words"),

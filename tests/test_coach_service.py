@@ -10,7 +10,7 @@ import pytest
 
 from schemas import coach as contract
 from schemas.common import clip_to_wire
-from tests.conftest import assert_refused, kill_during
+from tests.conftest import assert_refused, kill_during, state_files
 
 
 @pytest.fixture(scope="module")
@@ -94,9 +94,16 @@ def test_bad_attempts_get_clear_errors_and_leave_the_session_unchanged(coach_ser
         ("naive Bayes with one label", "policy_fit", {"kind": "nb", "features": [[1, 1], [2, 2]], "labels": ["more", "more"]},
          "bad_request"),
         ("session name with /", "state", {"session": "a/b"}, "bad_request"),
+        ("a NaN target with a new learner", "start", {"session": "nanl", "target": nan, "learner": "fresh"}, "bad_request"),
     ]
+    files = state_files(env)
     assert_refused(c, procs, [(name, "coach", verb, msg, code) for name, verb, msg, code in cases])
     assert c.request("coach", "state", {"session": "p"}) == before
+    # issue 17, row 5: a refused request leaves every state file byte-identical (the session's
+    # space: no proto-symbol of a NaN attempt) and creates no learner
+    assert state_files(env) == files
+    assert "fresh" not in {x["learner"] for x in c.request("simulator", "list", {})["learners"]}
+
 
 
 def test_killing_the_coach_mid_session_loses_no_completed_trial(coach_services, client_of, clips):
