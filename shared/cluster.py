@@ -159,16 +159,27 @@ def status(settings: Settings | None = None) -> list[dict]:
     return rows
 
 
+def private_home(s: Settings) -> None:
+    """The cluster's home (spaces, transcripts, clips, logs, recordings) is its user's alone:
+    the folder 0700, and every process of the cluster creates files 0600 (umask 077, set in the
+    supervisor, inherited by every service). Issue 17, row 16: they were 0644 in 0755 folders."""
+    s.home.mkdir(parents=True, exist_ok=True)
+    s.home.chmod(0o700)
+    for d in (s.run_dir, s.log_dir):
+        d.mkdir(parents=True, exist_ok=True)
+        d.chmod(0o700)
+
+
 def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> int:
     from shared.bus.client import Client, Unavailable
 
     s = settings or Settings()
     plan = load_plan()
-    s.run_dir.mkdir(parents=True, exist_ok=True)
-    s.log_dir.mkdir(parents=True, exist_ok=True)
+    private_home(s)
     sup = read_pid(s.run_dir / "supervisor.pid")
     if sup is None:
-        with open(s.log_dir / "supervisor.log", "ab") as out:
+        with open(s.log_dir / "supervisor.log", "ab", opener=lambda f, flags: os.open(f, flags, 0o600)) as out:
+            os.chmod(out.fileno(), 0o600)
             proc = subprocess.Popen([sys.executable, "-m", "shared.cluster", "supervise"], stdout=out,
                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
                                     env=os.environ.copy())
@@ -236,6 +247,7 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s supervisor %(levelname)s %(message)s")
     try:
         if args.command == "supervise":
+            os.umask(0o077)  # every file of the cluster is its user's alone (see private_home)
             return Supervisor(Settings(), load_plan()).run()
         if args.command == "up":
             return up()

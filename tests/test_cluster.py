@@ -104,6 +104,10 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     for args in (("space", "show", "nothere"), ("space", "build", "../x", train[0]), ("space", "generate", "moves", "--out", tmp_path / "x.bvh")):
         r = cli(env, *args)
         assert r.returncode == 2 and r.stderr.startswith("error: ") and "Traceback" not in r.stderr, (args, r.stderr)
+    # issue 17, row 16: what the cluster keeps (spaces, logs, pid files, recordings) is its user's alone
+    home = Path(env["MIRRORCOACH_HOME"])
+    shared_with_others = [str(p) for p in [home, *home.rglob("*")] if not p.is_symlink() and p.stat().st_mode & 0o077]
+    assert not shared_with_others and (home / "data" / "pss" / "moves.npz").exists(), shared_with_others
     r = cli(env, "space", "delete", "moves")
     assert r.returncode == 0
     assert "no spaces" in cli(env, "space", "list").stdout
