@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -170,6 +171,28 @@ def private_home(s: Settings) -> None:
         d.chmod(0o700)
 
 
+def router_port_taken(endpoint: str) -> str | None:
+    """Why the router could not listen on ``endpoint`` (``tcp/HOST:PORT``), or None when it can:
+    a trial bind on the same address, as the router would (SO_REUSEADDR, so connections of a
+    cluster just stopped do not count)."""
+    import socket
+
+    m = re.fullmatch(r"tcp/\[?([0-9A-Za-z.:-]+?)\]?:(\d+)", endpoint)
+    if not m:
+        return None
+    host, port = m.group(1), int(m.group(2))
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as e:
+            return (f"the router's port {host}:{port} is in use ({e.strerror}): another program listens there, "
+                    f"or a router left by a cluster whose supervisor died; stop it, or choose another port "
+                    f"with MIRRORCOACH_ROUTER=tcp/{host}:PORT")
+    return None
+
+
 def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> int:
     from shared.bus.client import Client, Unavailable
 
@@ -178,6 +201,10 @@ def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> in
     private_home(s)
     sup = read_pid(s.run_dir / "supervisor.pid")
     if sup is None:
+        taken = router_port_taken(s.router)
+        if taken:  # fail fast and say why (issue 17, row 15: it waited 120 s, then blamed the services)
+            echo(f"error: {taken}")
+            return 1
         with open(s.log_dir / "supervisor.log", "ab", opener=lambda f, flags: os.open(f, flags, 0o600)) as out:
             os.chmod(out.fileno(), 0o600)
             proc = subprocess.Popen([sys.executable, "-m", "shared.cluster", "supervise"], stdout=out,

@@ -242,6 +242,23 @@ def test_the_dashboard_recording_holds_what_the_cluster_did(cluster, bundled, tm
     assert r.returncode == 0 and (tmp_path / "snap/dashboard_snapshot.png").stat().st_size > 20_000
 
 
+def test_up_fails_fast_and_names_the_cause_when_the_router_port_is_taken(tmp_path):
+    """Issue 17, row 15: a foreign program on the router's port made `up` wait its whole timeout
+    and then blame the services."""
+    import socket
+
+    with socket.socket() as foreign:
+        foreign.bind(("127.0.0.1", 0))
+        foreign.listen()
+        port = foreign.getsockname()[1]
+        env = cluster_env(tmp_path / "home", MIRRORCOACH_ROUTER=f"tcp/127.0.0.1:{port}")
+        r = cli(env, "up", "--wait", "120")
+    assert r.returncode != 0 and f"port 127.0.0.1:{port} is in use" in r.stdout + r.stderr, r.stdout + r.stderr
+    # nothing was started, so nothing was waited for (the cause is found before the supervisor)
+    assert not (tmp_path / "home" / "run" / "supervisor.pid").exists()
+    assert "starting the cluster" not in r.stdout
+
+
 def test_cli_says_when_the_cluster_is_not_running(tmp_path, bundled):
     env = cluster_env(tmp_path / "home")
     r = cli(env, "space", "list")
