@@ -20,6 +20,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from shared.codec import DEFAULT_MAX_PAYLOAD
 from shared.errors import BadInput
 
 NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"  # no '/', no leading '.', so never a path
@@ -68,7 +69,7 @@ class Str(Spec):
 
 @dataclass
 class Bytes(Spec):
-    max_len: int = 64 * 1024 * 1024
+    max_len: int = DEFAULT_MAX_PAYLOAD
     doc: str = ""
 
     def check(self, value, path):

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from schemas.base import AnyMap, Array, Bool, Bytes, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str, NAME_PATTERN
 from schemas.common import CLIP, name
-from shared.clipfiles import FILE_PATTERN, READING_CHOICES
+from shared.clipfiles import FILE_PATTERN, READING_OPTIONS
 from shared.errors import BadInput
 
 SERVICE = "pss"
@@ -55,9 +55,10 @@ CLIP_FILE = Map({
     "skeleton": F(Bytes(), "an AMC file's skeleton: the ASF file's bytes", required=False),
 })
 
-#: how clip files are read (the CLI's --units, --up, --translations; README "Files from other tools")
-READING = {k: F(Str(choices=v), f"clip files' {k} (default: read off the file)", required=False)
-           for k, v in READING_CHOICES.items()}
+#: how clip files are read (the CLI's --units, --up, --translations; README "Files from other
+#: tools"); the readers refuse a value they do not know, naming the ones they do
+READING = {k: F(Str(max_len=16), f"clip files' {k} (default: read off the file)", required=False)
+           for k in READING_OPTIONS}
 
 
 def _clips_or_files(req: dict, path: str):

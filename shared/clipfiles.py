@@ -8,15 +8,15 @@ starts in well under 150 ms (issue 11); the reading happens once, in the service
 from __future__ import annotations
 
 import re
-import threading
-from collections import OrderedDict
 from pathlib import Path
 
+from shared.codec import DEFAULT_MAX_PAYLOAD
 from shared.errors import BadInput, ClipFormatError
 
 #: what the bus accepts as a clip file's name: a plain name with a clip suffix (never a path)
 FILE_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}\.(amc|bvh|npz|AMC|BVH|NPZ)"
-READING_CHOICES = {"units": ("m", "cm", "mm", "in", "cmu"), "up": ("y", "z"), "translations": ("replace", "add", "auto")}
+#: how clip files are read (the CLI's root options); the readers check the values (shared/io/)
+READING_OPTIONS = ("units", "up", "translations")
 
 
 def find_skeleton(amc_path) -> Path:
@@ -48,10 +48,10 @@ def find_skeleton(amc_path) -> Path:
     raise ClipFormatError(amc_path, "no skeleton found: put the actor's .asf beside it or in a sibling asf/ folder, or pass --skeleton FILE")
 
 
-def _wire_file_name(path: Path) -> str:
-    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem)[:59] or "clip"
-    stem = stem if stem[:1].isalnum() else ("c" + stem)[:59]
-    return f"{stem}{path.suffix.lower()}"
+def wire_name(name: str, max_len: int = 64) -> str:
+    """A name the contracts accept (letters, digits, '_', '.', '-'; a letter or digit first)."""
+    n = re.sub(r"[^A-Za-z0-9_.-]", "_", name or "clip")[:max_len]
+    return n if n[:1].isalnum() else ("c" + n)[:max_len]
 
 
 def _read_bytes(path: Path, limit: int) -> bytes:
@@ -68,39 +68,15 @@ def _read_bytes(path: Path, limit: int) -> bytes:
         raise ClipFormatError(path, f"cannot be read ({e.strerror or e})") from None
 
 
-def wire_file(path, skeleton=None, limit: int = 64 * 1024 * 1024) -> dict:
+def wire_file(path, skeleton=None, limit: int = DEFAULT_MAX_PAYLOAD) -> dict:
     """One clip file for the bus, unread: ``{name, data[, skeleton]}`` (an AMC file carries its ASF)."""
     path = Path(path)
     if path.suffix.lower() not in (".amc", ".bvh", ".npz"):
         raise ClipFormatError(path, f"unknown clip format {path.suffix!r} (expected one of .amc, .bvh, .npz)")
-    out = {"name": _wire_file_name(path), "data": _read_bytes(path, limit)}
+    out = {"name": wire_name(path.stem, 59) + path.suffix.lower(), "data": _read_bytes(path, limit)}
     if path.suffix.lower() == ".amc":
         out["skeleton"] = _read_bytes(Path(skeleton) if skeleton is not None else find_skeleton(path), limit)
     return out
-
-
-_SKELETONS: OrderedDict = OrderedDict()  # ASF bytes + unit -> Skeleton (a skeleton is not changed once read)
-_SKELETONS_LOCK = threading.Lock()
-SKELETON_CACHE = 32
-
-
-def _skeleton(path: Path, data: bytes, units: str | None):
-    """The ASF read once per content: a performer sends the same skeleton with every clip."""
-    import hashlib
-
-    from shared.io.asf_amc import read_asf
-
-    key = (hashlib.sha256(data).digest(), units)
-    with _SKELETONS_LOCK:
-        if key in _SKELETONS:
-            _SKELETONS.move_to_end(key)
-            return _SKELETONS[key]
-    sk = read_asf(path, units=units)
-    with _SKELETONS_LOCK:
-        _SKELETONS[key] = sk
-        while len(_SKELETONS) > SKELETON_CACHE:
-            _SKELETONS.popitem(last=False)
-    return sk
 
 
 def read_wire_files(files: list[dict], reading: dict | None = None) -> list:
@@ -126,10 +102,9 @@ def read_wire_files(files: list[dict], reading: dict | None = None) -> list:
                 if f.get("skeleton") is None:
                     raise BadInput(f"files[{i}]: an AMC file needs its skeleton (the ASF file's bytes)",
                                    field=f"files[{i}].skeleton")
-                (folder / "skeleton.asf").write_bytes(f["skeleton"])
+                skeleton = folder / "skeleton.asf"  # read once per content (shared.io.load_skeleton)
+                skeleton.write_bytes(f["skeleton"])
             try:
-                if path.suffix.lower() == ".amc":  # read here, not through load_skeleton's cache of paths
-                    skeleton = _skeleton(folder / "skeleton.asf", f["skeleton"], reading.get("units"))
                 clips.append(load_clip(path, skeleton=skeleton, **reading))
             except ClipFormatError as e:  # name the user's file, not the temporary copy
                 raise BadInput(f"{f['name']}: {e.reason}", field=f"files[{i}]") from None

@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -177,10 +176,11 @@ def router_port_taken(endpoint: str) -> str | None:
     cluster just stopped do not count)."""
     import socket
 
-    m = re.fullmatch(r"tcp/\[?([0-9A-Za-z.:-]+?)\]?:(\d+)", endpoint)
-    if not m:
+    from shared.bus.config import parse_endpoint
+
+    proto, host, port = parse_endpoint(endpoint)
+    if proto != "tcp":
         return None
-    host, port = m.group(1), int(m.group(2))
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     with socket.socket(family, socket.SOCK_STREAM) as sock:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)

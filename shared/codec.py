@@ -38,7 +38,8 @@ def _default(obj):
     raise TypeError(f"cannot encode {type(obj).__name__}")
 
 
-def _decode_array(d: dict):
+def _array_header(d: dict, itemsize) -> tuple[str, list, bytes]:
+    """An array message's dtype, shape and data, checked (``itemsize(dtype)``: its item's bytes)."""
     dtype, shape, data = d.get("dtype"), d.get("shape"), d.get("data")
     if dtype not in WIRE_DTYPES:
         raise BadInput(f"array dtype {dtype!r} is not accepted (one of {sorted(WIRE_DTYPES)})")
@@ -46,12 +47,16 @@ def _decode_array(d: dict):
         raise BadInput(f"array shape {shape!r} is not a list of at most 8 non-negative integers")
     if not isinstance(data, bytes):
         raise BadInput("array data must be bytes")
+    if len(data) != math.prod(shape) * itemsize(dtype):
+        raise BadInput(f"array data has {len(data)} bytes, shape {shape} of {dtype} needs {math.prod(shape) * itemsize(dtype)}")
+    return dtype, shape, data
+
+
+def _decode_array(d: dict):
     import numpy as np
 
-    dt = np.dtype(dtype)
-    if len(data) != math.prod(shape) * dt.itemsize:
-        raise BadInput(f"array data has {len(data)} bytes, shape {shape} of {dtype} needs {math.prod(shape) * dt.itemsize}")
-    return np.frombuffer(data, dtype=dt).reshape(shape)
+    dtype, shape, data = _array_header(d, lambda t: np.dtype(t).itemsize)
+    return np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
 
 
 def _object_hook(d: dict):
@@ -71,14 +76,8 @@ def _array_as_lists(d: dict):
         return d
     import array
 
-    dtype, shape, data = d.get("dtype"), d.get("shape"), d.get("data")
-    if dtype not in WIRE_DTYPES:
-        raise BadInput(f"array dtype {dtype!r} is not accepted (one of {sorted(WIRE_DTYPES)})")
-    if not (isinstance(shape, list) and all(isinstance(n, int) and n >= 0 for n in shape)) or len(shape) > 8:
-        raise BadInput(f"array shape {shape!r} is not a list of at most 8 non-negative integers")
+    dtype, shape, data = _array_header(d, lambda t: array.array(_ARRAY_CODES[t]).itemsize)
     a = array.array(_ARRAY_CODES[dtype])
-    if not isinstance(data, bytes) or len(data) != math.prod(shape) * a.itemsize:
-        raise BadInput(f"array data does not hold shape {shape} of {dtype}")
     a.frombytes(data)
     if sys.byteorder == "big" and a.itemsize > 1:
         a.byteswap()

@@ -173,7 +173,7 @@ def pss_alternatives(space: ProtoSymbolSpace, recs, truth: list[str]) -> dict[st
             pred.append(max(votes, key=votes.get))
         out[f"pss_knn{k}"] = _summarise(f"PSS {k}-NN", truth, pred, [])
     classes = sorted(set(labels))
-    perf = np.array([s.performers[0] if s.performers else "" for s in space.symbols])
+    perf = np.array(space.performers)
     d = space.recognition_matrix
     rows, ys = [], []
     for i in range(len(labels)):

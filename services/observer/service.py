@@ -50,7 +50,7 @@ class Observer:
         if not isinstance(ev, dict):
             raise BadInput(f"an event is a map, got {type(ev).__name__}")
         contract = CONTRACTS.get(service)
-        if contract is not None and topic in getattr(contract, "EVENTS", {}):
+        if contract is not None and topic in contract.EVENTS:
             ev = contract.EVENTS[topic].validate(ev)  # what its service declared: anything else is refused here
         if service == "coach" and topic == "session":
             dash.session_started(ev["session"], clip_from_wire(ev["target"]))

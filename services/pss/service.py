@@ -75,9 +75,9 @@ def make_service(settings: Settings | None = None) -> Service:
     def recognize(req):
         space = store.get(req["space"])
         if req["files"] is not None:
-            from shared.clipfiles import read_wire_files
+            from shared.clipfiles import READING_OPTIONS, read_wire_files
 
-            clips = read_wire_files(req["files"], {k: req[k] for k in ("units", "up", "translations")})
+            clips = read_wire_files(req["files"], {k: req[k] for k in READING_OPTIONS})
         else:
             clips = [clip_from_wire(c, space.features.skeleton) for c in req["clips"]]
         rec = space.recognize(clips[0] if len(clips) == 1 else clips, top=req["top"])

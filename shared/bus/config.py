@@ -45,12 +45,17 @@ def _env_num(name: str, default, kind=int):
         raise BadInput(f"{name}={raw!r} is not a number") from None
 
 
-def check_loopback(endpoint: str) -> str:
-    """``tcp/127.0.0.1:7447`` -> itself; anything not on loopback is refused."""
+def parse_endpoint(endpoint: str) -> tuple[str, str, int]:
+    """``tcp/127.0.0.1:7447`` -> ``("tcp", "127.0.0.1", 7447)`` (``[::1]`` without brackets)."""
     m = re.fullmatch(r"(tcp|udp)/\[?([^\]]+?)\]?:(\d{1,5})", endpoint)
     if not m:
         raise BadInput(f"endpoint {endpoint!r} is not of the form tcp/127.0.0.1:PORT")
-    host, port = m.group(2), int(m.group(3))
+    return m.group(1), m.group(2), int(m.group(3))
+
+
+def check_loopback(endpoint: str) -> str:
+    """``tcp/127.0.0.1:7447`` -> itself; anything not on loopback is refused."""
+    _, host, port = parse_endpoint(endpoint)
     if not 0 < port < 65536:
         raise BadInput(f"endpoint {endpoint!r}: port out of range")
     if host not in LOOPBACK_HOSTS:

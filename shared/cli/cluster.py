@@ -4,14 +4,14 @@
 from __future__ import annotations
 
 import json
-import re
 import sys
 from pathlib import Path
 from typing import Optional
 
 import typer
 
-from shared.cli.app import SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app, read_clip, recognition_text
+from shared.cli.app import READING, SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app, read_clip, recognition_text
+from shared.clipfiles import wire_file, wire_name
 
 space_app = typer.Typer(help="Proto-symbol spaces on the pss service (needs `make up`).", no_args_is_help=True)
 app.add_typer(space_app, name="space")
@@ -25,19 +25,13 @@ def _client(**kw):
     return Client(**kw)
 
 
-def _wire_name(name: str) -> str:
-    """A clip name the contract accepts (letters, digits, '_', '.', '-')."""
-    n = re.sub(r"[^A-Za-z0-9_.-]", "_", name or "clip")[:64]
-    return n if n[:1].isalnum() else ("c" + n)[:64]
-
-
 def _wire(clip, with_skeleton=True) -> dict:
     from schemas.common import clip_to_wire
 
     d = clip_to_wire(clip, with_skeleton=with_skeleton)
-    d["name"] = _wire_name(d["name"])
+    d["name"] = wire_name(d["name"])
     if "label" in d:
-        d["label"] = _wire_name(d["label"])
+        d["label"] = wire_name(d["label"])
     return d
 
 
@@ -62,7 +56,7 @@ def _print_info(info: dict) -> None:
 
 
 def _jsonable(obj):
-    if hasattr(obj, "tolist") and not isinstance(obj, (list, dict)):  # numpy arrays and scalars (numpy not imported)
+    if hasattr(obj, "tolist"):  # numpy arrays and scalars (without importing numpy)
         return obj.tolist()
     if isinstance(obj, dict):
         return {k: _jsonable(v) for k, v in obj.items() if k != "v"}
@@ -138,9 +132,6 @@ def space_recognize(name: str = typer.Argument(..., help="Space name."),
     import os
     import time
 
-    from shared.cli.app import READING
-    from shared.clipfiles import wire_file
-
     t_body = time.perf_counter()
     # the files go as they are (the performer's own body: positions are theirs); the service
     # reads them, so this command starts without numpy (README "How a motion is recognised")
@@ -172,7 +163,7 @@ def space_generate(name: str = typer.Argument(..., help="Space name."),
 
     if (point is None) == (not mix):
         _fail("give exactly one of --point or --mix")
-    req = {"space": name, "method": method, "seed": seed, "name": _wire_name(out.stem)}
+    req = {"space": name, "method": method, "seed": seed, "name": wire_name(out.stem)}
     if point is not None:
         req["point"] = _parse_point(point)
     else:

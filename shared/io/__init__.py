@@ -2,25 +2,45 @@
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
 from pathlib import Path
 
 from shared.clip import Clip
 from shared.errors import ClipFormatError
 from shared.io.asf_amc import find_skeleton, read_amc, read_asf, write_amc
 from shared.io.bvh import read_bvh, write_bvh
+from shared.io.conventions import check_reading
 from shared.io.npz import read_npz, write_npz
 
 CLIP_SUFFIXES = (".amc", ".bvh", ".npz")
 #: a clip file is read whole: a larger one is refused before reading (a 2 GB file took 4 GB of memory)
 MAX_CLIP_FILE_BYTES = 512 * 1024 * 1024
-_ASF_CACHE: dict[str, object] = {}
+ASF_CACHE_SIZE = 64
+_ASF_CACHE: OrderedDict = OrderedDict()  # (sha256 of the file, units) -> Skeleton, least recently used first
+_ASF_LOCK = threading.Lock()
 
 
 def load_skeleton(path, units: str | None = None):
-    key = f"{Path(path).resolve()}|{units}"
-    if key not in _ASF_CACHE:
-        _ASF_CACHE[key] = read_asf(path, units=units)
-    return _ASF_CACHE[key]
+    """:func:`read_asf`, once per file content and unit: a performer's clips share one skeleton
+    (and its compiled kinematics). Keyed by content, not path, so an edited file is read again
+    and a service that receives skeletons as bytes (:mod:`shared.clipfiles`) reuses them;
+    bounded, so a long-running service does not grow."""
+    try:
+        key = (hashlib.sha256(Path(path).read_bytes()).digest(), units)
+    except OSError as e:
+        raise ClipFormatError(path, f"cannot read file: {e.strerror or e}") from None
+    with _ASF_LOCK:
+        if key in _ASF_CACHE:
+            _ASF_CACHE.move_to_end(key)
+            return _ASF_CACHE[key]
+    sk = read_asf(path, units=units)
+    with _ASF_LOCK:
+        _ASF_CACHE[key] = sk
+        while len(_ASF_CACHE) > ASF_CACHE_SIZE:
+            _ASF_CACHE.popitem(last=False)
+    return sk
 
 
 def load_clip(path, skeleton=None, label: str | None = None, *, units: str | None = None, up: str | None = None,
@@ -32,8 +52,10 @@ def load_clip(path, skeleton=None, label: str | None = None, *, units: str | Non
     path = Path(path)
     if not path.exists():
         raise ClipFormatError(path, "no such file")
-    if path.is_file() and path.stat().st_size > MAX_CLIP_FILE_BYTES:
-        raise ClipFormatError(path, f"is {path.stat().st_size} bytes; clip files are read whole, up to "
+    check_reading(path, units, up, translations)
+    size = path.stat().st_size if path.is_file() else 0
+    if size > MAX_CLIP_FILE_BYTES:
+        raise ClipFormatError(path, f"is {size} bytes; clip files are read whole, up to "
                                     f"{MAX_CLIP_FILE_BYTES // 2**20} MiB (split the take)")
     suffix = path.suffix.lower()
     if suffix == ".amc":

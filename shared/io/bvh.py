@@ -188,8 +188,7 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
     :mod:`shared.io.conventions`); returns the skeleton, the data and what was decided."""
     from shared.io import conventions as cv
 
-    if translations not in (None, "auto", "add", "replace"):
-        raise ClipFormatError(path, f"translations must be add, replace or auto, got {translations!r}")
+    cv.check_reading(path, units, up, translations)
     col = {c: i for i, c in enumerate(channels)}
     size = float(np.ptp(cv.rest_points(sk), axis=0).max())
     modes = {}
@@ -202,8 +201,6 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
         elif any(k is not None for k in t) and translations != "add" and np.any(j.offset):
             raise ClipFormatError(path, f"joint {j.name!r} has only some of its position channels and an offset; "
                                         "say how they combine (--translations add|replace)")
-    if up not in (None, "y", "z"):
-        raise ClipFormatError(path, f"up must be y or z, got {up!r}")
     axis = {"y": 1, "z": 2}[up] if up else cv.detect_up(sk, path)
     if axis == 2:
         sk, data = cv.turn_z_up_to_y_up(sk, data, channels)

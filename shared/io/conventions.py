@@ -47,6 +47,20 @@ def rest_extent(skeleton, up_axis: int = 1) -> float:
     return float(np.ptp(rest_points(skeleton)[:, up_axis]))
 
 
+UP_AXES = ("y", "z")
+TRANSLATIONS = ("auto", "add", "replace")
+
+
+def check_reading(path, units: str | None, up: str | None, translations: str | None) -> None:
+    """The reading options (``--units``, ``--up``, ``--translations``) are ones a reader knows."""
+    if units is not None and units not in UNITS:
+        raise ClipFormatError(path, f"unknown unit {units!r} (use one of {', '.join(UNITS)})")
+    if up is not None and up not in UP_AXES:
+        raise ClipFormatError(path, f"up must be y or z, got {up!r}")
+    if translations is not None and translations not in TRANSLATIONS:
+        raise ClipFormatError(path, f"translations must be add, replace or auto, got {translations!r}")
+
+
 def choose_unit(path, height_units: float, units: str | None, declared_m: float | None = None) -> float:
     """Metres per file unit: ``units`` if given, else the declared unit if it makes a human
     height, else the one unit that does; a clear error when none does."""

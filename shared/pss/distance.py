@@ -19,6 +19,17 @@ from shared.errors import ModelError
 from shared.pss.hmm import LeftToRightHMM
 
 
+def bhattacharyya_terms(mu_p, var_p, mu_q, var_q) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 2.3 for diagonal Gaussians, channel by channel: the mean term
+    ``1/8 (mu_p - mu_q)_d^2 / s_d`` and the covariance term ``1/2 ln(s_d / sqrt(v_pd v_qd))``
+    (each (..., D)); :func:`bhattacharyya` sums them."""
+    mu_p, mu_q = np.asarray(mu_p, float), np.asarray(mu_q, float)
+    var_p, var_q = np.asarray(var_p, float), np.asarray(var_q, float)
+    diff = mu_p - mu_q
+    s = 0.5 * (var_p + var_q)
+    return 0.125 * diff * diff / s, 0.5 * (np.log(s) - 0.5 * (np.log(var_p) + np.log(var_q)))
+
+
 def bhattacharyya(mu_p, var_p, mu_q, var_q, weights=None) -> np.ndarray:
     """Eq. 2.3 for Gaussians. ``var`` is either variances (..., D) (diagonal) or covariance
     matrices (..., D, D) (full), chosen by the number of dimensions of ``var`` relative to ``mu``.
@@ -30,11 +41,9 @@ def bhattacharyya(mu_p, var_p, mu_q, var_q, weights=None) -> np.ndarray:
     var_p, var_q = np.asarray(var_p, float), np.asarray(var_q, float)
     diff = mu_p - mu_q
     if var_p.ndim == mu_p.ndim:  # diagonal
-        s = 0.5 * (var_p + var_q)
+        mean, cov = bhattacharyya_terms(mu_p, var_p, mu_q, var_q)
         w = 1.0 if weights is None else np.asarray(weights, float)
-        term1 = 0.125 * np.sum(w * diff * diff / s, axis=-1)
-        term2 = 0.5 * np.sum(np.log(s) - 0.5 * (np.log(var_p) + np.log(var_q)), axis=-1)
-        return np.maximum(term1 + term2, 0.0)
+        return np.maximum(np.sum(w * mean + cov, axis=-1), 0.0)
     if weights is not None:
         raise ModelError("channel weights need diagonal covariances")
     s = 0.5 * (var_p + var_q)
@@ -97,15 +106,19 @@ class ModelBank:
         self.models = models
         self.weights = None if weights is None else np.ascontiguousarray(weights, dtype=float)
         self.diag = bool(models) and all(m.covariance_type == "diag" for m in models)
+        if self.weights is not None and models and not self.diag:
+            raise ModelError("channel weights need diagonal covariances")
         if self.diag:
             self.means = np.ascontiguousarray(np.stack([m.means for m in models]), dtype=float)
             self.vars = np.ascontiguousarray(np.stack([m.covars for m in models]), dtype=float)
             self.logdet = np.log(self.vars).sum(axis=2)
+            n_features = self.means.shape[2]
+            if self.weights is not None and self.weights.shape != (n_features,):
+                raise ModelError(f"{self.weights.size} channel weights for HMMs of {n_features} channels")
+            self._kernel_weights = np.ones(n_features) if self.weights is None else self.weights
 
     def distances(self, model: LeftToRightHMM, start: int = 0) -> np.ndarray:
         """Eq. 2.4 from ``model`` to the bank's HMMs from ``start`` on."""
-        if self.weights is not None and not self.diag:
-            raise ModelError("channel weights need diagonal covariances")
         if start:
             if not self.diag:
                 return ModelBank(self.models[start:]).distances(model)
@@ -122,12 +135,9 @@ class ModelBank:
             return np.sum(np.sqrt(bhattacharyya(model.means[None], model.covars[None], mu, cov)), axis=1)
         if self.means.shape[1:] != model.means.shape:
             raise ModelError(f"HMMs have different shapes ({self.means.shape[1:]} and {model.means.shape})")
-        if self.weights is not None and len(self.weights) != model.n_features:
-            raise ModelError(f"{len(self.weights)} channel weights for HMMs of {model.n_features} channels")
         var1 = np.ascontiguousarray(model.covars, dtype=float)
-        w = np.ones(model.n_features) if self.weights is None else self.weights
         return _diag_hmm_distances(np.ascontiguousarray(model.means, dtype=float), var1, np.log(var1).sum(axis=1),
-                                   self.means[start:], self.vars[start:], self.logdet[start:], w)
+                                   self.means[start:], self.vars[start:], self.logdet[start:], self._kernel_weights)
 
 
 def distances_to(model: LeftToRightHMM, models: list[LeftToRightHMM] | ModelBank) -> np.ndarray:

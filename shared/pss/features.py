@@ -158,6 +158,7 @@ class MotionFeatures:
         if self.position_mean.shape != (n_p,) or self.position_scale.shape != (n_p,):
             raise BadInput(f"position standardisation needs {n_p} values per statistic")
         self.feature_names = names + self.position_feature_names + [f"std({c})" for c in self.sensor_channels]
+        self._angle_joints = None  # (names, Euler orders, pre-rotations) of the angle joints, for _foreign
 
     # ---------------------------------------------------------------- the position group
     def _position_names(self) -> list[str]:
@@ -237,7 +238,7 @@ class MotionFeatures:
         body = self.body(clip)
         if body is self.skeleton or self.skeleton is None:
             return None
-        ref = getattr(self, "_angle_joints", None)
+        ref = self._angle_joints
         if ref is None:  # the space's own convention of the joints that carry angle channels, once
             names = list(dict.fromkeys(c.rsplit(".", 1)[0] for c in self.angle_channels))
             joints = [self.skeleton.joints[self.skeleton.index(n)] for n in names]

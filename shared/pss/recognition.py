@@ -62,6 +62,8 @@ def channel_weights(means: np.ndarray, covars: np.ndarray, labels, performers) -
     space has one performer), of eq. 2.3's per-channel terms summed over states; the weight
     is ``sqrt(B_d / W_d)``, scaled to mean 1, and 0 for a channel that never varies.
     All ones (eq. 2.4 itself) when the space has no same-class pair or only one class."""
+    from shared.pss.distance import bhattacharyya_terms
+
     mu = np.asarray(means, float)
     var = np.asarray(covars, float)
     n, _, dim = mu.shape
@@ -70,11 +72,9 @@ def channel_weights(means: np.ndarray, covars: np.ndarray, labels, performers) -
     across = len(set(perf)) > 1
     within, between = np.zeros(dim), np.zeros(dim)
     n_within = n_between = 0
-    logv = np.log(var)
     for i in range(n - 1):
-        s = 0.5 * (var[i] + var[i + 1:])
-        diff = mu[i] - mu[i + 1:]
-        bd = (0.125 * diff * diff / s + 0.5 * (np.log(s) - 0.5 * (logv[i] + logv[i + 1:]))).sum(axis=1)  # (n-i-1, D)
+        mean, cov = bhattacharyya_terms(mu[i], var[i], mu[i + 1:], var[i + 1:])
+        bd = (mean + cov).sum(axis=1)  # (n-i-1, D): summed over states
         same = labels[i + 1:] == labels[i]
         if across:
             same &= perf[i + 1:] != perf[i]

@@ -305,6 +305,11 @@ class ProtoSymbolSpace:
         return ("position",) if self.features.has_position else GEOMETRY_GROUPS
 
     @property
+    def performers(self) -> list[str]:
+        """Each proto-symbol's performer (the skeleton of its first clip; "" when it had none)."""
+        return [s.performers[0] if s.performers else "" for s in self.symbols]
+
+    @property
     def recognition_weights(self) -> np.ndarray | None:
         """Channel weights of the recognition distance on the position group
         (:func:`shared.pss.recognition.channel_weights`); ``None`` where recognition uses the
@@ -316,7 +321,7 @@ class ProtoSymbolSpace:
 
             ms = self.models_on(self.recognition_groups)
             self._recognition_weights = channel_weights(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms]),
-                                                        self.labels, [s.performers[0] if s.performers else "" for s in self.symbols])
+                                                        self.labels, self.performers)
         return self._recognition_weights
 
     def recognition_bank(self) -> ModelBank:
@@ -344,7 +349,7 @@ class ProtoSymbolSpace:
         if self._calibration is None:
             from shared.pss.recognition import calibrate
 
-            perf = [s.performers[0] if s.performers else "" for s in self.symbols]
+            perf = self.performers
             self._calibration = calibrate(self.recognition_matrix, self.labels, perf if all(perf) else [])
         return self._calibration
 
