@@ -233,3 +233,26 @@ def test_a_clip_file_too_large_to_read_whole_is_refused_before_reading(tmp_path)
         f.truncate(MAX_CLIP_FILE_BYTES + 1)
     with pytest.raises(ClipFormatError, match="clip files are read whole, up to 512 MiB"):
         load_clip(big)
+
+
+def test_skeletons_are_cached_by_content_not_path(hdm05, tmp_path):
+    """One read per ASF content: the same file elsewhere (a service receiving it as bytes) is
+    the same skeleton; an edited file is read again, never a stale copy."""
+    from shared.io import ASF_CACHE_SIZE, load_skeleton
+
+    src = (hdm05 / "asf/HDM_bd.asf").read_text(encoding="latin-1")
+    (tmp_path / "a.asf").write_text(src, encoding="latin-1")
+    (tmp_path / "b.asf").write_text(src, encoding="latin-1")
+    a = load_skeleton(tmp_path / "a.asf")
+    assert load_skeleton(tmp_path / "b.asf") is a
+    lines = src.splitlines()
+    bones = next(i for i, ln in enumerate(lines) if ln.startswith(":bonedata"))
+    k = next(i for i, ln in enumerate(lines) if i > bones and ln.strip().startswith("length"))
+    lines[k] = "     length 9.0"  # a longer first bone
+    (tmp_path / "a.asf").write_text("\n".join(lines) + "\n", encoding="latin-1")
+    edited = load_skeleton(tmp_path / "a.asf")
+    assert edited is not a and edited.rest_height() != a.rest_height()
+    for i in range(ASF_CACHE_SIZE):  # bounded: the first one is read again once others pushed it out
+        (tmp_path / f"c{i}.asf").write_text(src + f"# {i}\n", encoding="latin-1")
+        load_skeleton(tmp_path / f"c{i}.asf")
+    assert load_skeleton(tmp_path / "b.asf") is not a
