@@ -6,11 +6,26 @@ router and every service of ``deploy/cluster.toml`` as child processes, each log
 10 s, reset after 30 s of good running). ``up`` returns once every service's liveliness token
 is seen (or says which one is not up and where its log is). ``down`` sends SIGTERM to the
 supervisor, which stops the services, then the router, and waits for them.
+
+The supervisor owns its children (issue 17, rows 7 and 8):
+
+* one supervisor per home: it holds an exclusive ``flock`` on ``run/supervisor.lock`` for its
+  whole life (the kernel drops it when the process dies, even by SIGKILL); a second one started
+  at the same time finds the lock taken and exits with code 3, and ``up`` then waits for the
+  first one's services instead;
+* children die with it: each child asks the kernel for SIGTERM when its parent dies
+  (``PR_SET_PDEATHSIG``), so a supervisor killed by SIGKILL leaves no orphans; all of them run
+  in the supervisor's process group, which ``down`` kills as a last resort;
+* pid files hold the pid and the process's start time (``/proc/PID/stat``, field 22), so a pid
+  reused by an unrelated process is never taken for ours: ``up`` does not wait for it and
+  ``down`` never signals it.
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
+import fcntl
 import logging
 import os
 import signal
@@ -52,26 +67,107 @@ def load_plan(path: Path = PLAN) -> list[Proc]:
     return procs
 
 
-def _pid_alive(pid: int) -> bool:
+def _proc_stat(pid: int) -> tuple[str, str] | None:
+    """(state, start time in clock ticks since boot) of a process, or None if there is none."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    try:  # a zombie child of ours is not alive
         with open(f"/proc/{pid}/stat") as f:
-            return f.read().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return True
+            fields = f.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return fields[0], fields[19]
+
+
+def _pid_alive(pid: int) -> bool:
+    st = _proc_stat(pid)
+    return st is not None and st[0] not in "ZX"  # a zombie child of ours is not alive
+
+
+def write_pid(path: Path, pid: int) -> None:
+    """``PID STARTTIME``: the start time tells our process from a later one given the same pid."""
+    st = _proc_stat(pid)
+    path.write_text(f"{pid} {st[1] if st else 0}\n")
 
 
 def read_pid(path: Path) -> int | None:
+    """The pid in ``path`` if that very process (same start time) still runs, else None."""
     try:
-        pid = int(path.read_text().strip())
+        pid, start = path.read_text().split()
+        pid = int(pid)
     except (OSError, ValueError):
         return None
-    return pid if _pid_alive(pid) else None
+    st = _proc_stat(pid)
+    return pid if st is not None and st[0] not in "ZX" and st[1] == start else None
+
+
+def _lock_path(s: Settings) -> Path:
+    return s.run_dir / "supervisor.lock"
+
+
+def take_lock(s: Settings, tries: int = 20) -> int | None:
+    """The supervisor's lock (an open fd, held until the process ends), or None when another
+    supervisor holds it. Retries for about a second: ``supervisor_running`` probes it briefly."""
+    fd = os.open(_lock_path(s), os.O_RDWR | os.O_CREAT, 0o600)
+    for _ in range(tries):
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return fd
+        except BlockingIOError:
+            time.sleep(0.05)
+    os.close(fd)
+    return None
+
+
+def supervisor_running(s: Settings) -> bool:
+    """Whether a supervisor holds this home's lock (a probe with a shared lock, released at once)."""
+    try:
+        fd = os.open(_lock_path(s), os.O_RDONLY)
+    except FileNotFoundError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return False
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+
+
+def reap_orphans(s: Settings, plan: list["Proc"], echo=print, grace_s: float = 15.0) -> None:
+    """Children of a supervisor that died (their pid files, same start time) are stopped:
+    they got SIGTERM from the kernel and are finishing; after ``grace_s`` they get SIGKILL."""
+    pids = {p.name: read_pid(s.run_dir / f"{p.name}.pid") for p in plan}
+    left = {n: pid for n, pid in pids.items() if pid is not None}
+    if left:
+        echo(f"waiting for {', '.join(sorted(left))} of a supervisor that is gone to stop")
+        for pid in left.values():
+            try:
+                os.kill(pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + grace_s
+        while any(_pid_alive(pid) for pid in left.values()) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        for name, pid in left.items():
+            if _pid_alive(pid):
+                echo(f"{name} (pid {pid}) did not stop in {grace_s:g} s; killing it")
+                os.kill(pid, signal.SIGKILL)
+    for p in plan:
+        (s.run_dir / f"{p.name}.pid").unlink(missing_ok=True)
+
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent(parent: int):
+    """``preexec_fn`` of every child: SIGTERM when the supervisor dies, even by SIGKILL."""
+    libc = ctypes.CDLL(None, use_errno=True)  # loaded before the fork: the child only calls it
+
+    def preexec():
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+        if os.getppid() != parent:  # the parent died before prctl: stop now
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    return preexec
 
 
 class Supervisor:
@@ -84,15 +180,22 @@ class Supervisor:
         self.s.log_dir.mkdir(parents=True, exist_ok=True)
         with open(self.s.log_dir / f"{p.name}.log", "ab") as out:
             p.popen = subprocess.Popen([sys.executable, "-m", p.module], stdout=out, stderr=subprocess.STDOUT,
-                                       stdin=subprocess.DEVNULL, env=os.environ.copy())
+                                       stdin=subprocess.DEVNULL, env=os.environ.copy(),
+                                       preexec_fn=self._preexec)
         p.started = time.monotonic()
         p.restart_at = None
-        (self.s.run_dir / f"{p.name}.pid").write_text(str(p.popen.pid))
+        write_pid(self.s.run_dir / f"{p.name}.pid", p.popen.pid)
         log.info("started %s (pid %d)", p.name, p.popen.pid)
 
     def run(self) -> int:
         self.s.run_dir.mkdir(parents=True, exist_ok=True)
-        (self.s.run_dir / "supervisor.pid").write_text(str(os.getpid()))
+        lock = take_lock(self.s)
+        if lock is None:
+            log.error("another supervisor runs this cluster (it holds %s); exiting", _lock_path(self.s))
+            return 3
+        reap_orphans(self.s, self.plan, echo=log.warning)
+        write_pid(self.s.run_dir / "supervisor.pid", os.getpid())
+        self._preexec = _die_with_parent(os.getpid())
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: setattr(self, "stopping", True))
         try:
@@ -119,6 +222,7 @@ class Supervisor:
         finally:
             self._stop_all()
             (self.s.run_dir / "supervisor.pid").unlink(missing_ok=True)
+            os.close(lock)
         return 0
 
     def _stop_all(self) -> None:
@@ -151,8 +255,7 @@ def status(settings: Settings | None = None) -> list[dict]:
             alive = c.alive(timeout=1.0)
     except Unavailable:
         pass
-    sup = read_pid(s.run_dir / "supervisor.pid")
-    rows = [{"name": "supervisor", "pid": sup, "alive": sup is not None}]
+    rows = [{"name": "supervisor", "pid": read_pid(s.run_dir / "supervisor.pid"), "alive": supervisor_running(s)}]
     for p in plan:
         up = router_up if p.name == "router" else p.name in alive
         rows.append({"name": p.name, "pid": read_pid(s.run_dir / f"{p.name}.pid"), "alive": up})
@@ -199,8 +302,11 @@ def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> in
     s = settings or Settings()
     plan = load_plan()
     private_home(s)
-    sup = read_pid(s.run_dir / "supervisor.pid")
-    if sup is None:
+    proc = None
+    if supervisor_running(s):
+        echo(f"the cluster's supervisor is already running (pid {read_pid(s.run_dir / 'supervisor.pid') or '?'})")
+    else:
+        reap_orphans(s, plan, echo=echo)  # children of a supervisor killed by SIGKILL (issue 17, row 7)
         taken = router_port_taken(s.router)
         if taken:  # fail fast and say why (issue 17, row 15: it waited 120 s, then blamed the services)
             echo(f"error: {taken}")
@@ -210,16 +316,16 @@ def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> in
             proc = subprocess.Popen([sys.executable, "-m", "shared.cluster", "supervise"], stdout=out,
                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
                                     env=os.environ.copy())
-        sup = proc.pid
-        echo(f"starting the cluster on {s.router} (supervisor pid {sup})")
-    else:
-        proc = None
-        echo(f"the cluster's supervisor is already running (pid {sup})")
+        echo(f"starting the cluster on {s.router} (supervisor pid {proc.pid})")
     want = {p.name for p in plan if p.name != "router"}
     deadline = time.monotonic() + wait_s
     alive: set[str] = set()
     while time.monotonic() < deadline:
         if proc is not None and proc.poll() is not None:
+            if proc.returncode == 3 and supervisor_running(s):  # another `up` started one first: wait for it
+                echo("another supervisor started this cluster at the same time; waiting for its services")
+                proc = None
+                continue
             echo(f"error: the supervisor exited (code {proc.returncode}); see {s.log_dir / 'supervisor.log'}")
             return 1
         try:
@@ -251,10 +357,15 @@ def running(settings: Settings, services: set[str] | None = None) -> bool:
 
 def down(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> int:
     s = settings or Settings()
-    sup = read_pid(s.run_dir / "supervisor.pid")
-    if sup is None:
+    if not supervisor_running(s):
+        reap_orphans(s, load_plan(), echo=echo)  # a supervisor killed by SIGKILL left them
         echo("the cluster is not running")
         return 0
+    sup = read_pid(s.run_dir / "supervisor.pid")
+    if sup is None:  # the lock is held, but the pid file does not name a live process of ours
+        echo(f"error: a supervisor holds {_lock_path(s)} but {s.run_dir / 'supervisor.pid'} does not name it; "
+             f"find it with `fuser {_lock_path(s)}`")
+        return 1
     os.kill(sup, signal.SIGTERM)
     deadline = time.monotonic() + wait_s
     while time.monotonic() < deadline:
@@ -262,7 +373,12 @@ def down(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> 
             echo("cluster stopped")
             return 0
         time.sleep(0.1)
-    echo(f"error: the supervisor (pid {sup}) did not stop within {wait_s:g} s; see {s.log_dir / 'supervisor.log'}")
+    echo(f"the supervisor (pid {sup}) did not stop within {wait_s:g} s; killing its process group; "
+         f"see {s.log_dir / 'supervisor.log'}")
+    try:
+        os.killpg(sup, signal.SIGKILL)  # it leads its own session: its children are in the group
+    except ProcessLookupError:
+        pass
     return 1
 
 

@@ -259,6 +259,81 @@ def test_up_fails_fast_and_names_the_cause_when_the_router_port_is_taken(tmp_pat
     assert "starting the cluster" not in r.stdout
 
 
+def _cluster_processes(env) -> list[int]:
+    """Pids of every live process of this test's cluster (its unique prefix in the environment)."""
+    mark = f"MIRRORCOACH_PREFIX={env['MIRRORCOACH_PREFIX']}".encode()
+    pids = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit() or int(d.name) == os.getpid():
+            continue
+        try:
+            if mark in (d / "environ").read_bytes().split(b"\0") and (d / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z":
+                pids.append(int(d.name))
+        except OSError:
+            continue
+    return pids
+
+
+def _wait_gone(env, timeout=60.0) -> list[int]:
+    deadline = time.monotonic() + timeout
+    while (left := _cluster_processes(env)) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return left
+
+
+def test_the_supervisor_owns_its_children(tmp_path):
+    """Issue 17, row 7: kill -9 of the supervisor orphaned all 7 children, `up` then started
+    duplicates and said "cluster up", and two `up` at once ran 12 services."""
+    env = cluster_env(tmp_path / "home")
+    n = 1 + 1 + 6  # supervisor, router, six services
+    try:
+        assert cli(env, "up").returncode == 0
+        assert len(_cluster_processes(env)) == n
+        sup = int((tmp_path / "home/run/supervisor.pid").read_text().split()[0])
+        os.kill(sup, signal.SIGKILL)
+        assert _wait_gone(env) == [], "children outlived their supervisor"
+        r = cli(env, "up")
+        assert r.returncode == 0 and "cluster up" in r.stdout, r.stdout + r.stderr
+        assert len(_cluster_processes(env)) == n
+        assert cli(env, "down").returncode == 0
+        assert _wait_gone(env) == []
+        # two `up` at the same time: one supervisor, one set of services, both commands succeed
+        ups = [subprocess.Popen([sys.executable, "-m", "shared.cli", "up"], env=env, cwd=REPO, text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT) for _ in range(2)]
+        outs = [u.communicate(timeout=300)[0] for u in ups]
+        assert [u.returncode for u in ups] == [0, 0], outs
+        assert len(_cluster_processes(env)) == n, outs
+        assert cli(env, "status").returncode == 0
+    finally:
+        cli(env, "down")
+    assert _wait_gone(env) == []
+
+
+def test_a_reused_pid_is_never_taken_for_the_supervisor(tmp_path):
+    """Issue 17, row 8: another process's pid in the pid file made `up` refuse for 120 s and
+    `down` signal that unrelated process."""
+    env = cluster_env(tmp_path / "home")
+    run = tmp_path / "home/run"
+    run.mkdir(parents=True)
+    stranger = subprocess.Popen(["sleep", "600"])
+    try:
+        for content in (f"{stranger.pid}", f"{stranger.pid} 1"):  # an old-style file; a wrong start time
+            (run / "supervisor.pid").write_text(content)
+            (run / "coach.pid").write_text(content)
+            r = cli(env, "down")
+            assert r.returncode == 0 and "not running" in r.stdout, r.stdout + r.stderr
+            assert stranger.poll() is None, "down signalled an unrelated process"
+        (run / "supervisor.pid").write_text(f"{stranger.pid} 1")
+        r = cli(env, "up")
+        assert r.returncode == 0 and "starting the cluster" in r.stdout and "already running" not in r.stdout, r.stdout
+        assert cli(env, "down").returncode == 0
+        assert stranger.poll() is None
+    finally:
+        stranger.kill()
+        cli(env, "down")
+    assert _wait_gone(env) == []
+
+
 def test_cli_says_when_the_cluster_is_not_running(tmp_path, bundled):
     env = cluster_env(tmp_path / "home")
     r = cli(env, "space", "list")
