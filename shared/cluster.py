@@ -262,6 +262,22 @@ def status(settings: Settings | None = None) -> list[dict]:
     return rows
 
 
+def local_state(s: Settings, name: str) -> tuple[str, str]:
+    """What this host knows of a process of the cluster from its pid files: ``("frozen",
+    detail)`` (stopped by SIGSTOP or a debugger), ``("running", detail)``, ``("restarting",
+    detail)`` (its supervisor runs, the process does not), or ``("down", "")``. Used to name
+    the cause when a service does not answer (issue 17, row 12)."""
+    pid = read_pid(s.run_dir / f"{name}.pid")
+    if pid is not None:
+        st = _proc_stat(pid)
+        if st is not None and st[0] in "Tt":
+            return "frozen", f"process {pid} is stopped"
+        return "running", f"process {pid}"
+    if supervisor_running(s):
+        return "restarting", f"the supervisor starts it again; its log: {s.log_dir / (name + '.log')}"
+    return "down", ""
+
+
 def private_home(s: Settings) -> None:
     """The cluster's home (spaces, transcripts, clips, logs, recordings) is its user's alone:
     the folder 0700, and every process of the cluster creates files 0600 (umask 077, set in the

@@ -334,6 +334,64 @@ def test_a_reused_pid_is_never_taken_for_the_supervisor(tmp_path):
     assert _wait_gone(env) == []
 
 
+def _wait_dead(pid: int, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while Path(f"/proc/{pid}").exists() and time.monotonic() < deadline:
+        st = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] if Path(f"/proc/{pid}").exists() else "X"
+        if st == "Z":
+            return
+        time.sleep(0.05)
+
+
+def test_no_answer_names_its_cause(tmp_path):
+    """Issue 17, row 12: "service X is not running (start it with `make up`)" came also when
+    the router died, the service was frozen or restarting."""
+    from shared.bus.client import Client, Unavailable
+
+    env = cluster_env(tmp_path / "home")
+    run = tmp_path / "home/run"
+    pid = lambda name: int((run / f"{name}.pid").read_text().split()[0])  # noqa: E731
+
+    def cause(c, service="pss"):
+        with pytest.raises(Unavailable) as e:
+            c.request(service, "list", timeout=3)
+        return e.value.details.get("cause"), e.value.message
+
+    try:
+        assert cli(env, "up").returncode == 0
+        with Client(settings_of(env)) as c:
+            os.kill(pid("pss"), signal.SIGSTOP)
+            try:
+                got, msg = cause(c)
+                assert got == "frozen" and "frozen" in msg, msg
+            finally:
+                os.kill(pid("pss"), signal.SIGCONT)
+            assert "spaces" in c.request("pss", "list", timeout=60)
+            sup = pid("supervisor")
+            os.kill(sup, signal.SIGSTOP)  # hold the restart, so the cause stays what it is
+            try:
+                victim = pid("pss")
+                os.kill(victim, signal.SIGKILL)
+                _wait_dead(victim)
+                deadline = time.monotonic() + 30
+                while "pss" in c.alive(timeout=1.0) and time.monotonic() < deadline:
+                    time.sleep(0.1)
+                got, msg = cause(c)
+                assert got == "restarting" and "restarting" in msg, msg
+                os.kill(pid("router"), signal.SIGKILL)
+                _wait_dead(pid("router"))
+                got, msg = cause(c, "simulator")
+                assert got == "router_down" and "router" in msg, msg
+            finally:
+                os.kill(sup, signal.SIGCONT)
+        r = cli(env, "up")  # the supervisor brings router and pss back
+        assert r.returncode == 0, r.stdout
+        r = cli(env, "space", "list")
+        assert r.returncode == 0, r.stderr
+    finally:
+        cli(env, "down")
+
+
 def test_cli_says_when_the_cluster_is_not_running(tmp_path, bundled):
     env = cluster_env(tmp_path / "home")
     r = cli(env, "space", "list")

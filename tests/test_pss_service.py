@@ -143,7 +143,9 @@ def _bad_cases(clip, other_clip, amc_file):
     short = dict(w, data=w["data"][:20])  # 20 frames at 120 fps -> 5 frames at 30 fps
     mismatch = dict(w, channels=w["channels"][:-1])
     foreign = dict(w, channels=[f"x{i}.rx" for i in range(len(w["channels"]))])
-    big = {"space": "base", "clips": [dict(w, data=np.zeros((20_000, 62)))]}  # ~10 MB > 8 MB limit
+    # ~8.4 MB: over the service's 8 MB limit, under the 9 MB Zenoh message ceiling (the router
+    # drops anything larger, see test_an_oversize_request_is_dropped_before_it_is_read_whole)
+    big = {"space": "base", "clips": [dict(w, data=np.zeros((17_000, 62)))]}
     from shared.clipfiles import wire_file
 
     f = wire_file(amc_file)
@@ -247,3 +249,67 @@ def test_a_long_build_does_not_stall_recognition_on_another_space(pss_service, d
           f"build finished {done['build'] - answered:.1f} s after them")
     assert answered < done["build"], "recognitions waited for the build"
     assert c.request("pss", "info", {"space": "big"})["n_proto_symbols"] == len(big)
+
+
+def _rss_kb(pid: int) -> int:
+    from pathlib import Path
+
+    return next(int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+                if line.startswith("VmRSS:"))
+
+
+def _shm_maps(pid: int) -> list[str]:
+    from pathlib import Path
+
+    return [line for line in Path(f"/proc/{pid}/maps").read_text().splitlines() if "/dev/shm/" in line]
+
+
+def test_concurrent_clients_leave_nothing_in_shared_memory(pss_service, clips, built):
+    """Issue 17, row 10: Zenoh's shared memory was on by default, and every client session that
+    sent more than 3 KB left a pool in /dev/shm (7.4 GB after two bursts of 200 clients)."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    from shared.bus.client import Client
+    from tests.conftest import settings_of
+
+    env, procs = pss_service
+    probe = clip_to_wire(clips[1][0], with_skeleton=False)  # ~60 KB, far above the 3 KB threshold
+
+    def one(_):
+        with Client(settings_of(env)) as c:
+            return c.request("pss", "recognize", {"space": "base", "clips": [probe]}, timeout=120)["nearest"][0]["name"]
+
+    for _ in range(2):
+        with ThreadPoolExecutor(30) as pool:
+            names = list(pool.map(one, range(30)))
+        assert len(set(names)) == 1  # every client got the same real answer
+    for pid in (os.getpid(), procs.procs["router"].pid, procs.procs["pss"].pid):
+        assert _shm_maps(pid) == [], pid
+
+
+def test_an_oversize_request_is_dropped_before_it_is_read_whole(pss_service, built):
+    """Issue 17, row 11: a 600 MiB request was reassembled whole by the router (1.1 GB kept) and
+    the service (1.66 GB) before the 64 MiB limit applied. Now Zenoh's message ceiling is the
+    payload limit plus 1 MiB: the router drops the rest, and our client refuses to send it."""
+    from shared.bus.client import Client, Unavailable
+    from shared.errors import BadInput
+    from tests.conftest import settings_of
+
+    env, procs = pss_service
+    size = 100 * 2**20  # twelve times the cluster's 8 MB limit
+    router, pss = procs.procs["router"].pid, procs.procs["pss"].pid
+    before = {pid: _rss_kb(pid) for pid in (router, pss)}
+    s = settings_of(env)
+    s.max_payload = 2**30  # a client that does not check, as a hostile one would not
+    with Client(s) as rogue:
+        with pytest.raises(Unavailable) as e:
+            rogue.request_raw("pss", "list", b"\x80" + b"x" * size, timeout=10)
+        assert e.value.details["cause"] == "timeout", e.value.message
+    for pid, kb in before.items():
+        assert _rss_kb(pid) - kb < 30 * 1024, (pid, kb, _rss_kb(pid))  # nowhere near 100 MiB kept
+    s.max_payload = int(env["MIRRORCOACH_MAX_PAYLOAD"])
+    with Client(s) as c:
+        with pytest.raises(BadInput, match="at most 8 MiB"):
+            c.request_raw("pss", "list", b"\x80" + b"x" * 9_000_000)
+        assert "base" in {x["space"] for x in c.request("pss", "list")["spaces"]}  # the service is fine

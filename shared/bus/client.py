@@ -15,7 +15,7 @@ import time
 
 from shared.bus.config import Settings, client_config
 from shared.codec import pack, unpack
-from shared.errors import MirrorcoachError, Unavailable
+from shared.errors import BadInput, MirrorcoachError, Unavailable
 
 __all__ = ["Client", "RemoteError", "Unavailable"]
 
@@ -62,25 +62,69 @@ class Client:
     # ------------------------------------------------------------------ requests
     def request_raw(self, service: str, verb: str, payload: bytes, timeout: float | None = None) -> dict:
         timeout = self.settings.timeout if timeout is None else timeout
+        if len(payload) > self.settings.max_payload:  # the router would drop it after 64 MiB: say so now
+            raise BadInput(f"the request is {len(payload) / 2**20:.1f} MiB; services accept at most "
+                           f"{self.settings.max_payload / 2**20:.0f} MiB (MIRRORCOACH_MAX_PAYLOAD)",
+                           size=len(payload), limit=self.settings.max_payload)
         t0 = time.monotonic()
         replies = self.session.get(self.settings.key(service, verb), payload=payload, timeout=timeout)
         for r in replies:
             if r.ok is not None:
                 return unpack(r.ok.payload.to_bytes(), arrays=self.arrays)
+            raw = r.err.payload.to_bytes()
+            if raw == b"Timeout":  # Zenoh's own reply when nothing answered in time
+                break
             try:
-                err = unpack(r.err.payload.to_bytes())
+                err = unpack(raw)
                 raise RemoteError(str(err.get("code", "internal")), str(err.get("message", "")), err.get("details") or {})
             except RemoteError:
                 raise
             except MirrorcoachError:
-                raise RemoteError("internal", f"{service} sent an unreadable error: {r.err.payload.to_bytes()[:200]!r}") from None
-        waited = time.monotonic() - t0
-        if service not in self.alive(timeout=1.0):
-            raise Unavailable(f"service {service} is not running (start it with `make up`)", service=service)
+                raise RemoteError("internal", f"{service} sent an unreadable error: {raw[:200]!r}") from None
+        raise self._no_answer(service, verb, timeout, time.monotonic() - t0)
+
+    def _router_listens(self) -> bool:
+        """Whether anything accepts connections on the router's endpoint (Zenoh notices a dead
+        router only when its link times out)."""
+        import socket
+
+        from shared.bus.config import parse_endpoint
+
+        proto, host, port = parse_endpoint(self.settings.router)
+        if proto != "tcp":
+            return True
+        try:
+            socket.create_connection((host, port), timeout=1.0).close()
+            return True
+        except OSError:
+            return False
+
+    def _no_answer(self, service: str, verb: str, timeout: float, waited: float) -> Unavailable:
+        """Why nothing answered, named (issue 17, row 12): the router is gone, the service is
+        frozen, restarting, not running, or alive but slower than the timeout."""
+        from shared.cluster import local_state
+
+        where = {"service": service, "router": self.settings.router}
+        if not list(self.session.info.routers_zid()) or not self._router_listens():
+            return Unavailable(f"lost the connection to the cluster's router at {self.settings.router} while waiting "
+                               f"for {service} (the router stopped or was killed; `make status` shows it, the "
+                               f"supervisor restarts it)", cause="router_down", **where)
+        state, detail = local_state(self.settings, service)
+        if state == "frozen":
+            return Unavailable(f"service {service} is frozen ({detail}); it cannot answer until it is continued "
+                               f"(kill -CONT) or restarted", cause="frozen", **where)
+        alive = service in self.alive(timeout=1.0)
+        if not alive and state == "restarting":
+            return Unavailable(f"service {service} is restarting ({detail}); retry in a few seconds",
+                               cause="restarting", **where)
+        if not alive:
+            return Unavailable(f"service {service} is not running (start it with `make up`)", cause="not_running",
+                               **where)
         if waited >= 0.9 * timeout:
-            raise Unavailable(f"service {service} did not answer {verb} within {timeout:g} s", service=service, timeout=timeout)
-        raise Unavailable(f"service {service} gave no answer to {verb} (it may have restarted meanwhile); retry",
-                          service=service)
+            return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s", cause="timeout",
+                               timeout=timeout, **where)
+        return Unavailable(f"service {service} gave no answer to {verb} (it may have restarted meanwhile); retry",
+                           cause="no_answer", **where)
 
     def request(self, service: str, verb: str, message: dict | None = None, timeout: float | None = None) -> dict:
         """Send ``message`` to ``<prefix>/<service>/<verb>``; the decoded reply map."""

@@ -98,7 +98,15 @@ class Settings:
         return self.home / "run"
 
 
-def _base(mode: str):
+def max_message_size(s: Settings) -> int:
+    """The largest Zenoh message any session of the cluster reassembles: the largest request a
+    service accepts plus room for the key and attachments. Zenoh's default is 1 GiB, so a 600 MiB
+    request was reassembled whole by the router and the service before the 64 MiB check
+    (issue 17, row 11); now the router drops it after 64 MiB of fragments."""
+    return s.max_payload + (1 << 20)
+
+
+def _base(mode: str, s: Settings):
     import zenoh
 
     c = zenoh.Config()
@@ -106,12 +114,18 @@ def _base(mode: str):
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("scouting/gossip/enabled", "false")
     c.insert_json5("adminspace/enabled", "false")
+    # Zenoh's shared memory is on by default: every session that sent a message above 3 KB kept
+    # a 16 MiB pool in /dev/shm, freed only when the process ended (7.4 GB after two bursts of
+    # 200 clients, issue 17, row 10). Messages between processes on one host are small next to
+    # the work they ask for (bench/results/bus.md), so the copy through TCP costs little.
+    c.insert_json5("transport/shared_memory/enabled", "false")
+    c.insert_json5("transport/link/rx/max_message_size", str(max_message_size(s)))
     return c
 
 
 def router_config(s: Settings):
     """The router: listens on the loopback endpoint and nowhere else."""
-    c = _base("router")
+    c = _base("router", s)
     c.insert_json5("listen/endpoints", json.dumps([s.router]))
     return c
 
@@ -119,7 +133,7 @@ def router_config(s: Settings):
 def client_config(s: Settings, wait: bool = True, connect_timeout_s: float = 3.0):
     """A client of the router. Services wait for it forever (start order does not matter);
     the CLI gives up after ``connect_timeout_s`` with a clear message."""
-    c = _base("client")
+    c = _base("client", s)
     c.insert_json5("listen/endpoints", "[]")
     c.insert_json5("connect/endpoints", json.dumps([s.router]))
     c.insert_json5("connect/timeout_ms", "-1" if wait else str(int(connect_timeout_s * 1000)))
