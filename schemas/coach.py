@@ -5,12 +5,36 @@ Keys: ``<prefix>/coach/<verb>``; every trial is published on ``<prefix>/events/c
 
 from __future__ import annotations
 
-from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, Message, Str
+from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
 from schemas.common import CLIP, name
+from shared.errors import BadInput
 
 SERVICE = "coach"
 SESSION = name("session id")
 ADVERB = Str(choices=("a little more", "more", "much more", "more like this", "table"))
+ADVERB_WORD = Str(choices=("a little more", "more", "much more", "more like this"))
+
+
+
+def _nb_consistent(m: dict, path: str) -> None:
+    """theta, var and prior have one row per class, two columns (d_p, d_cop); priors sum to 1."""
+    k = len(m["classes"])
+    if len(set(m["classes"])) != k:
+        raise BadInput(f"{path}.classes: the classes must differ", field=f"{path}.classes")
+    for key in ("theta", "var", "prior"):
+        if len(m[key]) != k:
+            raise BadInput(f"{path}.{key}: one entry per class ({k}), got {len(m[key])}", field=f"{path}.{key}")
+    if abs(sum(m["prior"]) - 1.0) > 1e-6:
+        raise BadInput(f"{path}.prior must sum to 1, got {sum(m['prior']):.6g}", field=f"{path}.prior")
+
+
+#: the parameters of a GaussianNB over (d_p, d_cop), as policy_fit returns them (eq. 6.6)
+NB = Map({
+    "classes": F(List(ADVERB_WORD, min_len=2, max_len=8), "the adverbs it chooses among"),
+    "theta": F(List(List(Float(-1e9, 1e9), min_len=2, max_len=2), min_len=2, max_len=8), "per class: mean d_p, d_cop"),
+    "var": F(List(List(Float(1e-12, 1e18), min_len=2, max_len=2), min_len=2, max_len=8), "per class: variances"),
+    "prior": F(List(Float(0.0, 1.0), min_len=2, max_len=8), "P(V) per class"),
+}, checks=[_nb_consistent])
 
 POLICY = Map({
     "kind": F(Str(choices=("fixed", "aeu1", "aeu2", "emu1", "emu1c", "emu2", "nb")), "which model", required=False,
@@ -18,8 +42,9 @@ POLICY = Map({
     "alpha": F(Float(0.0, 5.0), "emphasis alpha (eq. 4.3)", required=False, default=2.0),
     "adverb": F(ADVERB, "none, a fixed adverb, or 'table' (Table 4.1 for the alpha)", required=False),
     "calibration": F(Float(1e-9, 1e9), "AEU: thesis distance units per ours", required=False, default=1.0),
-    "per_learner": F(AnyMap(max_len=10_000), "EMU-2: learner -> alpha", required=False, default=dict),
-    "nb": F(AnyMap(), "naive Bayes parameters (from policy_fit)", required=False),
+    "per_learner": F(MapOf(Str(max_len=64), Float(0.0, 5.0), max_len=10_000), "EMU-2: learner -> alpha",
+                     required=False, default=dict),
+    "nb": F(NB, "naive Bayes parameters (from policy_fit)", required=False),
     "body_part": F(Bool(), "emphasise the worst body part only", required=False, default=False),
 })
 
@@ -86,6 +111,15 @@ RUN = Endpoint(
 STATE = Endpoint("state", Message("coach.state", Map({"session": SESSION})), Message("coach.state.reply", INFO),
                  "A session and its trials.")
 
+#: EMU-1 without observed data: the demonstrations of a simulated coach (policies.simulated_coach_demonstrations);
+#: n is bounded (issue 17, row 1: n = 10**9 grew the coach to 2.6 GB)
+SIMULATED_COACH = Map({
+    "n": F(Int(3, 10_000), "how many demonstrations", required=False, default=40),
+    "alpha": F(Float(0.0, 5.0), "the coach's emphasis", required=False, default=1.8),
+    "off_line": F(Float(0.0, 5.0), "relative error perpendicular to the line", required=False, default=0.35),
+    "seed": F(Int(0, 2**32 - 1), required=False, default=0),
+})
+
 POLICY_FIT = Endpoint(
     "policy_fit",
     Message("coach.policy_fit", Map({
@@ -94,9 +128,10 @@ POLICY_FIT = Endpoint(
                             required=False),
         "demonstrations": F(List(List(List(Float(), max_len=20), min_len=3, max_len=3), max_len=100_000),
                             "EMU-1: observed (x_t, x_p, x_s)", required=False),
-        "simulated_coach": F(AnyMap(), "EMU-1 without data: {n, alpha, off_line, seed} of a simulated coach",
+        "simulated_coach": F(SIMULATED_COACH, "EMU-1 without data: a simulated coach's demonstrations",
                              required=False),
-        "sweep": F(AnyMap(max_len=10_000), "EMU-2: learner -> {alpha: final error}", required=False),
+        "sweep": F(MapOf(Str(max_len=64), MapOf(Str(max_len=16), Float(0.0), min_len=1, max_len=32), max_len=10_000),
+                   "EMU-2: learner -> {alpha: final error}", required=False),
         "features": F(List(List(Float(), min_len=2, max_len=2), max_len=100_000), "NB: (d_p, d_cop) rows",
                       required=False),
         "labels": F(List(Str(max_len=32), max_len=100_000), "NB: the adverb that worked best", required=False),

@@ -6,7 +6,7 @@ Keys: ``<prefix>/simulator/<verb>``; events on ``<prefix>/events/simulator/perfo
 
 from __future__ import annotations
 
-from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, Message, Str
+from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
 from schemas.common import CLIP, name
 from shared.errors import BadInput
 from shared.symbols import COMPARISONS, RULES, WORDS
@@ -134,7 +134,10 @@ LEARNER_PARAMS = Map({
     "gain": F(Float(0.0, 1.0), required=False), "threshold": F(Float(0.0, 90.0), required=False),
     "overshoot": F(Float(0.0, 5.0), required=False), "noise": F(Float(0.0, 30.0), required=False),
     "tempo": F(Float(0.5, 2.0), required=False), "adverb_sensitivity": F(Float(0.0, 5.0), required=False),
-    "deviation": F(AnyMap(max_len=3), "body part -> {scale, offset}", required=False),
+    "deviation": F(MapOf(Str(choices=("arms", "legs", "trunk")),
+                         Map({"scale": F(Float(0.0, 3.0), "of the learner's range of motion"),
+                              "offset": F(Float(-90.0, 90.0), "degrees added to the joint angles")}), max_len=3),
+                   "body part -> {scale, offset}", required=False),
     "seed": F(Int(0, 2**32 - 1), required=False),
 })
 

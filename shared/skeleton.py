@@ -31,6 +31,9 @@ if TYPE_CHECKING:
 
 ROT_DOFS = ("rx", "ry", "rz")
 TRANS_DOFS = ("tx", "ty", "tz")
+#: no body has more; a bound on the work a skeleton from outside can ask for (issue 17, row 1:
+#: a 10,000-joint skeleton held a simulator worker 39 s)
+MAX_JOINTS = 1000
 
 
 @dataclass
@@ -59,11 +62,11 @@ class Joint:
     @classmethod
     def from_dict(cls, d: dict) -> "Joint":
         return cls(
-            name=d["name"],
+            name=str(d["name"]),
             parent=int(d["parent"]),
             offset=np.asarray(d["offset"], dtype=float),
-            dofs=list(d["dofs"]),
-            euler=d["euler"],
+            dofs=[str(x) for x in d["dofs"]],
+            euler=str(d["euler"]),
             pre=np.asarray(d["pre"], dtype=float),
             end=None if d["end"] is None else np.asarray(d["end"], dtype=float),
             limits={k: (float(v[0]), float(v[1])) for k, v in d.get("limits", {}).items()},
@@ -96,6 +99,36 @@ class Skeleton:
 
     def children(self, i: int) -> list[int]:
         return [k for k, j in enumerate(self.joints) if j.parent == i]
+
+    def check(self) -> "Skeleton":
+        """A tree a reader could have made, or :class:`BadInput` naming the first fault: 1 to
+        ``MAX_JOINTS`` joints with unique names, one root first and every joint after its
+        parent (so no cycle), known degrees of freedom, an Euler order of x, y, z, finite
+        offsets and pre-rotations, a positive unit and an up axis 0-2 (issue 17, row 4: a
+        space whose skeleton had a parent cycle was broken for good)."""
+        from shared.errors import BadInput
+
+        def fail(msg):
+            raise BadInput(f"skeleton {self.name!r}: {msg}", field="skeleton")
+
+        if not 1 <= len(self.joints) <= MAX_JOINTS:
+            fail(f"must have 1 to {MAX_JOINTS} joints, has {len(self.joints)}")
+        if len({j.name for j in self.joints}) != len(self.joints):
+            fail("joint names must be unique")
+        for i, j in enumerate(self.joints):
+            if not (-1 <= j.parent < i) or (j.parent < 0) != (i == 0):
+                fail(f"joint {j.name!r} does not come after its parent (a skeleton lists one root first, "
+                     "then every joint after its parent)")
+            if len(set(j.dofs)) != len(j.dofs) or not set(j.dofs) <= set(ROT_DOFS + TRANS_DOFS):
+                fail(f"joint {j.name!r}: degrees of freedom must be distinct ones of {', '.join(ROT_DOFS + TRANS_DOFS)}")
+            if len(j.euler) != 3 or sorted(j.euler.lower()) != ["x", "y", "z"]:
+                fail(f"joint {j.name!r}: Euler order {j.euler!r} is not a permutation of xyz")
+            shapes = [(j.offset, (3,)), (j.pre, (3, 3))] + ([] if j.end is None else [(j.end, (3,))])
+            if any(np.shape(a) != sh or not np.all(np.isfinite(a)) for a, sh in shapes):
+                fail(f"joint {j.name!r}: offset, end and pre-rotation must be finite 3-vectors and a 3x3 matrix")
+        if not (np.isfinite(self.unit_m) and self.unit_m > 0) or self.up_axis not in (0, 1, 2):
+            fail("unit_m must be positive and up_axis 0, 1 or 2")
+        return self
 
     # ----------------------------------------------------------------- rotations
     def local_rotations(self, values: dict[str, np.ndarray], n_frames: int, joints=None) -> list[Rotation]:
@@ -162,13 +195,7 @@ class Skeleton:
         key = (channels, ends)
         if key in cache:
             return cache[key]
-        nj = len(self.joints)
-        bad = [j.name for i, j in enumerate(self.joints) if not (-1 <= j.parent < i) or (j.parent < 0) != (i == 0)]
-        if bad:
-            from shared.errors import BadInput
-
-            raise BadInput(f"skeleton {self.name!r}: joint {bad[0]!r} does not come after its parent "
-                           "(a skeleton lists one root first, then every joint after its parent)")
+        nj = len(self.check().joints)
         col = {c: i for i, c in enumerate(channels)}
         axes = np.full((nj, 3), -1, dtype=np.int64)
         cols = np.full((nj, 3), -1, dtype=np.int64)
@@ -244,12 +271,12 @@ class Skeleton:
     def from_json(cls, text: str) -> "Skeleton":
         d = json.loads(text)
         return cls(
-            name=d["name"],
+            name=str(d["name"]),
             joints=[Joint.from_dict(j) for j in d["joints"]],
             unit_m=float(d["unit_m"]),
             up_axis=int(d.get("up_axis", 1)),
             source_format=d.get("source_format", "asf"),
-        )
+        ).check()
 
     def __eq__(self, other) -> bool:  # dataclass eq would compare arrays element-wise
         return isinstance(other, Skeleton) and self.to_json() == other.to_json()

@@ -57,6 +57,27 @@ def bundled() -> Path:
     return BUNDLED_HDM05
 
 
+# ---------------------------------------------------------------------------- bad skeletons (issue 17)
+def chain_skeleton(n: int) -> str:
+    """A person-sized skeleton of ``n`` joints in one chain, as JSON."""
+    import numpy as np
+
+    from shared.skeleton import Joint, Skeleton
+
+    joints = [Joint("j0", -1, np.zeros(3), ["tx", "ty", "tz", "rx", "ry", "rz"])]
+    joints += [Joint(f"j{i}", i - 1, np.array([0.0, 1.7 / n, 0.0]), ["rx", "ry", "rz"]) for i in range(1, n)]
+    return Skeleton("chain", joints, unit_m=1.0).to_json()
+
+
+def cycle_skeleton(skeleton) -> str:
+    """``skeleton`` as JSON with joints 1 and 3 each other's parent."""
+    import json
+
+    d = json.loads(skeleton.to_json())
+    d["joints"][1]["parent"], d["joints"][3]["parent"] = 3, 1
+    return json.dumps(d)
+
+
 # ---------------------------------------------------------------------------- real processes
 def free_port() -> int:
     import socket

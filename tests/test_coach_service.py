@@ -95,6 +95,21 @@ def test_bad_attempts_get_clear_errors_and_leave_the_session_unchanged(coach_ser
          "bad_request"),
         ("session name with /", "state", {"session": "a/b"}, "bad_request"),
         ("a NaN target with a new learner", "start", {"session": "nanl", "target": nan, "learner": "fresh"}, "bad_request"),
+        # issue 17, row 1: unbounded work (the coach grew to 2.6 GB)
+        ("a simulated coach of 10**9 demonstrations", "policy_fit", {"kind": "emu1", "simulated_coach": {"n": 10**9}},
+         "bad_request"),
+        ("a simulated coach with an unknown field", "policy_fit", {"kind": "emu1", "simulated_coach": {"m": 3}},
+         "bad_request"),
+        # issue 17, row 4: accepted input that broke a session for good
+        ("a per-learner alpha that is text", "start",
+         {"session": "pl", "target": w, "policy": {"kind": "emu2", "per_learner": {"l2": "x"}}}, "bad_request"),
+        ("naive Bayes parameters of the wrong shape", "start",
+         {"session": "nbx", "target": w, "policy": {"kind": "nb", "nb": {"classes": 5}}}, "bad_request"),
+        ("naive Bayes priors that do not sum to 1", "start",
+         {"session": "nby", "target": w, "policy": {"kind": "nb", "nb": {
+             "classes": ["more", "much more"], "theta": [[1, 1], [2, 2]], "var": [[1, 1], [1, 1]], "prior": [0.9, 0.9]}}},
+         "bad_request"),
+        ("sweep alphas that are not numbers", "policy_fit", {"kind": "emu2", "sweep": {"l": {"fast": 1.0}}}, "bad_request"),
     ]
     files = state_files(env)
     assert_refused(c, procs, [(name, "coach", verb, msg, code) for name, verb, msg, code in cases])

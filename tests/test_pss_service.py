@@ -17,7 +17,7 @@ import pytest
 from schemas import pss as contract
 from schemas.common import clip_to_wire
 from shared.codec import pack
-from tests.conftest import assert_refused
+from tests.conftest import assert_refused, cycle_skeleton
 
 
 @pytest.fixture(scope="module")
@@ -199,6 +199,8 @@ def _bad_cases(clip, other_clip, amc_file):
         ("add to an unknown space", "add", pack({"space": "nowhere", "clips": [w]}), "not_found"),
         ("add a name the space has", "add", pack({"space": "base", "clips": [dict(w, name=other_clip)]}), "bad_request"),
         ("payload over the size limit", "add", pack(big), "bad_request"),
+        ("a skeleton with a parent cycle (issue 17, row 4)", "build",
+         pack({"space": "cyc", "clips": [dict(w, skeleton=cycle_skeleton(clip.skeleton))]}), "bad_request"),
     ]
 
 
@@ -313,3 +315,56 @@ def test_an_oversize_request_is_dropped_before_it_is_read_whole(pss_service, bui
         with pytest.raises(BadInput, match="at most 8 MiB"):
             c.request_raw("pss", "list", b"\x80" + b"x" * 9_000_000)
         assert "base" in {x["space"] for x in c.request("pss", "list")["spaces"]}  # the service is fine
+
+
+def test_a_saturated_service_answers_unavailable_at_once(tmp_path_factory, dev_split):
+    """Issue 17, row 1: requests queued without bound behind long work. With one worker and two
+    places in the queue, a long build holds the worker: two requests wait, the rest are told
+    `unavailable` (cause `saturated`) while the build still runs, and the waiting two are
+    answered."""
+    from concurrent.futures import ThreadPoolExecutor
+    from pathlib import Path
+
+    from shared.bus.client import Client, RemoteError
+    from tests.conftest import _serve, settings_of
+
+    serve = _serve(tmp_path_factory, {"pss": "services.pss"}, MIRRORCOACH_WORKERS=1, MIRRORCOACH_QUEUE=2)
+    env, procs = next(serve)
+    try:
+        big = [clip_to_wire(x.resample(30)) for x in dev_split[0][::3]]  # full covariances: a build of seconds
+        events = []
+
+        def build():
+            with Client(settings_of(env)) as c:
+                c.request("pss", "build", {"space": "big", "clips": big, "covariance_type": "full"})
+            events.append("build done")
+
+        t = threading.Thread(target=build)
+        t.start()
+        marker = Path(env["MIRRORCOACH_HOME"]) / "data" / "pss" / "big.pending.json"
+        deadline = time.monotonic() + 60
+        while not marker.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert marker.exists(), "the build never started"
+
+        def listing(_):
+            with Client(settings_of(env)) as c:
+                try:
+                    c.request("pss", "list", timeout=600)
+                    events.append("answered")
+                    return "answered"
+                except RemoteError as e:
+                    events.append(e.code)
+                    return e.details.get("cause"), e.code, e.message
+
+        with ThreadPoolExecutor(6) as pool:
+            outcomes = list(pool.map(listing, range(6)))
+        t.join(timeout=600)
+        refused = [o for o in outcomes if o != "answered"]
+        assert outcomes.count("answered") == 2 and len(refused) == 4, outcomes
+        assert all(o[:2] == ("saturated", "unavailable") and "saturated" in o[2] for o in refused), refused
+        # every refusal came while the build still ran (it held the only worker for seconds)
+        assert events.index("build done") > max(i for i, e in enumerate(events) if e == "unavailable"), events
+        assert "Traceback" not in procs.log("pss")
+    finally:
+        serve.close()

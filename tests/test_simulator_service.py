@@ -12,7 +12,7 @@ from schemas import simulator as contract
 from schemas.common import clip_to_wire
 from shared.bus.client import RemoteError
 from shared.clip import Clip
-from tests.conftest import assert_refused
+from tests.conftest import assert_refused, chain_skeleton, cycle_skeleton
 
 
 def _robot_motion(amplitude=60.0, n=90):
@@ -143,7 +143,27 @@ def test_bad_simulator_input_gets_clear_errors_and_the_service_stays_up(simulato
         ("bad learner gain", "learner_create", {"learner": "x", "target": human, "params": {"gain": 7.0}}, "bad_request"),
         ("name with /", "other_reveal", {"other": "a/b"}, "bad_request"),
         ("delete nothing", "delete", {}, "bad_request"),
+        # issue 17, row 1: a 10,000-joint skeleton held a worker 39 s
+        ("a skeleton of 1,500 joints", "perform", {"skeleton": chain_skeleton(1500), "clip": human}, "bad_request"),
+        ("a simulated person of 300 joints", "perform", {"skeleton": chain_skeleton(300), "clip": human}, "bad_request"),
+        # issue 17, row 4: accepted input that broke an object for good
+        ("a skeleton with a parent cycle", "perform", {"skeleton": cycle_skeleton(squat.skeleton), "clip": human}, "bad_request"),
+        ("a NaN deviation", "learner_create",
+         {"learner": "x", "target": human, "params": {"deviation": {"legs": {"scale": float("nan"), "offset": 0.0}}}},
+         "bad_request"),
+        ("a 1e300 deviation", "learner_create",
+         {"learner": "x", "target": human, "params": {"deviation": {"legs": {"scale": 1e300, "offset": 0.0}}}},
+         "bad_request"),
+        ("a deviation of an unknown body part", "learner_create",
+         {"learner": "x", "target": human, "params": {"deviation": {"tail": {"scale": 1.0, "offset": 0.0}}}},
+         "bad_request"),
+        ("a 1e300 demonstration", "learner_imitate",
+         {"learner": "steady", "demonstration": dict(human, data=human["data"] * 1e300)}, "bad_request"),
     ]
+    c.request("simulator", "learner_create", {"learner": "steady", "target": human, "replace": True})
     before = c.request("simulator", "list")
     assert_refused(c, procs, [(name, "simulator", verb, msg, code) for name, verb, msg, code in cases])
     assert c.request("simulator", "list") == before
+    # the learner that was shown a 1e300 demonstration still learns from a real one
+    out = c.request("simulator", "learner_imitate", {"learner": "steady", "demonstration": human})
+    assert all(np.isfinite(a["data"]).all() for a in out["attempts"])

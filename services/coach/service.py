@@ -201,8 +201,8 @@ def make_service(settings: Settings | None = None) -> Service:
                 pts = [tuple(np.asarray(v, float) for v in d) for d in req["demonstrations"]]
                 source = "observed demonstrations"
             else:
-                sim = req["simulated_coach"] or {}
-                pts = simulated_coach_demonstrations(**{k: sim[k] for k in ("n", "alpha", "off_line", "seed") if k in sim})
+                sim = req["simulated_coach"] or contract.SIMULATED_COACH.check({}, "simulated_coach")
+                pts = simulated_coach_demonstrations(**sim)
                 source = "a simulated coach"
             corrected, plain = fit_emu1_corrected(pts)  # eq. 5.5's alpha = 1 + eq. 4.3's
             alpha = (corrected if kind == "emu1c" else plain) - 1.0
@@ -216,8 +216,11 @@ def make_service(settings: Settings | None = None) -> Service:
             for learner, errs in req["sweep"].items():
                 try:
                     items = {float(a): float(e) for a, e in errs.items()}
-                except (TypeError, ValueError, AttributeError):
-                    raise BadInput(f"sweep of {learner!r} must map alphas to errors", field="sweep") from None
+                except ValueError:
+                    raise BadInput(f"sweep of {learner!r} must map alphas (numbers as text) to errors",
+                                   field="sweep") from None
+                if not all(0.0 <= a <= 5.0 for a in items):
+                    raise BadInput(f"sweep of {learner!r}: alphas must be in [0, 5]", field="sweep")
                 per[learner] = min(items, key=items.get)
             return {"policy": Policy("emu2", alpha=req["alpha"], adverb=None, per_learner=per).to_dict(),
                     "fit": {"per_learner": per, "sweep_alphas": list(SWEEP)}}

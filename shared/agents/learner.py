@@ -48,6 +48,17 @@ from shared.errors import BadInput
 
 N_PHASE = 100
 REPETITIONS = 5
+#: the largest joint angle (degrees) or position a demonstration may hold
+MAX_VALUE = 1e5
+
+
+def _bounded(phase: np.ndarray, what: str) -> np.ndarray:
+    """``phase`` if every value is within ``MAX_VALUE``: a 1e300 demonstration turned a
+    learner's memory to infinities for good (issue 17, row 4)."""
+    if not np.all(np.abs(phase) <= MAX_VALUE):
+        raise BadInput(f"the {what} has values beyond {MAX_VALUE:g} (degrees or centimetres): not a motion a person "
+                       "makes", field=what)
+    return phase
 ADVERB_FACTOR = {None: 1.0, "": 1.0, "a little more": 1.10, "more": 1.20, "much more": 1.35, "more like this": 1.20}
 ADVERBS = tuple(a for a in ADVERB_FACTOR if a)
 
@@ -87,8 +98,12 @@ class LearnerParams:
             if not (isinstance(v, (int, float)) and np.isfinite(v) and lo <= v <= hi):
                 raise BadInput(f"learner {name} must be in [{lo}, {hi}], got {v}", field=name)
         for part, dev in self.deviation.items():
-            if part not in BODY_PARTS or not {"scale", "offset"} <= set(dev):
+            if part not in BODY_PARTS or not isinstance(dev, dict) or not {"scale", "offset"} <= set(dev):
                 raise BadInput(f"deviation must map arms/legs/trunk to {{scale, offset}}, got {part!r}", field="deviation")
+            for key, lo, hi in (("scale", 0.0, 3.0), ("offset", -90.0, 90.0)):
+                v = dev[key]
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not (np.isfinite(v) and lo <= v <= hi):
+                    raise BadInput(f"deviation {part}.{key} must be in [{lo:g}, {hi:g}], got {v!r}", field="deviation")
         return self
 
 
@@ -136,7 +151,7 @@ class SimulatedLearner:
         self.params = (params or LearnerParams()).check()
         self.target = target
         self.channels = target.group("motion") or list(target.channels)
-        self.target_phase = to_phase(target, self.channels)
+        self.target_phase = _bounded(to_phase(target, self.channels), "target")
         self._rotation_mask = np.array([0.0 if c.split(".")[-1].startswith("t") else 1.0 for c in self.channels])
         # the body's orientation in the room (the root's rotation channels) is not part of the
         # form a learner copies: it follows the target, and Euler triples of a root near
@@ -169,7 +184,7 @@ class SimulatedLearner:
         if adverb not in ADVERB_FACTOR:
             raise BadInput(f"unknown adverb {adverb!r}; one of: {', '.join(ADVERBS)} (or none)", field="adverb")
         p = self.params
-        demo = to_phase(demonstration, self.channels)
+        demo = _bounded(to_phase(demonstration, self.channels), "demonstration")
         if self.reference is None:  # the first motion shown is taken to be the target
             self.reference = demo
         diff = self.perceive((demo - self.memory) * self._imitated)

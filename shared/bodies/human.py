@@ -146,11 +146,19 @@ def _hinge_order(seq: str, dofs: list[str]) -> list[str]:
     return axes if seq.isupper() else axes[::-1]
 
 
+#: the most joints a simulated person may have: mocap skeletons have 20-70 (150 with every finger
+#: joint); a 200-joint chain compiles in 0.2 s, a 1,000-joint one in 25 s (issue 17, row 1)
+MAX_BODY_JOINTS = 200
+
+
 def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) -> Body:
     """A MuJoCo body of ``mass`` kg from a mocap skeleton (see module docstring)."""
     mass = check_mass(mass)
     if skeleton is None or not skeleton.joints:
         raise BadInput("a human body needs a skeleton with joints")
+    if len(skeleton.joints) > MAX_BODY_JOINTS:
+        raise BadInput(f"skeleton {skeleton.name!r} has {len(skeleton.joints)} joints; a simulated person has at most "
+                       f"{MAX_BODY_JOINTS}", field="skeleton", limit=MAX_BODY_JOINTS)
     sk = skeleton
     from shared.io.conventions import HUMAN_HEIGHT_M
 

@@ -10,6 +10,10 @@ variable                     default                     meaning
 ``MIRRORCOACH_TIMEOUT``      ``120``                     default request timeout of the CLI, seconds
 ``MIRRORCOACH_WORKERS``      ``4``                       requests a service handles at once (more
                                                          threads than cores only fight for the GIL)
+``MIRRORCOACH_QUEUE``        ``256``                     requests a service keeps waiting beyond its
+                                                         workers; more get ``unavailable`` at once
+``MIRRORCOACH_QUEUE_MB``     ``512``                     bytes of waiting requests a service keeps
+                                                         (one request is always taken when idle)
 ===========================  ==========================  ===========================================
 
 The embedded default topology (DESIGN.md "Bus conventions"): one router-mode Zenoh session
@@ -75,11 +79,16 @@ class Settings:
     max_payload: int = field(default_factory=lambda: _env_num("MIRRORCOACH_MAX_PAYLOAD", DEFAULT_MAX_PAYLOAD))
     timeout: float = field(default_factory=lambda: _env_num("MIRRORCOACH_TIMEOUT", 120.0, float))
     workers: int = field(default_factory=lambda: _env_num("MIRRORCOACH_WORKERS", 4))
+    queue: int = field(default_factory=lambda: _env_num("MIRRORCOACH_QUEUE", 256))
+    queue_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_QUEUE_MB", 512.0, float))
 
     def __post_init__(self):
         check_loopback(self.router)
         if not 1 <= self.workers <= 64:
             raise BadInput(f"MIRRORCOACH_WORKERS must be 1..64, got {self.workers}")
+        if not 0 <= self.queue <= 100_000 or not 0 < self.queue_mb <= 1e6:
+            raise BadInput(f"MIRRORCOACH_QUEUE must be 0..100000 and MIRRORCOACH_QUEUE_MB positive, "
+                           f"got {self.queue} and {self.queue_mb}")
         if not re.fullmatch(r"[A-Za-z0-9_-]{1,32}", self.prefix):
             raise BadInput(f"MIRRORCOACH_PREFIX {self.prefix!r} must be 1-32 letters, digits, '_' or '-'")
 

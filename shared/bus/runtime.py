@@ -9,6 +9,9 @@ A :class:`Service` answers the verbs of its contract (``schemas/<service>.py``) 
    request against the contract, calls the handler, validates the reply, and replies on the
    query's concrete key;
 3. any :class:`~shared.errors.MirrorcoachError` becomes ``reply_err`` with its stable code;
+   a request arriving when ``workers + MIRRORCOACH_QUEUE`` requests are in progress or waiting,
+   or when the waiting ones hold ``MIRRORCOACH_QUEUE_MB``, gets ``unavailable`` (cause
+   ``saturated``) at once instead of queueing without bound (issue 17, row 1);
    anything else becomes ``internal`` (logged with its traceback, never shown to the caller);
 4. the query is always finalised (``with query``), so a caller never waits for a timeout.
 
@@ -74,6 +77,7 @@ class Service:
         self._token = None
         self._publishers: dict[str, object] = {}
         self._inflight = 0
+        self._inflight_bytes = 0
         self._inflight_lock = threading.Lock()
         self._client = None
         self._client_lock = threading.Lock()
@@ -167,17 +171,35 @@ class Service:
 
     # ------------------------------------------------------------------ requests
     def _on_query(self, query) -> None:
+        size = len(query.payload) if query.payload is not None else 0
         with self._inflight_lock:
-            self._inflight += 1
+            busy = self._inflight
+            full = busy >= self.workers + self.settings.queue or (
+                busy > 0 and self._inflight_bytes + size > self.settings.queue_mb * 2**20)
+            if not full:
+                self._inflight += 1
+                self._inflight_bytes += size
+        if full:
+            log.warning("saturated: refused a request (%d in progress or waiting)", busy)
+            with query:
+                query.reply_err(error_payload(
+                    "unavailable", f"service {self.name} is saturated: {busy} requests in progress or waiting "
+                    f"(at most {self.workers} at once and {self.settings.queue} waiting); retry later",
+                    {"cause": "saturated", "service": self.name}))
+            return
         try:
-            self._pool.submit(self._serve, query)
+            self._pool.submit(self._serve, query, size)
         except RuntimeError:  # pool shut down: we are stopping
-            with self._inflight_lock:
-                self._inflight -= 1
+            self._done(size)
             with query:
                 query.reply_err(error_payload("unavailable", f"service {self.name} is stopping"))
 
-    def _serve(self, query) -> None:
+    def _done(self, size: int) -> None:
+        with self._inflight_lock:
+            self._inflight -= 1
+            self._inflight_bytes -= size
+
+    def _serve(self, query, size: int = 0) -> None:
         t0 = time.perf_counter()
         verb = str(query.key_expr).rsplit("/", 1)[-1]
         code = "ok"
@@ -194,8 +216,7 @@ class Service:
                     log.error("internal error in %s/%s: %s\n%s", self.name, verb, e, traceback.format_exc())
                     query.reply_err(error_payload("internal", f"{self.name} failed on {verb}: {type(e).__name__}: {e}"))
         finally:
-            with self._inflight_lock:
-                self._inflight -= 1
+            self._done(size)
             ms = 1e3 * (time.perf_counter() - t0)
             log.info("%s %s %.1f ms", verb, code, ms)
             try:

@@ -22,7 +22,7 @@ import numpy as np
 
 from shared.clip import Clip
 from shared.errors import ClipFormatError
-from shared.skeleton import Joint, Skeleton
+from shared.skeleton import MAX_JOINTS, Joint, Skeleton
 
 _BVH_TO_DOF = {
     "xposition": "tx", "yposition": "ty", "zposition": "tz",
@@ -68,7 +68,6 @@ class _Tokens:
 
 
 #: limits of a hierarchy a reader accepts: human rigs with fingers and face bones stay far below
-MAX_JOINTS = 1000
 MAX_DEPTH = 200
 
 
