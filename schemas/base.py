@@ -316,12 +316,16 @@ class Message:
 
 @dataclass
 class Endpoint:
-    """One verb of a service: its request, its reply and what it does."""
+    """One verb of a service: its request, its reply and what it does. ``waits``: the verb
+    may wait for a person (an answer to a question); the service runs it on its pool of
+    waiting requests, so that people thinking never hold the workers every other request
+    needs (issue 17, row 3)."""
 
     verb: str
     request: Message
     reply: Message
     doc: str = ""
+    waits: bool = False
 
 
 def _in_range(value, lo, hi, path: str):

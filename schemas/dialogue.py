@@ -42,6 +42,7 @@ ASK_OPEN = Endpoint(
         "problem": F(Str(max_len=500), "why it was not understood", required=False),
     })),
     "Ask how heavy a motion felt; parse the word into k (Table 3.1).",
+    waits=True,
 )
 
 ASK_COMPARE = Endpoint(
@@ -58,6 +59,7 @@ ASK_COMPARE = Endpoint(
         "problem": F(Str(max_len=500), required=False),
     })),
     "Ask which of two motions felt heavier (eq. 3.11-3.12).",
+    waits=True,
 )
 
 TRANSCRIPT = Endpoint(

@@ -55,6 +55,7 @@ CONVERSE = Endpoint(
         "stopped": F(Str(max_len=1000), "why the conversation stopped early", required=False),
     })),
     "Run conversation sets (eq. 3.2-3.6); each completed set is saved before the next starts.",
+    waits=True,
 )
 
 ESTIMATE_EP = Endpoint(
@@ -89,6 +90,7 @@ IDENTIFY = Endpoint(
         "reason": F(Str(max_len=1000)), "design": F(AnyMap(), "m1-m4 design report (thesis method)", required=False),
     })),
     "Identify the other's conversion rule by comparative questions (3.4).",
+    waits=True,
 )
 
 INFO_EP = Endpoint("info", Message("estimator.info", Map({"estimate": ESTIMATE})), Message("estimator.info.reply", INFO),

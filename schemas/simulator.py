@@ -102,6 +102,7 @@ OTHER_ASK = Endpoint(
         "answer": F(Str(max_len=64), "a word of Table 3.1 (open) or >, <, equal (compare)"),
     })),
     "Ask an other an open or a comparative question about motions it performs with its own body.",
+    waits=True,
 )
 
 QUESTION = Map({"question": F(Str(max_len=64)), "other": OTHER, "kind": F(Str(choices=("open", "compare"))),

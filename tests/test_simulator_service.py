@@ -114,6 +114,44 @@ def test_a_person_answers_in_the_others_seat(simulator_service, client_of):
     assert e.value.code == "unavailable" and "did not answer" in e.value.message
 
 
+def test_questions_to_people_never_hold_the_workers(simulator_service, client_of):
+    """Issue 17, row 3: four questions to a person-other held every simulator worker, and `list`
+    waited 14-29 s. Six questions (more than the four workers) wait for their person while
+    every other verb answers; then the person answers them all."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from shared.bus.client import Client
+    from tests.conftest import settings_of
+
+    env, _ = simulator_service
+    c = client_of(env)
+    c.request("simulator", "other_create", {"other": "carol", "kind": "person", "params": {"d": 4}, "replace": True})
+    events = []
+
+    def ask(i):
+        with Client(settings_of(env)) as c2:
+            r = c2.request("simulator", "other_ask", {"other": "carol", "kind": "open", "text": f"question {i}",
+                                                      "clips": [clip_to_wire(_robot_motion())], "timeout": 120})
+        events.append("answered")
+        return r["answer"]
+
+    with ThreadPoolExecutor(6) as pool:
+        asks = [pool.submit(ask, i) for i in range(6)]
+        deadline = time.monotonic() + 60
+        qs = []
+        while len(qs) < 6 and time.monotonic() < deadline:
+            qs = c.request("simulator", "other_pending", {"other": "carol"}, timeout=30)["questions"]
+            time.sleep(0.05)
+        assert len(qs) == 6, f"{len(qs)} of 6 questions reached the person"
+        assert "carol" in {o["other"] for o in c.request("simulator", "list", timeout=30)["others"]}
+        c.request("simulator", "perform", {"body": "self", "clip": clip_to_wire(_robot_motion())}, timeout=60)
+        events.append("other verbs answered")
+        for q in qs:
+            c.request("simulator", "other_answer", {"question": q["question"], "answer": "heavy"})
+        assert [a.result(timeout=60) for a in asks] == ["heavy"] * 6
+    assert events[0] == "other verbs answered", events
+
+
 def test_bad_simulator_input_gets_clear_errors_and_the_service_stays_up(simulator_service, client_of, squat):
     env, procs = simulator_service
     c = client_of(env)

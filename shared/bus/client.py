@@ -84,19 +84,14 @@ class Client:
         raise self._no_answer(service, verb, timeout, time.monotonic() - t0)
 
     def _router_listens(self) -> bool:
-        """Whether anything accepts connections on the router's endpoint (Zenoh notices a dead
-        router only when its link times out)."""
-        import socket
+        """Whether a new session reaches the router now (this session notices a dead router
+        only when its link times out)."""
+        import zenoh
 
-        from shared.bus.config import parse_endpoint
-
-        proto, host, port = parse_endpoint(self.settings.router)
-        if proto != "tcp":
-            return True
         try:
-            socket.create_connection((host, port), timeout=1.0).close()
+            zenoh.open(client_config(self.settings, wait=False, connect_timeout_s=1.0)).close()
             return True
-        except OSError:
+        except zenoh.ZError:
             return False
 
     def _no_answer(self, service: str, verb: str, timeout: float, waited: float) -> Unavailable:

@@ -14,6 +14,8 @@ variable                     default                     meaning
                                                          workers; more get ``unavailable`` at once
 ``MIRRORCOACH_QUEUE_MB``     ``512``                     bytes of waiting requests a service keeps
                                                          (one request is always taken when idle)
+``MIRRORCOACH_WAITING``      ``32``                      questions to people a service keeps open at
+                                                         once (verbs that wait, on their own pool)
 ===========================  ==========================  ===========================================
 
 The embedded default topology (DESIGN.md "Bus conventions"): one router-mode Zenoh session
@@ -81,11 +83,14 @@ class Settings:
     workers: int = field(default_factory=lambda: _env_num("MIRRORCOACH_WORKERS", 4))
     queue: int = field(default_factory=lambda: _env_num("MIRRORCOACH_QUEUE", 256))
     queue_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_QUEUE_MB", 512.0, float))
+    waiting: int = field(default_factory=lambda: _env_num("MIRRORCOACH_WAITING", 32))
 
     def __post_init__(self):
         check_loopback(self.router)
         if not 1 <= self.workers <= 64:
             raise BadInput(f"MIRRORCOACH_WORKERS must be 1..64, got {self.workers}")
+        if not 1 <= self.waiting <= 1000:
+            raise BadInput(f"MIRRORCOACH_WAITING must be 1..1000, got {self.waiting}")
         if not 0 <= self.queue <= 100_000 or not 0 < self.queue_mb <= 1e6:
             raise BadInput(f"MIRRORCOACH_QUEUE must be 0..100000 and MIRRORCOACH_QUEUE_MB positive, "
                            f"got {self.queue} and {self.queue_mb}")

@@ -11,7 +11,9 @@ A :class:`Service` answers the verbs of its contract (``schemas/<service>.py``) 
 3. any :class:`~shared.errors.MirrorcoachError` becomes ``reply_err`` with its stable code;
    a request arriving when ``workers + MIRRORCOACH_QUEUE`` requests are in progress or waiting,
    or when the waiting ones hold ``MIRRORCOACH_QUEUE_MB``, gets ``unavailable`` (cause
-   ``saturated``) at once instead of queueing without bound (issue 17, row 1);
+   ``saturated``) at once instead of queueing without bound (issue 17, row 1); verbs that may
+   wait for a person (``Endpoint.waits``) run on a pool of their own (``MIRRORCOACH_WAITING``),
+   so questions nobody has answered yet never hold the workers (issue 17, row 3);
    anything else becomes ``internal`` (logged with its traceback, never shown to the caller);
 4. the query is always finalised (``with query``), so a caller never waits for a timeout.
 
@@ -72,12 +74,14 @@ class Service:
         self.stop_grace_s = stop_grace_s
         self._stop = threading.Event()
         self._pool: ThreadPoolExecutor | None = None
+        self._wait_pool: ThreadPoolExecutor | None = None
         self._session = None
         self._queryable = None
         self._token = None
         self._publishers: dict[str, object] = {}
-        self._inflight = 0
+        self._inflight = 0  # on the workers, running or waiting for one
         self._inflight_bytes = 0
+        self._waiting = 0  # verbs that wait for a person, on their own pool
         self._inflight_lock = threading.Lock()
         self._client = None
         self._client_lock = threading.Lock()
@@ -111,6 +115,8 @@ class Service:
         if missing:
             raise RuntimeError(f"service {self.name}: no handler for {sorted(missing)}")
         self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix=f"{self.name}-worker")
+        if any(ep.waits for ep in self.endpoints.values()):
+            self._wait_pool = ThreadPoolExecutor(self.settings.waiting, thread_name_prefix=f"{self.name}-waiting")
         self._session = zenoh.open(client_config(self.settings, wait=True))
         for topic in list(self.events) + ["request"]:
             self._publishers[topic] = self._session.declare_publisher(
@@ -139,9 +145,11 @@ class Service:
             self._queryable = None
         if self._pool is not None:
             deadline = time.monotonic() + self.stop_grace_s
-            while self._inflight and time.monotonic() < deadline:
+            while (self._inflight or self._waiting) and time.monotonic() < deadline:
                 time.sleep(0.05)
             self._pool.shutdown(wait=False, cancel_futures=True)
+            if self._wait_pool is not None:
+                self._wait_pool.shutdown(wait=False, cancel_futures=True)
         for hook in self.on_stop:
             try:
                 hook()
@@ -172,34 +180,45 @@ class Service:
     # ------------------------------------------------------------------ requests
     def _on_query(self, query) -> None:
         size = len(query.payload) if query.payload is not None else 0
+        ep = self.endpoints.get(str(query.key_expr).rsplit("/", 1)[-1])
+        waits = ep is not None and ep.waits
         with self._inflight_lock:
-            busy = self._inflight
-            full = busy >= self.workers + self.settings.queue or (
-                busy > 0 and self._inflight_bytes + size > self.settings.queue_mb * 2**20)
+            if waits:  # a verb that may wait for a person: its own pool, never the workers
+                busy, limit = self._waiting, self.settings.waiting
+                full = busy >= limit
+            else:
+                busy, limit = self._inflight, self.workers + self.settings.queue
+                full = busy >= limit or (busy > 0 and self._inflight_bytes + size > self.settings.queue_mb * 2**20)
             if not full:
-                self._inflight += 1
-                self._inflight_bytes += size
+                if waits:
+                    self._waiting += 1
+                else:
+                    self._inflight += 1
+                    self._inflight_bytes += size
         if full:
             log.warning("saturated: refused a request (%d in progress or waiting)", busy)
+            what = "questions waiting for an answer" if waits else "requests in progress or waiting"
             with query:
                 query.reply_err(error_payload(
-                    "unavailable", f"service {self.name} is saturated: {busy} requests in progress or waiting "
-                    f"(at most {self.workers} at once and {self.settings.queue} waiting); retry later",
+                    "unavailable", f"service {self.name} is saturated: {busy} {what} (at most {limit}); retry later",
                     {"cause": "saturated", "service": self.name}))
             return
         try:
-            self._pool.submit(self._serve, query, size)
+            (self._wait_pool if waits else self._pool).submit(self._serve, query, size, waits)
         except RuntimeError:  # pool shut down: we are stopping
-            self._done(size)
+            self._done(size, waits)
             with query:
                 query.reply_err(error_payload("unavailable", f"service {self.name} is stopping"))
 
-    def _done(self, size: int) -> None:
+    def _done(self, size: int, waits: bool) -> None:
         with self._inflight_lock:
-            self._inflight -= 1
-            self._inflight_bytes -= size
+            if waits:
+                self._waiting -= 1
+            else:
+                self._inflight -= 1
+                self._inflight_bytes -= size
 
-    def _serve(self, query, size: int = 0) -> None:
+    def _serve(self, query, size: int = 0, waits: bool = False) -> None:
         t0 = time.perf_counter()
         verb = str(query.key_expr).rsplit("/", 1)[-1]
         code = "ok"
@@ -216,7 +235,7 @@ class Service:
                     log.error("internal error in %s/%s: %s\n%s", self.name, verb, e, traceback.format_exc())
                     query.reply_err(error_payload("internal", f"{self.name} failed on {verb}: {type(e).__name__}: {e}"))
         finally:
-            self._done(size)
+            self._done(size, waits)
             ms = 1e3 * (time.perf_counter() - t0)
             log.info("%s %s %.1f ms", verb, code, ms)
             try:
