@@ -139,3 +139,39 @@ def test_killing_the_coach_mid_session_loses_no_completed_trial(coach_services, 
     assert len(state["trials"]) >= reported
     r = c.request("coach", "run", {"session": "k", "trials": 1})  # and it goes on
     assert len(r["trials"]) == len(state["trials"]) + 1
+
+
+def test_sessions_never_take_what_is_anothers(coach_services, client_of, clips):
+    """Issue 17, row 6: a second session with the same learner name reset the first one's
+    learner, and `coach start --session mine` replaced the user's own space `coach-mine`."""
+    from shared.bus.client import RemoteError
+
+    env, procs = coach_services
+    c = client_of(env)
+    squat, other, kick = clips
+    c.request("coach", "start", {"session": "first", "target": clip_to_wire(squat), "learner": "lena", "replace": True})
+    c.request("coach", "run", {"session": "first"})
+    learners = lambda: {x["learner"]: x["trials"] for x in c.request("simulator", "list")["learners"]}  # noqa: E731
+    before, trained = c.request("coach", "state", {"session": "first"}), learners()["lena"]
+    c.request("pss", "build", {"space": "coach-mine", "clips": [clip_to_wire(kick)], "replace": True})
+    files = state_files(env)
+    with pytest.raises(RemoteError) as e:
+        c.request("coach", "start", {"session": "second", "target": clip_to_wire(squat), "learner": "lena"})
+    assert e.value.code == "conflict" and "'first'" in e.value.message, e.value.message
+    with pytest.raises(RemoteError) as e:
+        c.request("coach", "start", {"session": "mine", "target": clip_to_wire(squat)})
+    assert e.value.code == "conflict" and "coach-mine" in e.value.message, e.value.message
+    c.request("simulator", "learner_create", {"learner": "solo", "target": clip_to_wire(squat), "replace": True})
+    with pytest.raises(RemoteError) as e:
+        c.request("coach", "start", {"session": "third", "target": clip_to_wire(squat), "learner": "solo"})
+    assert e.value.code == "conflict" and "solo" in e.value.message, e.value.message
+    c.request("simulator", "delete", {"learner": "solo"})
+    assert state_files(env) == {k: v for k, v in files.items() if "solo" not in k}
+    assert c.request("coach", "state", {"session": "first"}) == before and learners()["lena"] == trained
+    # replacing one's own session keeps its name, space and learner; deleting it frees them
+    c.request("coach", "start", {"session": "first", "target": clip_to_wire(squat), "learner": "lena", "replace": True})
+    c.request("coach", "delete", {"session": "first"})
+    assert "lena" not in learners()
+    assert "coach-first" not in {x["space"] for x in c.request("pss", "list")["spaces"]}
+    c.request("coach", "start", {"session": "second", "target": clip_to_wire(squat), "learner": "lena"})
+    c.request("coach", "delete", {"session": "second"})

@@ -122,6 +122,31 @@ def make_service(settings: Settings | None = None) -> Service:
                               "emphatic": clip_to_wire(demo, False)})
         return rec, demo
 
+    def learner_of(session_file: Path) -> str | None:
+        try:
+            return json.loads(session_file.read_text()).get("learner")
+        except (OSError, ValueError, AttributeError):  # unreadable: it owns nothing we can name
+            return None
+
+    def check_owned(s: Session, replacing: bool) -> None:
+        """A session never takes what is another's (issue 17, row 6): its learner must not be
+        learning in another session, and a new session's space ``coach-<session>`` and learner
+        must not already exist (a user's own space or learner would be replaced)."""
+        if s.learner:
+            owner = next((p.stem for p in sorted(root.glob("*.json"))
+                          if p.stem != s.name and learner_of(p) == s.learner), None)
+            if owner is not None:
+                raise Conflict(f"learner {s.learner!r} is learning in session {owner!r}; give this session another "
+                               f"learner name, or delete session {owner!r} first", learner=s.learner, session=owner)
+        if replacing:
+            return
+        if s.space in {x["space"] for x in bus().request("pss", "list", {}, timeout=30)["spaces"]}:
+            raise Conflict(f"a space named {s.space!r} exists and is not this coach's; session {s.name!r} would "
+                           f"replace it: choose another session name, or delete that space", space=s.space)
+        if s.learner and s.learner in {x["learner"] for x in bus().request("simulator", "list", {}, timeout=30)["learners"]}:
+            raise Conflict(f"a learner named {s.learner!r} exists in the simulator and belongs to no session; "
+                           f"choose another learner name, or delete it (`mirrorcoach learner delete`)", learner=s.learner)
+
     @svc.handler("start")
     def start_session(req):
         name = req["session"]
@@ -143,6 +168,7 @@ def make_service(settings: Settings | None = None) -> Service:
             raise BadInput(f"the target has {target.n_frames} frames at 30 fps; at least 10", field="target")
         policy = Policy.from_dict(req["policy"])
         s = Session(name, target, policy, req["learner"], mode=req["mode"], check=req["check"])
+        check_owned(s, replacing=meta.exists())
         with writing(name):
             for p in (meta, paths(name)[1], root / f"{name}.last.npz"):
                 p.unlink(missing_ok=True)
@@ -245,13 +271,17 @@ def make_service(settings: Settings | None = None) -> Service:
             meta, target = paths(name)
             if not meta.exists():
                 raise NotFound(f"no coaching session {name!r}", session=name)
+            learner = learner_of(meta)
             meta.unlink()
             target.unlink(missing_ok=True)
             (root / f"{name}.last.npz").unlink(missing_ok=True)
-        try:
-            bus().request("pss", "delete", {"space": f"coach-{name}"}, timeout=30)
-        except RemoteError:
-            pass
+        for service, what in (("pss", {"space": f"coach-{name}"}), ("simulator", {"learner": learner})):
+            if None in what.values():
+                continue
+            try:  # the session's space and learner are its own: they go with it
+                bus().request(service, "delete", what, timeout=30)
+            except RemoteError:
+                pass
         return {"session": name, "deleted": True}
 
     return svc

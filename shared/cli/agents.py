@@ -217,6 +217,14 @@ def learner_imitate(name: str = typer.Argument(...), demonstration: Path = typer
     typer.echo(f"trial {r['trial']}: wrote {len(r['attempts'])} attempts to {out}")
 
 
+@learner_app.command("delete")
+def learner_delete(name: str = typer.Argument(...)):
+    """Delete a simulated learner (a coaching session's learner goes with `coach delete`)."""
+    with _client() as c:
+        c.request("simulator", "delete", {"learner": name})
+    typer.echo(f"deleted learner {name}")
+
+
 # ---------------------------------------------------------------------------- dialogue and estimator
 dialogue_app = typer.Typer(help="Questions to others and their transcripts (dialogue service).", no_args_is_help=True)
 estimator_app = typer.Typer(help="Estimating what an other feels (estimator service, thesis ch. 3).", no_args_is_help=True)
