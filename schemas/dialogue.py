@@ -65,7 +65,10 @@ ASK_COMPARE = Endpoint(
 TRANSCRIPT = Endpoint(
     "transcript",
     Message("dialogue.transcript", Map({"dialogue": DIALOGUE})),
-    Message("dialogue.transcript.reply", Map({"dialogue": DIALOGUE, "lines": F(List(LINE, max_len=100_000))})),
+    Message("dialogue.transcript.reply", Map({
+        "dialogue": DIALOGUE, "lines": F(List(LINE, max_len=100_000)),
+        "damaged": F(Int(0), "lines that could not be read (a write cut short by a kill), left out", required=False,
+                     default=0)})),
     "Every line of a dialogue, in order.",
 )
 

@@ -2,14 +2,13 @@
 answers into symbols (contract: ``schemas/dialogue.py``).
 
 Wording, parsing and the symbol tables are ``shared.symbols``; transcripts are JSON lines in
-``$MIRRORCOACH_HOME/data/dialogue/<dialogue>.jsonl`` (appended and fsynced line by line), each
+``$MIRRORCOACH_HOME/data/dialogue/<dialogue>.jsonl`` (appended all or nothing and fsynced line by line; a line a full disk cut short is removed), each
 line also published as an event.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import threading
 import time
 
@@ -18,6 +17,7 @@ from shared.bus.client import RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
 from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.io.atomic import append_line, read_lines
 from shared.symbols import WORDS, index_of, parse_answer
 
 #: the simulator's refusals: the question was never put to the other
@@ -35,17 +35,18 @@ def make_service(settings: Settings | None = None) -> Service:
     lock = threading.Lock()
     bus = svc.client
 
-    def write(line: dict) -> dict:
-        line = {"t": time.time(), **line}  # a line that carries its own time keeps it
-        contract.EVENTS["transcript"].validate(line)
-        with lock, open(root / f"{line['dialogue']}.jsonl", "a") as f:
-            f.write(json.dumps(line) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        svc.publish("transcript", line)
-        return line
+    def write(*lines: dict) -> None:
+        """Append a question and its answer (or note) together, all or nothing: a full disk leaves
+        neither half a line nor a question without its answer (issue 17, row 9)."""
+        lines = [{"t": time.time(), **x} for x in lines]  # a line that carries its own time keeps it
+        for x in lines:
+            contract.EVENTS["transcript"].validate(x)
+        with lock:
+            append_line(root / f"{lines[0]['dialogue']}.jsonl", "\n".join(json.dumps(x) for x in lines))
+        for x in lines:
+            svc.publish("transcript", x)
 
-    def ask(req, kind: str, question: str, clips: list, d: int) -> tuple[str, str | None, str | None]:
+    def ask(req, kind: str, question: str, clips: list, d: int) -> tuple[dict, str, str | None, str | None]:
         asked = {"t": time.time(), "dialogue": req["dialogue"], "speaker": "self", "kind": "question", "text": question}
         try:
             r = bus().request("simulator", "other_ask", {"other": req["other"], "kind": kind, "clips": clips,
@@ -54,31 +55,30 @@ def make_service(settings: Settings | None = None) -> Service:
         except MirrorcoachError as e:
             if isinstance(e, RemoteError) and e.code in REFUSED:  # never put (no such other, a bad clip): no line
                 raise
-            write(asked)  # put and not answered (timeout, the simulator down): the transcript says so
-            write({"dialogue": req["dialogue"], "speaker": "self", "kind": "note", "text": f"no answer: {e.message}"})
+            # put and not answered (timeout, the simulator down): the transcript says so
+            write(asked, {"dialogue": req["dialogue"], "speaker": "self", "kind": "note", "text": f"no answer: {e.message}"})
             raise
-        write(asked)
         raw = r["answer"]
         try:
-            return raw, parse_answer(raw, kind, d), None
+            return asked, raw, parse_answer(raw, kind, d), None
         except BadInput as e:
-            return raw, None, e.message
+            return asked, raw, None, e.message
 
     @svc.handler("ask_open")
     def ask_open(req):
         if req["d"] not in WORDS:
             raise BadInput(f"density d must be one of {sorted(WORDS)}, got {req['d']}", field="d")
-        raw, word, problem = ask(req, "open", OPEN_QUESTION, [req["clip"]], req["d"])
+        asked, raw, word, problem = ask(req, "open", OPEN_QUESTION, [req["clip"]], req["d"])
         k = None if word is None else index_of(word, req["d"])
-        write({"dialogue": req["dialogue"], "speaker": req["other"], "kind": "answer", "text": raw,
+        write(asked, {"dialogue": req["dialogue"], "speaker": req["other"], "kind": "answer", "text": raw,
                "understood": word is not None, **({"k": k} if k else {})})
         return {"dialogue": req["dialogue"], "question": OPEN_QUESTION, "understood": word is not None, "raw": raw,
                 "word": word, "k": k, "problem": problem}
 
     @svc.handler("ask_compare")
     def ask_compare(req):
-        raw, answer, problem = ask(req, "compare", COMPARE_QUESTION, req["clips"], 4)
-        write({"dialogue": req["dialogue"], "speaker": req["other"], "kind": "answer", "text": raw,
+        asked, raw, answer, problem = ask(req, "compare", COMPARE_QUESTION, req["clips"], 4)
+        write(asked, {"dialogue": req["dialogue"], "speaker": req["other"], "kind": "answer", "text": raw,
                "understood": answer is not None, **({"answer": answer} if answer else {})})
         return {"dialogue": req["dialogue"], "question": COMPARE_QUESTION, "understood": answer is not None,
                 "raw": raw, "answer": answer, "problem": problem}
@@ -89,8 +89,14 @@ def make_service(settings: Settings | None = None) -> Service:
         if not p.exists():
             raise NotFound(f"no dialogue {req['dialogue']!r}", dialogue=req["dialogue"])
         with lock:
-            lines = [json.loads(x) for x in p.read_text().splitlines() if x.strip()]
-        return {"dialogue": req["dialogue"], "lines": lines}
+            raw, damaged = read_lines(p)
+        lines = []
+        for x in raw:  # a line that cannot be read (an older version's torn write) is counted, never fatal
+            try:
+                lines.append(contract.EVENTS["transcript"].validate(json.loads(x)))
+            except (ValueError, BadInput):
+                damaged += 1
+        return {"dialogue": req["dialogue"], "lines": lines, "damaged": damaged}
 
     @svc.handler("words")
     def words(req):
@@ -101,7 +107,7 @@ def make_service(settings: Settings | None = None) -> Service:
     @svc.handler("list")
     def list_dialogues(req):
         with lock:
-            return {"dialogues": [{"dialogue": p.stem, "lines": sum(1 for _ in open(p))}
+            return {"dialogues": [{"dialogue": p.stem, "lines": len(read_lines(p)[0])}
                                   for p in sorted(root.glob("*.jsonl"))]}
 
     return svc

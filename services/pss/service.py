@@ -41,12 +41,8 @@ def make_service(settings: Settings | None = None) -> Service:
                               **({} if space is None else {"info": space_info(name, space)})})
 
     def write(name, operation, make):
-        with store.writing(name, operation):
-            try:
-                space = make()
-            except BaseException:
-                store.abandon(name)  # nothing changed; a kill (not an exception) leaves the marker
-                raise
+        with store.writing(name, operation):  # a kill (not an exception) leaves the marker
+            space = make()
             store.commit(name, space)
         return space
 

@@ -56,13 +56,30 @@ class AgentStore:
         self.others: dict[str, tuple[str, object]] = {}
         self.learners: dict[str, SimulatedLearner] = {}
         for p in sorted((self.root / "others").glob("*.json")):
-            d = json.loads(p.read_text())
-            kind = d.get("kind", "simulated")
-            obj = SimulatedOther.from_dict(d) if kind == "simulated" else PersonOther(d["name"], int(d["params"]["d"]))
-            obj.asked = int(d.get("asked", 0))
-            self.others[p.stem] = (kind, obj)
+            self.others[p.stem] = self._load_other(p)
         for p in sorted((self.root / "learners").glob("*.npz")):
             self.learners[p.stem] = self._load_learner(p)
+
+    @staticmethod
+    def _load_other(path: Path) -> tuple[str, object]:
+        d = json.loads(path.read_text())
+        kind = d.get("kind", "simulated")
+        obj = SimulatedOther.from_dict(d) if kind == "simulated" else PersonOther(d["name"], int(d["params"]["d"]))
+        obj.asked = int(d.get("asked", 0))
+        return kind, obj
+
+    def _saving(self, table: dict, name: str, path: Path, load, write) -> None:
+        """Write ``table[name]`` to ``path``; when the write fails (a full disk), put back what is on
+        disk, so memory never runs ahead of the files (an other's noise, a learner's memory)."""
+        try:
+            atomic_write(path, write)
+        except OSError:
+            with self.lock:
+                if path.exists():
+                    table[name] = load(path)
+                else:
+                    table.pop(name, None)
+            raise
 
     # ------------------------------------------------------------------ others
     def add_other(self, name: str, kind: str, params: dict, replace: bool = False):
@@ -87,7 +104,8 @@ class AgentStore:
     def save_other(self, name: str) -> None:
         kind, obj = self.others[name]
         text = json.dumps({"kind": kind, **obj.to_dict()}).encode()
-        atomic_write(self.root / "others" / f"{_check(name)}.json", lambda f: f.write(text))
+        self._saving(self.others, name, self.root / "others" / f"{_check(name)}.json", self._load_other,
+                     lambda f: f.write(text))
 
     # ------------------------------------------------------------------ learners
     def add_learner(self, name: str, learner: SimulatedLearner, replace: bool = False) -> None:
@@ -114,7 +132,8 @@ class AgentStore:
         arrays = {"target": t.data, "memory": lr.memory, "header": np.array(json.dumps(header))}
         if lr.reference is not None:
             arrays["reference"] = lr.reference
-        atomic_write(self.root / "learners" / f"{_check(name)}.npz", lambda f: np.savez(f, **arrays))
+        self._saving(self.learners, name, self.root / "learners" / f"{_check(name)}.npz", self._load_learner,
+                     lambda f: np.savez(f, **arrays))
 
     @staticmethod
     def _load_learner(path: Path) -> SimulatedLearner:

@@ -14,7 +14,7 @@ A :class:`Service` answers the verbs of its contract (``schemas/<service>.py``) 
    ``saturated``) at once instead of queueing without bound (issue 17, row 1); verbs that may
    wait for a person (``Endpoint.waits``) run on a pool of their own (``MIRRORCOACH_WAITING``),
    so questions nobody has answered yet never hold the workers (issue 17, row 3);
-   anything else becomes ``internal`` (logged with its traceback, never shown to the caller);
+   a full disk (``ENOSPC``) becomes ``unavailable`` (cause ``disk_full``); anything else becomes ``internal`` (logged with its traceback, never shown to the caller);
 4. the query is always finalised (``with query``), so a caller never waits for a timeout.
 
 The service declares the liveliness token ``<prefix>/alive/<service>``, publishes events on
@@ -38,6 +38,7 @@ from schemas.base import Endpoint, Message
 from shared.bus.config import Settings, client_config
 from shared.codec import pack, unpack
 from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
+from shared.io.atomic import DISK_FULL
 
 log = logging.getLogger("mirrorcoach.service")
 
@@ -230,8 +231,16 @@ class Service:
                 except MirrorcoachError as e:
                     code = e.code
                     query.reply_err(error_payload(e.code, e.message, e.details))
-                except Exception as e:  # a bug: log it, tell the caller without a traceback
-                    code = "internal"
+                except Exception as e:
+                    if isinstance(e, OSError) and e.errno in DISK_FULL:  # not a bug, not the caller's (issue 17, row 9)
+                        code = "unavailable"
+                        log.error("%s/%s: the disk is full: %s", self.name, verb, e)
+                        query.reply_err(error_payload(
+                            "unavailable", f"service {self.name} could not write: the disk is full ({e.strerror}); "
+                            f"the request was not completed; free some space and retry",
+                            {"cause": "disk_full", "service": self.name}))
+                        return
+                    code = "internal"  # a bug: log it, tell the caller without a traceback
                     log.error("internal error in %s/%s: %s\n%s", self.name, verb, e, traceback.format_exc())
                     query.reply_err(error_payload("internal", f"{self.name} failed on {verb}: {type(e).__name__}: {e}"))
         finally:

@@ -3,7 +3,8 @@
 Every space is one ``<name>.npz`` in the store's folder, written atomically (temporary file,
 fsync, rename) by :meth:`ProtoSymbolSpace.save`, so a crash at any moment leaves either the
 old file or the new one. A build or add first writes ``<name>.pending.json``; the marker is
-removed once the new space is on disk. A marker found when the store opens belongs to an
+removed once the new space is on disk, or at once when the operation fails or is refused (the
+old file is intact). A marker found when the store opens belongs to an
 operation the previous process never finished: :meth:`interrupted` reports it until the space
 is built again or deleted.
 
@@ -23,6 +24,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from shared.errors import BadInput, Conflict, NotFound
+from shared.io.atomic import atomic_write
 from shared.pss.space import ProtoSymbolSpace
 
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
@@ -46,6 +48,9 @@ class SpaceStore:
         self._lock = threading.Lock()
         for tmp in self.root.glob(".*.npz.*"):  # half-written temporary files of a killed process
             tmp.unlink(missing_ok=True)
+        for m in self.root.glob("*.pending.json"):  # a marker an older version could not finish writing
+            if m.stat().st_size == 0:  # (a full disk): written before any work, so no operation began
+                m.unlink(missing_ok=True)
 
     # ------------------------------------------------------------------ paths
     def path(self, name: str) -> Path:
@@ -100,8 +105,13 @@ class SpaceStore:
             self._busy.add(name)
         marker = self._marker(name)
         try:
-            marker.write_text(json.dumps({"operation": operation, "started": time.time(), "pid": os.getpid()}))
-            yield
+            record = json.dumps({"operation": operation, "started": time.time(), "pid": os.getpid()}).encode()
+            atomic_write(marker, lambda f: f.write(record))  # never an empty marker, even on a full disk
+            try:
+                yield
+            except BaseException:  # refused or failed (a full disk): the old space is intact, nothing to report
+                marker.unlink(missing_ok=True)
+                raise
         finally:
             with self._lock:
                 self._busy.discard(name)
@@ -112,10 +122,6 @@ class SpaceStore:
         space.save(self.path(name))
         with self._lock:
             self._cache[name] = space
-        self._marker(name).unlink(missing_ok=True)
-
-    def abandon(self, name: str) -> None:
-        """A write that failed cleanly (bad input): nothing changed, the marker goes."""
         self._marker(name).unlink(missing_ok=True)
 
     def delete(self, name: str) -> bool:
