@@ -319,13 +319,16 @@ class Endpoint:
     """One verb of a service: its request, its reply and what it does. ``waits``: the verb
     may wait for a person (an answer to a question); the service runs it on its pool of
     waiting requests, so that people thinking never hold the workers every other request
-    needs (issue 17, row 3)."""
+    needs (issue 17, row 3). ``time_limit_s``: the request stops at a safe point past this
+    (``unavailable``, cause ``time_limit``; ``shared.deadline``); verbs that wait for a person are
+    bounded by their own ``timeout`` instead."""
 
     verb: str
     request: Message
     reply: Message
     doc: str = ""
     waits: bool = False
+    time_limit_s: float = 600.0
 
 
 def _in_range(value, lo, hi, path: str):

@@ -218,44 +218,55 @@ def kill_during(env: dict, procs: "Processes", service: str, module: str, reques
     return errors[0] if errors else None
 
 
-def _serve(tmp_path_factory, services: dict[str, str], **env_extra):
+def running(env: dict, *services: str):
+    """A router and ``services`` (names under ``services/``) as real processes of ``env``, alive;
+    use as ``with running(env, "pss") as procs:`` (stopped at the end)."""
+    from contextlib import contextmanager
+
+    @contextmanager
+    def run():
+        procs = Processes(env)
+        procs.start("router", "shared.bus.router")
+        for name in services:
+            procs.start(name, f"services.{name}")
+        try:
+            procs.wait_alive(set(services))
+            yield procs
+        finally:
+            procs.stop()
+
+    return run()
+
+
+def _serve(tmp_path_factory, *services: str, **env_extra):
     env = cluster_env(tmp_path_factory.mktemp("home"), **env_extra)
-    procs = Processes(env)
-    procs.start("router", "shared.bus.router")
-    for name, module in services.items():
-        procs.start(name, module)
-    try:
-        procs.wait_alive(set(services))
+    with running(env, *services) as procs:
         yield env, procs
-    finally:
-        procs.stop()
 
 
 @pytest.fixture(scope="module")
 def pss_service(tmp_path_factory):
     """A real router and a real pss service process on a free loopback port; yields
     (env, Processes). The payload limit is 8 MB so the over-size case is cheap to send."""
-    yield from _serve(tmp_path_factory, {"pss": "services.pss"}, MIRRORCOACH_MAX_PAYLOAD=8_000_000)
+    yield from _serve(tmp_path_factory, "pss", MIRRORCOACH_MAX_PAYLOAD=8_000_000)
 
 
 @pytest.fixture(scope="module")
 def simulator_service(tmp_path_factory):
     """A real router and a real simulator service process; yields (env, Processes)."""
-    yield from _serve(tmp_path_factory, {"simulator": "services.simulator"})
+    yield from _serve(tmp_path_factory, "simulator")
 
 
 @pytest.fixture(scope="module")
 def chapter3_services(tmp_path_factory):
     """Router, pss, simulator, dialogue and estimator as real processes; yields (env, Processes)."""
-    yield from _serve(tmp_path_factory, {"pss": "services.pss", "simulator": "services.simulator",
-                                         "dialogue": "services.dialogue", "estimator": "services.estimator"})
+    yield from _serve(tmp_path_factory, "pss", "simulator", "dialogue", "estimator")
 
 
 @pytest.fixture(scope="module")
 def coach_services(tmp_path_factory):
     """Router, pss, simulator and coach as real processes; yields (env, Processes)."""
-    yield from _serve(tmp_path_factory, {"pss": "services.pss", "simulator": "services.simulator",
-                                         "coach": "services.coach"})
+    yield from _serve(tmp_path_factory, "pss", "simulator", "coach")
 
 
 @pytest.fixture

@@ -328,7 +328,7 @@ def test_a_saturated_service_answers_unavailable_at_once(tmp_path_factory, dev_s
     from shared.bus.client import Client, RemoteError
     from tests.conftest import _serve, settings_of
 
-    serve = _serve(tmp_path_factory, {"pss": "services.pss"}, MIRRORCOACH_WORKERS=1, MIRRORCOACH_QUEUE=2)
+    serve = _serve(tmp_path_factory, "pss", MIRRORCOACH_WORKERS=1, MIRRORCOACH_QUEUE=2)
     env, procs = next(serve)
     try:
         big = [clip_to_wire(x.resample(30)) for x in dev_split[0][::3]]  # full covariances: a build of seconds

@@ -2,7 +2,9 @@
 (``shared.observe.dashboard``). It answers no requests; it declares the liveliness token
 ``<prefix>/alive/observer`` so ``make up`` waits for it and ``status`` lists it.
 
-Recording: ``$MIRRORCOACH_HOME/recordings/<time>.rrd`` (``latest.rrd`` points to it). With
+Recording: ``$MIRRORCOACH_HOME/recordings/<time>.rrd`` (``latest.rrd`` points to it); past
+``MIRRORCOACH_RECORDING_MB`` it goes on in a new file, and only the newest ``MIRRORCOACH_RECORDINGS``
+are kept. With
 ``MIRRORCOACH_RERUN_URL`` (e.g. ``rerun+http://127.0.0.1:9876/proxy``) it also streams live to
 a viewer the user started; it never binds a port itself. The Zenoh callback only queues the
 sample; one worker thread decodes and logs, so a slow disk never stalls the bus.
@@ -16,14 +18,19 @@ import queue
 import signal
 import threading
 import time
+from collections import OrderedDict
 
 from schemas import CONTRACTS
 from schemas.common import clip_from_wire
-from shared.bus.config import Settings, client_config
+from shared.bus.config import Settings, _env_num, client_config
 from shared.codec import unpack
 from shared.errors import BadInput, MirrorcoachError
 
 log = logging.getLogger("mirrorcoach.observer")
+
+#: MiB of events waiting to be drawn (``MIRRORCOACH_OBSERVER_QUEUE_MB``); more are dropped (counted
+#: and logged), never queued without bound
+MAX_QUEUED_MB = 256.0
 
 
 class Observer:
@@ -33,15 +40,58 @@ class Observer:
         self.stop = threading.Event()
         self.count = 0
         self.refused = 0
+        self.spaces: OrderedDict[str, dict] = OrderedDict()
+        self.queued_bytes, self.dropped = 0, 0
+        self.max_queued = _env_num("MIRRORCOACH_OBSERVER_QUEUE_MB", MAX_QUEUED_MB, float) * 2**20
+        self.queued_lock = threading.Lock()
+
+    def enqueue(self, sample) -> None:
+        """The Zenoh callback: queue the event for the drawing thread. Events waiting beyond
+        ``MIRRORCOACH_OBSERVER_QUEUE_MB`` (the observer far behind a burst) are dropped and counted, so the
+        observer's memory stays bounded; the services never wait for it."""
+        payload = sample.payload.to_bytes()
+        with self.queued_lock:
+            if self.queued_bytes + len(payload) > self.max_queued:
+                self.dropped += 1
+                if self.dropped == 1 or self.dropped % 1000 == 0:
+                    log.warning("behind: %d event(s) dropped so far (more than %g MiB waiting)", self.dropped,
+                                self.max_queued / 2**20)
+                return
+            self.queued_bytes += len(payload)
+        self.q.put((str(sample.key_expr), payload))
 
     def recording_path(self):
+        """A new recording file; ``latest.rrd`` points to it and only the newest
+        ``MIRRORCOACH_RECORDINGS`` are kept (issue 17, row 16)."""
         d = self.s.home / "recordings"
         d.mkdir(parents=True, exist_ok=True)
-        path = d / time.strftime("%Y%m%d-%H%M%S.rrd")
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        path, n = d / f"{stamp}.rrd", 1
+        while path.exists():
+            path, n = d / f"{stamp}-{n}.rrd", n + 1
+        path.touch()
         latest = d / "latest.rrd"
         latest.unlink(missing_ok=True)
         latest.symlink_to(path.name)
+        old = sorted((p for p in d.glob("2*.rrd") if p != path), key=lambda p: (p.stat().st_mtime, p.name))
+        for p in old[: max(0, len(old) - (self.s.recordings - 1))]:
+            p.unlink(missing_ok=True)
+            log.info("deleted the old recording %s (MIRRORCOACH_RECORDINGS=%d)", p.name, self.s.recordings)
         return path
+
+    def rotate(self, dash, path):
+        """Past ``MIRRORCOACH_RECORDING_MB``: go on in a new recording that starts with what is
+        still true (each session's target and path, each space's proto-symbols)."""
+        from shared.observe.dashboard import Dashboard
+
+        new_path = self.recording_path()
+        new = Dashboard(new_path, os.environ.get("MIRRORCOACH_RERUN_URL") or None)
+        dash.close()
+        new.continue_from(dash)
+        for ev in self.spaces.values():
+            new.space(ev)
+        log.info("recording %s passed %g MB; recording to %s", path.name, self.s.recording_mb, new_path.name)
+        return new, new_path
 
     def handle(self, dash, key: str, payload: bytes) -> None:
         parts = key.split("/")
@@ -59,6 +109,11 @@ class Observer:
                        clip_from_wire(ev["emphatic"]) if ev.get("emphatic") else None)
         elif service == "pss" and topic == "space":
             dash.space(ev)
+            self.spaces.pop(ev["space"], None)  # the latest state of each space, for the next recording
+            if ev["change"] != "deleted" and ev.get("info"):
+                self.spaces[ev["space"]] = ev
+                while len(self.spaces) > 1000:
+                    self.spaces.popitem(last=False)
         elif service == "estimator" and topic == "progress":
             dash.progress(ev)
         elif service == "dialogue" and topic == "transcript":
@@ -76,16 +131,22 @@ class Observer:
         path = self.recording_path()
         dash = Dashboard(path, os.environ.get("MIRRORCOACH_RERUN_URL") or None)
         session = zenoh.open(client_config(self.s, wait=True))
-        sub = session.declare_subscriber(self.s.key("events", "**"),
-                                         lambda sample: self.q.put((str(sample.key_expr), sample.payload.to_bytes())))
+        sub = session.declare_subscriber(self.s.key("events", "**"), self.enqueue)
         token = session.liveliness().declare_token(self.s.key("alive", "observer"))
         log.info("observer up; recording to %s", path)
+        limit, next_check = self.s.recording_mb * 2**20, 0.0
         try:
             while not (self.stop.is_set() and self.q.empty()):
+                if time.monotonic() >= next_check:  # the file's size, once a second
+                    next_check = time.monotonic() + 1.0
+                    if path.exists() and path.stat().st_size > limit:
+                        dash, path = self.rotate(dash, path)
                 try:
                     key, payload = self.q.get(timeout=0.2)
                 except queue.Empty:
                     continue
+                with self.queued_lock:
+                    self.queued_bytes -= len(payload)
                 try:
                     self.handle(dash, key, payload)
                     self.count += 1
@@ -100,5 +161,6 @@ class Observer:
             token.undeclare()
             session.close()
             dash.close()
-            log.info("observer stopped after %d events (%d refused); recording %s", self.count, self.refused, path)
+            log.info("observer stopped after %d events (%d refused); %d dropped while behind; recording %s",
+                     self.count, self.refused, self.dropped, path)
         return 0

@@ -1,22 +1,28 @@
 """Where the cluster lives: endpoints, key prefix, data folder, limits (environment variables).
 
-===========================  ==========================  ===========================================
-variable                     default                     meaning
-===========================  ==========================  ===========================================
-``MIRRORCOACH_ROUTER``       ``tcp/127.0.0.1:7447``      the router's endpoint (loopback only)
-``MIRRORCOACH_PREFIX``       ``mc``                      first segment of every key
-``MIRRORCOACH_HOME``         ``./var``                   data (``data/<service>``), logs, pid files
-``MIRRORCOACH_MAX_PAYLOAD``  ``67108864`` (64 MiB)       largest request a service accepts, bytes
-``MIRRORCOACH_TIMEOUT``      ``120``                     default request timeout of the CLI, seconds
-``MIRRORCOACH_WORKERS``      ``4``                       requests a service handles at once (more
-                                                         threads than cores only fight for the GIL)
-``MIRRORCOACH_QUEUE``        ``256``                     requests a service keeps waiting beyond its
-                                                         workers; more get ``unavailable`` at once
-``MIRRORCOACH_QUEUE_MB``     ``512``                     bytes of waiting requests a service keeps
-                                                         (one request is always taken when idle)
-``MIRRORCOACH_WAITING``      ``32``                      questions to people a service keeps open at
-                                                         once (verbs that wait, on their own pool)
-===========================  ==========================  ===========================================
+============================  ==========================  ===========================================
+variable                      default                     meaning
+============================  ==========================  ===========================================
+``MIRRORCOACH_ROUTER``        ``tcp/127.0.0.1:7447``      the router's endpoint (loopback only)
+``MIRRORCOACH_PREFIX``        ``mc``                      first segment of every key
+``MIRRORCOACH_HOME``          ``./var``                   data (``data/<service>``), logs, pid files
+``MIRRORCOACH_MAX_PAYLOAD``   ``67108864`` (64 MiB)       largest request a service accepts, bytes
+``MIRRORCOACH_TIMEOUT``       ``120``                     default request timeout of the CLI, seconds
+``MIRRORCOACH_WORKERS``       ``4``                       requests a service handles at once (more
+                                                          threads than cores only fight for the GIL)
+``MIRRORCOACH_QUEUE``         ``256``                     requests a service keeps waiting beyond its
+                                                          workers; more get ``unavailable`` at once
+``MIRRORCOACH_QUEUE_MB``      ``512``                     bytes of waiting requests a service keeps
+                                                          (one request is always taken when idle)
+``MIRRORCOACH_WAITING``       ``32``                      questions to people a service keeps open at
+                                                          once (verbs that wait, on their own pool)
+``MIRRORCOACH_TIME_LIMIT``    ``600``                     seconds any request may run (each verb declares
+                                                          its own limit, at most this); past it the
+                                                          request stops at a safe point: ``unavailable``
+``MIRRORCOACH_RECORDING_MB``  ``64``                      the observer starts a new recording when
+                                                          its file passes this size
+``MIRRORCOACH_RECORDINGS``    ``10``                      recordings kept (the oldest are deleted)
+============================  ==========================  ===========================================
 
 The embedded default topology (DESIGN.md "Bus conventions"): one router-mode Zenoh session
 listening on the loopback endpoint, every service and the CLI as clients connecting to it,
@@ -84,6 +90,9 @@ class Settings:
     queue: int = field(default_factory=lambda: _env_num("MIRRORCOACH_QUEUE", 256))
     queue_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_QUEUE_MB", 512.0, float))
     waiting: int = field(default_factory=lambda: _env_num("MIRRORCOACH_WAITING", 32))
+    time_limit: float = field(default_factory=lambda: _env_num("MIRRORCOACH_TIME_LIMIT", 600.0, float))
+    recording_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_RECORDING_MB", 64.0, float))
+    recordings: int = field(default_factory=lambda: _env_num("MIRRORCOACH_RECORDINGS", 10))
 
     def __post_init__(self):
         check_loopback(self.router)
@@ -94,6 +103,11 @@ class Settings:
         if not 0 <= self.queue <= 100_000 or not 0 < self.queue_mb <= 1e6:
             raise BadInput(f"MIRRORCOACH_QUEUE must be 0..100000 and MIRRORCOACH_QUEUE_MB positive, "
                            f"got {self.queue} and {self.queue_mb}")
+        if not 0 < self.time_limit <= 1e6:
+            raise BadInput(f"MIRRORCOACH_TIME_LIMIT must be positive seconds, got {self.time_limit}")
+        if not 0 < self.recording_mb <= 1e6 or not 1 <= self.recordings <= 10_000:
+            raise BadInput(f"MIRRORCOACH_RECORDING_MB must be positive and MIRRORCOACH_RECORDINGS 1..10000, "
+                           f"got {self.recording_mb} and {self.recordings}")
         if not re.fullmatch(r"[A-Za-z0-9_-]{1,32}", self.prefix):
             raise BadInput(f"MIRRORCOACH_PREFIX {self.prefix!r} must be 1-32 letters, digits, '_' or '-'")
 

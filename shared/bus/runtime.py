@@ -37,6 +37,7 @@ from typing import Callable
 from schemas.base import Endpoint, Message
 from shared.bus.config import Settings, client_config
 from shared.codec import pack, unpack
+from shared.deadline import time_limit
 from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
 from shared.io.atomic import DISK_FULL
 
@@ -259,7 +260,9 @@ class Service:
             raise NotFound(f"service {self.name} has no verb {verb!r}; it answers {', '.join(sorted(self.endpoints))}")
         msg = unpack(payload, self.settings.max_payload) if payload else {}
         req = ep.request.validate(msg)
-        out = self.handlers[verb](req)
+        limit = None if ep.waits else min(ep.time_limit_s, self.settings.time_limit)
+        with time_limit(limit, f"{self.name}/{verb}"):
+            out = self.handlers[verb](req)
         try:
             out = ep.reply.validate(out)
         except BadInput as e:  # our own reply is off-contract: a bug, not the caller's fault

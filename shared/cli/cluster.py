@@ -233,6 +233,8 @@ def schemas(service: Optional[str] = typer.Argument(None, help="Only this servic
         typer.echo(f"# {name}  (keys {'<prefix>'}/{name}/<verb>)\n")
         for ep in mod.ENDPOINTS.values():
             typer.echo(f"## {name}/{ep.verb}: {ep.doc}")
+            typer.echo("limit    " + ("waits for a person: its request's timeout" if ep.waits
+                                      else f"stops at a safe point after {ep.time_limit_s:g} s"))
             typer.echo("request  " + ep.request.describe())
             typer.echo("reply    " + ep.reply.describe())
             typer.echo("")

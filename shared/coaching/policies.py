@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from shared.deadline import check_time
 from shared.errors import BadInput
 
 TABLE_4_1 = {1.5: "a little more", 2.0: "more", 2.5: "much more"}
@@ -105,6 +106,7 @@ def simulated_coach_demonstrations(n: int = 40, alpha: float = 1.8, off_line: fl
     r = np.random.default_rng(seed)
     out = []
     for _ in range(n):
+        check_time()
         x_t = np.zeros(dim)
         x_p = r.normal(size=dim) * r.uniform(0.5, 2.0)
         d = np.linalg.norm(x_p)

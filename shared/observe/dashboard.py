@@ -97,8 +97,17 @@ class Dashboard:
     def session_started(self, session: str, target: Clip) -> None:
         self.targets[session] = target
         self.paths[session], self.emphatic[session] = [], []
+        self._show_target(session, target)
+
+    def _show_target(self, session: str, target: Clip) -> None:
         self._skeleton(f"skeletons/{session}/target", target, SIDE_BY_SIDE["target"], COLOURS["target"], 0)
         self._curves(session, "target", target, 0)
+
+    def continue_from(self, old: "Dashboard") -> None:
+        """A new recording goes on from ``old``: the sessions' targets and paths so far."""
+        self.targets, self.paths, self.emphatic = old.targets, old.paths, old.emphatic
+        for session, target in self.targets.items():
+            self._show_target(session, target)
 
     def trial(self, ev: dict, attempt: Clip | None, emphatic: Clip | None) -> None:
         s, n = ev["session"], int(ev["trial"])

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from shared.deadline import check_time
 from shared.errors import ModelError
 
 LOG2PI = np.log(2.0 * np.pi)
@@ -279,6 +280,7 @@ def fit_hmm(
     if short < n_states:
         raise ModelError(f"a repetition has {short} frames, fewer than the {n_states} HMM states; use fewer states or a longer clip",
                          frames=short, states=n_states)
+    check_time()  # a request past its time limit stops before each model (shared.deadline)
     means, covars, stay = uniform_segmentation(seqs, n_states, var_floor, covariance_type)
     n_frames = sum(len(s) for s in seqs)
     if backend == "hmmlearn":

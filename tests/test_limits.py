@@ -1,5 +1,7 @@
-"""Issue 17, row 9: a full disk on real processes. The cluster's home is a 40 MiB tmpfs the test
-mounts (skipped, saying why, where it cannot mount one); the disk is filled by a plain file."""
+"""Issue 17 on real processes: a full disk (row 9) and time limits.
+
+For the full disk the cluster's home is a 40 MiB tmpfs the test mounts (skipped, saying why,
+where it cannot mount one); the disk is filled by a plain file."""
 
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import pytest
 
 from schemas.common import clip_to_wire
 from shared.estimation.motions import unknown_motions
-from tests.conftest import Processes, cluster_env, state_files
+from tests.conftest import cluster_env, running, state_files
 
 
 @pytest.fixture
@@ -50,12 +52,7 @@ def test_a_full_disk_is_unavailable_and_leaves_no_half_state(small_disk, bundled
     from shared.io import find_clips, load_clip
 
     env = cluster_env(small_disk)
-    procs = Processes(env)
-    procs.start("router", "shared.bus.router")
-    for name in ("pss", "simulator", "dialogue"):
-        procs.start(name, f"services.{name}")
-    try:
-        procs.wait_alive({"pss", "simulator", "dialogue"})
+    with running(env, "pss", "simulator", "dialogue") as procs:
         c = client_of(env)
         clips = [clip_to_wire(load_clip(f)) for f in find_clips([bundled / "amc"])[:4]]
         c.request("pss", "build", {"space": "keep", "clips": clips[:2]})
@@ -114,8 +111,6 @@ def test_a_full_disk_is_unavailable_and_leaves_no_half_state(small_disk, bundled
         assert len(t["lines"]) == n + 2 and t["damaged"] == 1 and np.all([x["dialogue"] == "chat" for x in t["lines"]])
         for name in ("pss", "dialogue"):
             assert "Traceback" not in procs.log(name), procs.log(name)[-3000:]
-    finally:
-        procs.stop()
 
 
 def test_an_empty_marker_is_no_interrupted_space(tmp_path, dev_split):
@@ -145,3 +140,36 @@ def test_a_line_the_full_disk_cut_is_taken_back(small_disk):
         append_line(path, "x" * 100_000)
     assert e.value.errno == errno.ENOSPC
     assert path.read_bytes() == b"first\n" and read_lines(path) == (["first"], 0)
+
+
+def test_a_request_past_its_time_limit_stops_and_changes_nothing(tmp_path, bundled, client_of):
+    """Issue 17: time limits. A build of 12 clips under a 1 ms limit (its clips alone take longer to read) stops before its next HMM
+    (``unavailable``, cause ``time_limit``), writes nothing, and the service answers the next
+    request at once."""
+    from shared.bus.client import RemoteError
+    from shared.io import find_clips, load_clip
+
+    env = cluster_env(tmp_path / "home", MIRRORCOACH_TIME_LIMIT=0.001)
+    with running(env, "pss") as procs:
+        c = client_of(env)
+        clips = [clip_to_wire(load_clip(f)) for f in find_clips([bundled / "amc"])[:12]]
+        files = state_files(env)
+        with pytest.raises(RemoteError) as e:
+            c.request("pss", "build", {"space": "big", "clips": clips}, timeout=120)
+        assert e.value.code == "unavailable" and e.value.details["cause"] == "time_limit", e.value.message
+        assert "pss/build passed its time limit of 0.001 s" in e.value.message and "nothing was changed" in e.value.message
+        assert state_files(env) == files
+        assert c.request("pss", "list")["spaces"] == [] and c.request("pss", "list")["interrupted"] == []
+    assert "Traceback" not in procs.log("pss")
+
+
+def test_library_code_is_limited_only_inside_a_request():
+    from shared.coaching.policies import simulated_coach_demonstrations
+    from shared.deadline import TimeLimit, time_limit
+
+    assert len(simulated_coach_demonstrations(n=100)) == 100  # no request, no limit
+    with time_limit(0.0, "coach/policy_fit"), pytest.raises(TimeLimit) as e:
+        simulated_coach_demonstrations(n=10)
+    assert e.value.code == "unavailable" and e.value.details["cause"] == "time_limit"
+    with time_limit(60.0, "coach/policy_fit"):
+        assert len(simulated_coach_demonstrations(n=10)) == 10

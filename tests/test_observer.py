@@ -1,0 +1,61 @@
+"""The observer as a real process (issue 17, row 16): its recording rotates past
+``MIRRORCOACH_RECORDING_MB``, keeps the newest ``MIRRORCOACH_RECORDINGS`` files, and every new
+file starts with what is still true (the sessions' targets, the spaces)."""
+
+from __future__ import annotations
+
+import re
+import time
+
+from schemas.common import clip_to_wire
+from shared.codec import pack
+from tests.conftest import cluster_env, running, settings_of
+
+
+def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of):
+    from shared.io import find_clips, load_clip
+    from shared.observe.snapshot import read
+
+    env = cluster_env(tmp_path / "home", MIRRORCOACH_RECORDING_MB=0.5, MIRRORCOACH_RECORDINGS=3)
+    recordings = tmp_path / "home" / "recordings"
+    with running(env, "pss", "observer") as procs:
+        c = client_of(env)
+        s = settings_of(env)
+        clips = [load_clip(f) for f in find_clips([bundled / "amc"])[:2]]
+        c.request("pss", "build", {"space": "seen", "clips": [clip_to_wire(x) for x in clips]})
+        target = clip_to_wire(clips[0])
+        log = lambda: procs.log("observer")  # noqa: E731
+        for i in range(300):  # session events until the recording has rotated four times (paced: the
+            c.session.put(s.key("events", "coach", "session"), pack({"v": 1, "session": f"s{i}", "target": target}))
+            if log().count("recording to") >= 5:  # observer draws each in about 0.1 s)
+                break
+            time.sleep(0.25)
+        assert log().count("recording to") >= 5, log()[-2000:]
+    files = sorted(recordings.glob("2*.rrd"))
+    assert len(files) == 3, files  # the newest three; older ones deleted and said so
+    assert log().count("deleted the old recording") >= 2 and "Traceback" not in log()
+    latest = (recordings / "latest.rrd").resolve()
+    assert latest == max(files, key=lambda p: p.stat().st_mtime)
+    for f in files[:-1]:  # rotated at the size limit (checked once a second: a little over it)
+        assert f.stat().st_size < 6 * 2**20, (f, f.stat().st_size)
+    data = read(latest)  # the newest file starts with what is still true
+    assert "/space/seen/proto_symbols" in data and "/skeletons/s0/target" in data
+
+
+def test_an_observer_far_behind_drops_events_instead_of_growing(tmp_path, bundled, client_of):
+    from shared.io import find_clips, load_clip
+
+    env = cluster_env(tmp_path / "home", MIRRORCOACH_OBSERVER_QUEUE_MB=1)
+    with running(env, "observer") as procs:
+        c = client_of(env)
+        s = settings_of(env)
+        target = pack({"v": 1, "session": "x", "target": clip_to_wire(load_clip(find_clips([bundled / "amc"])[0]))})
+        for _ in range(200):  # 200 x ~50 KB at once: far more than 1 MiB waits to be drawn
+            c.session.put(s.key("events", "coach", "session"), target)
+        deadline = time.monotonic() + 60
+        while "dropped so far" not in procs.log("observer") and time.monotonic() < deadline:
+            time.sleep(0.2)
+    log = procs.log("observer")
+    assert "dropped so far (more than 1 MiB waiting)" in log and "Traceback" not in log
+    drawn, dropped = (int(x) for x in re.search(r"stopped after (\d+) events .*; (\d+) dropped", log).groups())
+    assert dropped > 0 and drawn > 0 and drawn + dropped <= 200, log[-1500:]  # (some may not have arrived yet)
