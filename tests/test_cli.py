@@ -74,5 +74,34 @@ def test_schemas_prints_every_contract():
         for verb in mod.ENDPOINTS:
             assert f"## {name}/{verb}:" in r.stdout
     assert "reply_err" in r.stdout and "bad_request" in r.stdout
+    assert "limit    stops at a safe point after 600 s" in r.stdout and "limit    waits for a person" in r.stdout
     r = run("schemas", "nosuch")
     assert r.returncode == 2 and r.stderr.startswith("error: no service")
+
+
+def test_the_dashboard_opens_the_viewer_on_loopback_only(tmp_path):
+    """Issue 15: `make dashboard` started the viewer listening on 0.0.0.0:9876. The viewer cannot
+    start on this machine without a GPU or Mesa's Vulkan driver, so a `rerun` on PATH records the
+    command line the CLI gives it (analytics first, then the recording)."""
+    import os
+    import time
+
+    home = tmp_path / "home"
+    (home / "recordings").mkdir(parents=True)
+    (home / "recordings" / "x.rrd").write_bytes(b"")
+    (home / "recordings" / "latest.rrd").symlink_to("x.rrd")
+    bin_ = tmp_path / "bin"
+    bin_.mkdir()
+    (bin_ / "rerun").write_text(f"#!/bin/sh\necho \"$@\" >> {tmp_path / 'argv'}\n")
+    (bin_ / "rerun").chmod(0o755)
+    env = {**os.environ, "PATH": f"{bin_}:{os.environ['PATH']}", "DISPLAY": ":99", "MIRRORCOACH_HOME": str(home)}
+    r = subprocess.run([sys.executable, "-m", "shared.cli", "dashboard"], env=env, capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0, r.stderr
+    for _ in range(50):
+        if (tmp_path / "argv").exists() and len((tmp_path / "argv").read_text().splitlines()) == 2:
+            break
+        time.sleep(0.1)
+    first, second = (tmp_path / "argv").read_text().splitlines()
+    assert first == "analytics disable"
+    assert second.startswith("--bind 127.0.0.1 --port auto ") and second.endswith("recordings/x.rrd")
