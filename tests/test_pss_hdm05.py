@@ -63,7 +63,8 @@ def test_midpoint_recognises_between_and_emphasis_moves_away(dev_space):
     emph = dev_space.generate(weights=dev_space.emphatic_weights(dev_space.names[t], dev_space.names[p], 2.0))
     re = dev_space.recognize(emph)
     assert re.distances[p] > dev_space.distances[t, p]  # further from the learner than the target is
-    assert re.label == "squat1Reps"  # still the same kind of motion
+    assert re.nearest_label == "squat1Reps"  # still nearest the same kind of motion (an exaggeration no
+    # performer showed may be "none of these": the open set's novelty model sees it beyond them)
 
 
 @pytest.fixture(scope="module")

@@ -185,3 +185,71 @@ def test_channel_weights_are_saved_with_the_space_and_older_files_recognise_unwe
     idx = old.features.group_indices(("position",))
     hmm = old.abstract(clip).marginal(idx)
     assert np.allclose(old.recognize(clip).recognition_distances, ModelBank(old.models_on(("position",))).distances(hmm))
+
+
+# ---------------------------------------------------------------------------- the novelty model (open set)
+def _synthetic_classes(rng, classes=3, performers=2, n=10, dim=20, shift=0.3):
+    centres = rng.normal(0.0, 3.0, size=(classes + 1, dim))
+    centres[-1] = centres[:2].mean(axis=0)  # the last class is never learnt: it lies between two known ones
+    style = rng.normal(0.0, shift, size=(performers + 1, dim))  # the last performer is never seen
+
+    def sample(c, p, k):
+        return centres[c] + style[p] + rng.normal(0.0, 0.5, size=(k, dim))
+
+    x = np.vstack([sample(c, p, n) for c in range(classes) for p in range(performers)])
+    labels = [f"c{c}" for c in range(classes) for p in range(performers) for _ in range(n)]
+    perf = [f"p{p}" for c in range(classes) for p in range(performers) for _ in range(n)]
+    return x, labels, perf, sample
+
+
+def test_novelty_model_as_documented():
+    from shared.pss.recognition import NoveltyModel, _margins, _ridge
+
+    rng = np.random.default_rng(0)
+    x, labels, perf, sample = _synthetic_classes(rng)
+    m = NoveltyModel.fit(x, labels, perf)
+    assert m.scheme == "across performers" and len(m.scores) == len(x) and 0 < m.threshold < np.inf
+    assert m.threshold == pytest.approx(-conformal_threshold(-np.array(m.scores), m.quantile))
+    # the kept arrays give scikit-learn's own decision (the reference) without importing it
+    scaler, ridge = _ridge(x, np.array(labels))
+    new = sample(0, 2, 50)
+    assert np.allclose(m.margins(new), _margins(ridge.decision_function(scaler.transform(new))), atol=1e-6)
+    # a known class from an unseen performer stays known; a class never learnt, between known ones,
+    # is "none of these" (far from every class is the distance rule's to catch: a linear model extrapolates)
+    known = np.array([m.novelty(v) for c in range(3) for v in sample(c, 2, 30)])
+    unknown = np.array([m.novelty(v) for v in sample(3, 2, 30)])
+    assert (known > 1).mean() <= 0.1 and (unknown > 1).mean() >= 0.9
+    # one performer: calibrated leave-one-out; one class: nothing to tell apart
+    solo = [i for i, p in enumerate(perf) if p == "p0"]
+    m1 = NoveltyModel.fit(x[solo], [labels[i] for i in solo], None)
+    assert m1.scheme == "leave one out" and len(m1.scores) == len(solo) and np.isfinite(m1.threshold)
+    assert NoveltyModel.fit(x[:10], labels[:10], perf[:10]) is None
+    # decide: either test rejects (the distance rule's thresholds here never do)
+    c = Calibration(["c0", "c1", "c2"], 1.0, threshold=np.inf, ratio_threshold=np.inf, n_calibration=0,
+                    scheme="across performers")
+    d = np.array([1.0, 5.0, 5.0])
+    assert decide(d, ["c0", "c1", "c2"], c, m, sample(0, 2, 1)[0]).label == "c0"
+    out = decide(d, ["c0", "c1", "c2"], c, m, sample(3, 2, 1)[0])
+    assert out.label is None and out.nearest_label == "c0" and out.novelty > 1
+
+
+def test_the_novelty_model_is_saved_with_the_space_and_older_files_keep_their_rule(dev_space, dev_split, tmp_path):
+    m = dev_space.novelty_model
+    assert m is not None and m.scheme == "across performers" and sorted(m.classes) == sorted(set(dev_space.labels))
+    clips = dev_split[1][:6]
+    before = [dev_space.recognize(c) for c in clips]
+    back = ProtoSymbolSpace.load(dev_space.save(tmp_path / "n.npz"))
+    assert np.array_equal(back.novelty_model.coef, m.coef) and back.novelty_model.threshold == m.threshold
+    assert [back.recognize(c).novelty for c in clips] == pytest.approx([r.novelty for r in before])
+    # a file written before the model: its open set is the distance rule it was written with
+    with np.load(tmp_path / "n.npz", allow_pickle=False) as z:
+        arrays = {k: np.array(z[k]) for k in z.files if not k.startswith("novelty_")}
+    header = json.loads(str(arrays["header"]))
+    header.pop("novelty")
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "old.npz", **arrays)
+    old = ProtoSymbolSpace.load(tmp_path / "old.npz")
+    assert old.novelty_model is None
+    for c in clips:
+        r = old.recognize(c)
+        assert r.novelty == pytest.approx(decide(r.recognition_distances, old.labels, old.calibration).novelty)

@@ -129,6 +129,7 @@ class ProtoSymbolSpace:
         self._partial_scale: dict[str, float] = {}
         self._group_models: dict[tuple, list[LeftToRightHMM] | ModelBank] = {}
         self._calibration = None
+        self._novelty = None  # fitted on first use; False: a file written before it (the distance rule)
         self._recognition_matrix = None
         self._recognition_weights = None  # computed on first use, or read from the file
 
@@ -353,6 +354,20 @@ class ProtoSymbolSpace:
             self._calibration = calibrate(self.recognition_matrix, self.labels, perf if all(perf) else [])
         return self._calibration
 
+    @property
+    def novelty_model(self):
+        """The open set's discriminative step (:class:`shared.pss.recognition.NoveltyModel`), fitted
+        on the proto-symbols' recognition-group HMMs; ``None`` for a file written before it (its
+        open set stays the distance rule it was written with) or a space of one class."""
+        if self._novelty is None:
+            from shared.pss.recognition import NoveltyModel, hmm_features
+
+            ms = self.models_on(self.recognition_groups)
+            perf = self.performers
+            self._novelty = NoveltyModel.fit(hmm_features(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms])),
+                                             self.labels, perf if all(perf) else None) or False
+        return self._novelty or None
+
     def recognize(self, clip_or_clips, top: int = 5) -> Recognition:
         """``x = F_recog(M)`` (eq. 2.6): abstract the new clip (or the repetitions of one
         trial) into an HMM, measure eq. 2.4 to every proto-symbol, decide its label (nearest
@@ -364,12 +379,13 @@ class ProtoSymbolSpace:
         geo = self.features.group_indices(GEOMETRY_GROUPS)
         f = self.bank_on(GEOMETRY_GROUPS).distances(hmm.marginal(geo))
         rg = self.recognition_groups
-        fr = f if rg == GEOMETRY_GROUPS else self.recognition_bank().distances(hmm.marginal(self.features.group_indices(rg)))
-        rec = self._place(hmm, f, top, fr)
+        hr = hmm.marginal(self.features.group_indices(rg))
+        fr = f if rg == GEOMETRY_GROUPS else self.recognition_bank().distances(hr)
+        rec = self._place(hmm, f, top, fr, hr)
         rec.seconds = time.perf_counter() - t0
         return rec
 
-    def _place(self, hmm, f, top=5, fr=None) -> Recognition:
+    def _place(self, hmm, f, top=5, fr=None, hr=None) -> Recognition:
         """Eq. 2.6 placement by the geometry distances ``f``. With recognition distances ``fr``
         the label is decided (:mod:`shared.pss.recognition`); without (association, eq. 2.8,
         on partial channels) it is the nearest proto-symbol's by ``f``, with no confidence."""
@@ -384,7 +400,10 @@ class ProtoSymbolSpace:
             lab = self.symbols[order[0]].label
             return Recognition(x, f, nearest, lab, self.symbols[in_space].label, stress, hmm, nearest_label=lab,
                                confidence=float("nan"))
-        d = decide(fr, self.labels, self.calibration)
+        from shared.pss.recognition import hmm_features
+
+        d = decide(fr, self.labels, self.calibration, self.novelty_model,
+                   None if hr is None else hmm_features(hr.means, hr.covars))
         return Recognition(x, f, nearest, d.label, self.symbols[in_space].label, stress, hmm,
                            nearest_label=d.nearest_label, confidence=d.confidence, novelty=d.novelty,
                            recognition_distances=fr)
@@ -532,6 +551,7 @@ class ProtoSymbolSpace:
             # recognition's decision (shared/pss/recognition.py), kept so that a loaded space
             # recognises without refitting it (and without importing scipy.optimize)
             "calibration": dataclasses.asdict(self.calibration),
+            "novelty": None if self.novelty_model is None else self.novelty_model.header(),
         }
         arrays = {
             "means": np.stack([s.hmm.means for s in self.symbols]),
@@ -543,6 +563,8 @@ class ProtoSymbolSpace:
         }
         if self.recognition_weights is not None:
             arrays["recognition_weights"] = self.recognition_weights
+        if self.novelty_model is not None:
+            arrays.update(self.novelty_model.arrays())
         atomic_write(path, lambda f: np.savez(f, **arrays))
         return path
 
@@ -554,6 +576,7 @@ class ProtoSymbolSpace:
                 header = json.loads(str(z["header"]))
                 arrays = {k: np.array(z[k]) for k in ("means", "covars", "stay", "distances", "points")}
                 weights = np.array(z["recognition_weights"]) if "recognition_weights" in z.files else None
+                novelty = {k: np.array(z[k]) for k in z.files if k.startswith("novelty_")}
         except FileNotFoundError:
             raise NotFound(f"no space file {path}") from None
         except (OSError, KeyError, ValueError) as e:
@@ -582,6 +605,12 @@ class ProtoSymbolSpace:
             from shared.pss.recognition import Calibration
 
             space._calibration = Calibration(**header["calibration"])
+        if header.get("novelty") and novelty:
+            from shared.pss.recognition import NoveltyModel
+
+            space._novelty = NoveltyModel.from_file(header["novelty"], novelty)
+        elif header.get("calibration"):  # written before the novelty model: its open set as written
+            space._novelty = False
         return space
 
     # ------------------------------------------------------------------ summary
