@@ -156,6 +156,11 @@ EVENTS = {"trial": Message("coach.event.trial", Map({
     "x_p": F(List(Float(), max_len=20)), "x_s": F(List(Float(), max_len=20)), "learner": F(Str(max_len=64), required=False),
     "attempt": F(CLIP, "the attempt's first repetition (for the dashboard)", required=False),
     "emphatic": F(CLIP, "the motion shown next (for the dashboard)", required=False),
+    "R": F(Float(0.0), "d_p over the first trial's d_p", required=False),
+    "d_cop": F(Float(0.0), "centre-of-pressure distance to the target's, when measured", required=False),
+    "alpha_chosen": F(Float(0.0), "the policy's alpha before the feasibility check", required=False),
+    "alpha_reduced": F(Bool(), "the simulator found alpha_chosen infeasible", required=False),
+    "feasibility": F(Str(max_len=1000), "the feasibility check's words", required=False),
 }), doc="after every trial"),
     "session": Message("coach.event.session", Map({
         "session": SESSION, "learner": F(Str(max_len=64), required=False),

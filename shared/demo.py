@@ -103,8 +103,6 @@ def coach_learner(client: Client, target, out: Path, trials: int = 4) -> None:
         note = f" (lowered from {t['alpha']:g}: {t['feasibility']})" if t["alpha_reduced"] else ""
         print(f"  trial {t['number']}: d_p {t['d_p']:6.1f}  R {r:.2f}  alpha {t['alpha_shown']:g}  "
               f"\"{t['adverb'] or 'no adverb'}\"{note}")
-    last = client.request("coach", "attempt", {"session": "demo", "clips": [clip_to_wire(target)]})
-    save_clip(clip_from_wire(last["emphatic"]), out / "coach_trial5_target_as_attempt.bvh")
 
 
 def estimate_other(client: Client) -> None:

@@ -197,7 +197,7 @@ def test_coaching_from_the_cli(cluster, bundled, tmp_path):
 
 def test_the_dashboard_recording_holds_what_the_cluster_did(cluster, bundled, tmp_path):
     from shared.bus.client import Client
-    from shared.observe.snapshot import read
+    from shared.observe.recording import read
 
     env = cluster
     s = settings_of(env)
@@ -227,19 +227,26 @@ def test_the_dashboard_recording_holds_what_the_cluster_did(cluster, bundled, tm
     assert log.count("refused event on") == 20 and "Traceback" not in log and "(20 refused)" in log
     data = read(rec)
     paths = set(data)
-    for p in ("/coach/watched/d_p", "/coach/watched/alpha", "/space/coach-watched/path", "/space/coach-watched/emphatic",
-              "/skeletons/watched/target", "/skeletons/watched/attempt", "/skeletons/watched/emphatic",
-              "/curves/watched/rfemur.rx/emphatic", "/estimator/watch/scale", "/dialogue/watch", "/space/est-watch/proto_symbols"):
+    for p in ("/sessions/watched/d_p", "/sessions/watched/alpha", "/sessions/watched/R", "/sessions/watched/coaching",
+              "/sessions/watched/space/path", "/sessions/watched/space/emphatic", "/sessions/watched/body/target",
+              "/sessions/watched/body/attempt", "/sessions/watched/body/emphatic", "/sessions/watched/overlay/emphatic",
+              "/sessions/watched/curves/rfemur.rx/emphatic", "/estimates/watch/scale", "/estimates/watch/transcript",
+              "/estimates/watch/space/proto_symbols/points", "/readme"):
         assert p in paths, p
-    assert [r["trial"] for r in data["/coach/watched/d_p"]] == [1, 2, 3]
-    path = data["/space/coach-watched/path"][-1]["LineStrips3D:strips"][0]
+    assert [r["trial"] for r in data["/sessions/watched/d_p"] if r.get("Scalars:scalars")] == [1, 2, 3]
+    path = data["/sessions/watched/space/path"][-1]["LineStrips3D:strips"][0]
     assert len(path) == 3  # the attempts' path across the trials
-    assert [r["set"] for r in data["/estimator/watch/scale"]] == [1, 2]
-    assert abs(data["/estimator/watch/scale"][-1]["Scalars:scalars"][0] - 2.0) < 0.1
-    assert len(data["/dialogue/watch"]) == lines
-    assert any(p.startswith("/latency/coach/") for p in paths)
-    r = cli(env, "dashboard", "--snapshot", tmp_path / "snap")
-    assert r.returncode == 0 and (tmp_path / "snap/dashboard_snapshot.png").stat().st_size > 20_000
+    assert [r["set"] for r in data["/estimates/watch/scale"] if r.get("Scalars:scalars")] == [1, 2]
+    assert abs([r for r in data["/estimates/watch/scale"] if r.get("Scalars:scalars")][-1]["Scalars:scalars"][0] - 2.0) < 0.1
+    transcript = [r for r in data["/estimates/watch/transcript"] if r.get("TextLog:text")]
+    assert len(transcript) == lines and {r["set"] for r in transcript} == {1, 2}  # each line on its own set
+    assert any(p.startswith("/cluster/latency/coach/") for p in paths)
+    # the latencies carry no trial or set (issue 15: they carried whatever was set last)
+    assert all("trial" not in r and "set" not in r for p in paths if p.startswith("/cluster/latency/") for r in data[p])
+    # every motion of a trial has the same number of frames on the playback timeline: they play in step
+    frames = {role: sorted({r["playback"] for r in data[f"/sessions/watched/body/{role}"] if r.get("trial") == 2})
+              for role in ("target", "attempt", "emphatic")}
+    assert frames["target"] == frames["attempt"] == frames["emphatic"] and len(frames["target"]) > 10
 
 
 def test_up_fails_fast_and_names_the_cause_when_the_router_port_is_taken(tmp_path):

@@ -14,7 +14,7 @@ from tests.conftest import cluster_env, running, settings_of
 
 def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of):
     from shared.io import find_clips, load_clip
-    from shared.observe.snapshot import read
+    from shared.observe.recording import read
 
     env = cluster_env(tmp_path / "home", MIRRORCOACH_RECORDING_MB=0.5, MIRRORCOACH_RECORDINGS=3)
     recordings = tmp_path / "home" / "recordings"
@@ -38,8 +38,10 @@ def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of
     assert latest == max(files, key=lambda p: p.stat().st_mtime)
     for f in files[:-1]:  # rotated at the size limit (checked once a second: a little over it)
         assert f.stat().st_size < 6 * 2**20, (f, f.stat().st_size)
-    data = read(latest)  # the newest file starts with what is still true
-    assert "/space/seen/proto_symbols" in data and "/skeletons/s0/target" in data
+    data = read(latest)  # the newest file starts with what is still true: the space, the newest sessions
+    assert "/spaces/seen/points" in data
+    carried = {p.split("/")[2] for p in data if p.startswith("/sessions/") and p.endswith("/body/target")}
+    assert f"s{i}" in carried and "s0" not in carried  # bounded: the oldest sessions are not carried on
 
 
 def test_an_observer_far_behind_drops_events_instead_of_growing(tmp_path, bundled, client_of):
@@ -59,3 +61,20 @@ def test_an_observer_far_behind_drops_events_instead_of_growing(tmp_path, bundle
     assert "dropped so far (more than 1 MiB waiting)" in log and "Traceback" not in log
     drawn, dropped = (int(x) for x in re.search(r"stopped after (\d+) events .*; (\d+) dropped", log).groups())
     assert dropped > 0 and drawn > 0 and drawn + dropped <= 200, log[-1500:]  # (some may not have arrived yet)
+
+
+def test_the_dashboard_keeps_a_bounded_number_of_sessions(tmp_path, bundled):
+    from shared.io import find_clips, load_clip
+    from shared.observe.dashboard import MAX_KEPT, Dashboard
+    from shared.observe.recording import read
+
+    target = load_clip(find_clips([bundled / "amc"])[0])
+    d = Dashboard(tmp_path / "r.rrd")
+    for i in range(MAX_KEPT + 5):
+        d.session_started(f"s{i}", target)
+        d.progress({"estimate": f"e{i}", "set": 1, "scale": 2.0, "k_other": [3], "k_self": [2]})
+    assert list(d.targets) == [f"s{i}" for i in range(5, MAX_KEPT + 5)] and len(d.estimates) == MAX_KEPT
+    tabs = d.blueprint().root_container.contents  # a tab per kept session and estimate, and the cluster's
+    assert len(tabs) == 2 * MAX_KEPT + 1
+    d.close()
+    assert "/sessions/s0/body/target" in read(tmp_path / "r.rrd")  # what was drawn stays in the recording

@@ -120,7 +120,10 @@ def make_service(settings: Settings | None = None) -> Service:
         svc.publish("trial", {"session": s.name, "trial": rec.number, "d_p": rec.d_p, "alpha": rec.alpha_shown,
                               "adverb": rec.adverb, "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
                               "learner": s.learner, "attempt": clip_to_wire(attempts[0], False),
-                              "emphatic": clip_to_wire(demo, False)})
+                              "emphatic": clip_to_wire(demo, False), "alpha_chosen": rec.alpha,
+                              "alpha_reduced": bool(rec.alpha_reduced), "feasibility": rec.feasibility[:1000],
+                              **({"R": rec.d_p / s.trials[0].d_p} if s.trials[0].d_p > 0 else {}),
+                              **({} if rec.d_cop is None else {"d_cop": rec.d_cop})})
         return rec, demo
 
     def learner_of(session_file: Path) -> str | None:

@@ -256,8 +256,11 @@ def viewer_command(viewer: str, path) -> list[str]:
 
 @app.command("dashboard")
 def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file (default: the latest recording)."),
-              snapshot: Optional[Path] = typer.Option(None, help="Instead of opening the viewer, render PNG snapshots "
-                                                                   "of the recording into this folder.")):
+              screenshot: Optional[Path] = typer.Option(None, help="Instead of opening a window, open the recording "
+                                                                     "in the real viewer without a screen and save a "
+                                                                     "screenshot of every tab into this folder (needs "
+                                                                     "Mesa's Vulkan driver: apt-get install "
+                                                                     "mesa-vulkan-drivers libvulkan1).")):
     """Open the rerun viewer on the cluster's recording, or say where it is and how to open it."""
     import os
     import shutil
@@ -269,11 +272,17 @@ def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file
     if not path.exists():
         _fail(f"no recording at {path}: run `make demo` (or `make up` and use the cluster) first")
     path = path.resolve()
-    if snapshot is not None:
-        from shared.observe.snapshot import render
+    if screenshot is not None:
+        from shared.errors import MirrorcoachError
+        from shared.observe.viewer import dashboard_screenshots
 
-        for p in render(path, snapshot):
-            typer.echo(f"wrote {p}")
+        try:
+            for p in dashboard_screenshots(path, screenshot, log=Settings().log_dir / "viewer.log"):
+                typer.echo(f"wrote {p}")
+        except MirrorcoachError as e:
+            _fail(e.message)
+        except OSError as e:
+            _fail(f"could not write the screenshots to {screenshot}: {e.strerror}")
         return
     viewer = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
     if (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) and Path(viewer).exists():
@@ -283,4 +292,4 @@ def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file
         return
     typer.echo(f"no display here. The recording is {path}\n"
                f"Open it where there is one: `pip install rerun-sdk==0.41.0 && rerun analytics disable && rerun {path.name}`\n"
-               f"or render snapshots here: `mirrorcoach dashboard --snapshot docs/dashboard`")
+               f"or take screenshots of it in the viewer here: `mirrorcoach dashboard --screenshot docs/dashboard`")

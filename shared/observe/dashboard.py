@@ -1,20 +1,31 @@
 """What the cluster does, logged to rerun (DESIGN.md "Observability"). Only the observer
 process imports this module: services publish events and never import rerun.
 
-Entity layout (the saved blueprint arranges it):
+The recording opens with its own blueprint (re-sent whenever a session, space or estimate
+appears): one tab per coaching session, one per estimate, one for the other spaces and one for
+the cluster, in the style of rerun's robotics examples.
 
-* ``skeletons/<session>/{target,attempt,emphatic}``: 3-D bones by forward kinematics, side by
-  side (1.5 m apart), on the ``frame`` timeline, for the latest trial (``trial`` timeline);
-* ``space/<space>/proto_symbols``: every proto-symbol as a labelled point;
-  ``space/coach-<session>/path``: the session's attempts ``x_p`` across trials as a line, and
-  ``.../emphatic``: the emphatic points ``x_s``; ``space/est-<estimate>`` is each estimator's
-  estimated space of its other, as it moves set by set;
-* ``curves/<session>/<channel>/{target,attempt,emphatic}``: joint angles over the frames;
-* ``coach/<session>/{d_p,alpha}`` per trial and ``coach/<session>/adverb`` as text;
-* ``estimator/<estimate>/{k_other,k_self,symbol_error,scale}`` per conversation set (the
-  other's felt symbol against the self's estimate of it);
-* ``dialogue/<dialogue>``: transcript lines; ``warnings/<service>``: failed requests;
-  ``latency/<service>/<verb>``: request milliseconds.
+Entities and timelines (each kind of data on the timelines where it belongs):
+
+* ``readme``: a short markdown text explaining the views (static);
+* ``sessions/<s>/body/{target,attempt,emphatic}``: upright people (the skeleton's own up axis
+  as the view coordinates, a floor, a front camera), side by side 1.5 m apart; joints are
+  keypoints of an annotation context (named on hover; left side, right side, head and feet
+  coloured apart, bones in the motion's colour); ``sessions/<s>/overlay/...`` the same three
+  overlaid. Timeline ``playback``: trial ``n`` occupies ``n * K ... n * K + K - 1`` where ``K``
+  is the target's frame count at 30 fps, and the target, the attempt and the emphatic motion
+  shown next are each resampled to those ``K`` frames, so any trial plays in step; also
+  timeline ``trial`` (its last frame at ``n``);
+* ``sessions/<s>/curves/<channel>/<role>``: joint angles on the same timelines;
+* ``sessions/<s>/{d_p,R,alpha}`` per trial with markers and ``sessions/<s>/coaching``: one text
+  line per trial (adverb, alpha shown and chosen, why it was lowered, d_p, R, d_cop), on
+  ``trial`` and at the start of the trial's ``playback`` block;
+* ``sessions/<s>/space``: the session's space (``coach-<s>``): its proto-symbols, the attempts
+  ``x_p`` as a numbered path, the emphatic points ``x_s`` and the target ``x_t``;
+* ``spaces/<space>``: any other space, coloured by class, one label per class;
+* ``estimates/<e>/{k_other,k_self,symbol_error,scale}`` per conversation set (timeline ``set``),
+  ``estimates/<e>/transcript`` with each line on the set it belongs to, ``estimates/<e>/space``;
+* ``cluster/warnings`` and ``cluster/latency/<service>/<verb>`` on the log time only.
 """
 
 from __future__ import annotations
@@ -25,26 +36,79 @@ import rerun.blueprint as rrb
 
 from shared.clip import Clip
 
-CURVE_CHANNELS = ("rfemur.rx", "rtibia.rx", "lowerback.rx", "rhumerus.rx", "rradius.rx", "shoulder_pitch", "elbow")
+CURVE_CHANNELS = ("rfemur.rx", "rtibia.rx", "lowerback.rx", "rhumerus.rx", "shoulder_pitch", "elbow")
+MAX_CURVES = 3
+ROLES = ("target", "attempt", "emphatic")
 SIDE_BY_SIDE = {"target": 0.0, "attempt": 1.5, "emphatic": 3.0}
 COLOURS = {"target": (80, 160, 255), "attempt": (255, 170, 60), "emphatic": (230, 60, 90)}
+CLASS_OF = {"target": 1, "attempt": 2, "emphatic": 3}
+JOINT_COLOURS = {"left": (255, 235, 90), "right": (90, 235, 255), "head": (60, 230, 60), "foot": (255, 60, 255),
+                 "centre": (235, 235, 235)}
+PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
+           (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207), (255, 200, 80), (120, 200, 120)]
+PLAYBACK_FPS = 30.0
+#: sessions (and estimates, and other spaces) the dashboard keeps: its memory and its tabs stay
+#: bounded over a long run; a new recording (rotation) starts with the newest CARRY_OVER sessions
+MAX_KEPT = 16
+CARRY_OVER = 4
+
+README = """# mirrorcoach dashboard
+
+**Timelines.** `playback` (the default) plays every coaching trial in turn: the target, the
+learner's attempt and the emphatic motion shown next, resampled to one length so they move in
+step. `trial` shows the last frame of each trial; `set` is the estimator's conversation sets;
+`log_time` the cluster's requests.
+
+**A session's tab.** Left: the three people side by side (blue target, orange attempt, red
+emphatic motion; yellow joints are the left side, cyan the right), the same overlaid, and joint
+angles. Right: the session's proto-symbol space (the attempts' numbered path, the emphatic
+points `s1, s2, ...`), `d_p` (distance to the target), `R` (d_p over the first trial's) and
+alpha, and the coach's words per trial with the reason alpha was lowered.
+
+**Estimates** (switch the timeline to `set`): the other's felt symbol against the self's
+estimate, the torque scale, the transcript of each conversation set. **Spaces**: every other
+space, coloured by class. **Cluster**: failed requests and latencies.
+"""
 
 
-def blueprint() -> rrb.Blueprint:
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(rrb.Spatial3DView(origin="skeletons", name="target | attempt | emphatic"),
-                         rrb.TimeSeriesView(origin="curves", name="joint angles")),
-            rrb.Vertical(rrb.Spatial3DView(origin="space", name="proto-symbol spaces"),
-                         rrb.TimeSeriesView(origin="coach", name="d_p and alpha per trial"),
-                         rrb.TimeSeriesView(origin="estimator", name="estimator per conversation set")),
-            rrb.Vertical(rrb.TextLogView(origin="dialogue", name="dialogue transcripts"),
-                         rrb.TextLogView(origin="warnings", name="warnings and errors"),
-                         rrb.TimeSeriesView(origin="latency", name="request latency (ms)")),
-            column_shares=[2, 2, 1.5],
-        ),
-        collapse_panels=True,
-    )
+def _short(name: str) -> str:
+    return name if len(name) <= 24 else name[:21] + "..."
+
+
+def _side(name: str, names: set[str]) -> str:
+    n = name.lower()
+    if "head" in n:
+        return "head"
+    if "foot" in n or "toe" in n:
+        return "foot"
+    for a, b, side in (("left", "right", "left"), ("right", "left", "right"), ("l", "r", "left"), ("r", "l", "right")):
+        if n.startswith(a) and (b + n[len(a):]) in {x.lower() for x in names}:
+            return side
+    return "centre"
+
+
+def _text_columns(timeline: str | None = None):
+    """A text log showing its words (and ``timeline``), not entity paths and every timeline."""
+    enc = rrb.encodings
+    return rrb.archetypes.TextLogColumns(
+        timeline_columns=[enc.TimelineColumn(t, visible=t == timeline) for t in ("playback", "trial", "set", "log_time")],
+        text_log_columns=[enc.TextLogColumn("EntityPath", visible=False), enc.TextLogColumn("LogLevel", visible=False),
+                          enc.TextLogColumn("Body")])
+
+
+def _resample(clip: Clip, n: int) -> np.ndarray:
+    """The clip's frames resampled to ``n`` (time-normalised: start to start, end to end)."""
+    x = np.asarray(clip.data, float)
+    if len(x) == n:
+        return x
+    src = np.linspace(0.0, 1.0, len(x))
+    dst = np.linspace(0.0, 1.0, n)
+    return np.stack([np.interp(dst, src, x[:, j]) for j in range(x.shape[1])], axis=1)
+
+
+def _xyz(p) -> list[float]:
+    p = list(p)[:3]
+    return [float(v) for v in p] + [0.0] * (3 - len(p))
 
 
 class Dashboard:
@@ -59,113 +123,337 @@ class Dashboard:
             sinks.append(rr.GrpcSink(viewer_url))
         if sinks:
             self.rec.set_sinks(*sinks)
-        self.rec.send_blueprint(blueprint())
         self.targets: dict[str, Clip] = {}
+        self.frames: dict[str, int] = {}  # K per session: the target's frames at 30 fps
         self.paths: dict[str, list] = {}
         self.emphatic: dict[str, list] = {}
+        self.first_dp: dict[str, float] = {}
+        self.spaces: dict[str, None] = {}  # in order of arrival
+        self.estimates: dict[str, int] = {}  # conversation sets completed per estimate
+        self.trials: dict[str, int] = {}  # trials completed per session
+        self.pending: dict[str, dict] = {}  # a session's space event that came before the session
+        self.curves: dict[str, list[str]] = {}
+        self.rec.log("readme", rr.TextDocument(README, media_type=rr.MediaType.MARKDOWN), static=True)
+        self._layout()
 
     def close(self) -> None:
         self.rec.flush()
         self.rec.disconnect()
 
-    # ------------------------------------------------------------------ helpers
-    def _times(self, n: int, trial: int) -> list:
-        return [rr.TimeColumn("frame", sequence=np.arange(n)), rr.TimeColumn("trial", sequence=np.full(n, trial))]
+    # ------------------------------------------------------------------ layout
+    def _session_tab(self, s: str) -> rrb.Container:
+        front = rrb.EyeControls3D(kind=rrb.components.Eye3DKind.Orbital, position=[1.5, 1.2, 4.3],
+                                  look_target=[1.5, 0.85, 0.0], eye_up=[0.0, 1.0, 0.0])
+        up = self.targets[s].skeleton.up_axis if self.targets.get(s) is not None and self.targets[s].skeleton else 1
+        if up == 2:
+            front = rrb.EyeControls3D(kind=rrb.components.Eye3DKind.Orbital, position=[1.5, -4.3, 1.2],
+                                      look_target=[1.5, 0.0, 0.85], eye_up=[0.0, 0.0, 1.0])
+        curves = [rrb.TimeSeriesView(origin=f"sessions/{s}/curves/{c}", name=f"{c} (deg)",
+                                     plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop))
+                  for c in self.curves.get(s, [])]
+        series = [rrb.TimeSeriesView(origin=f"sessions/{s}/{m}", name=label, plot_legend=rrb.PlotLegend(visible=False))
+                  for m, label in (("d_p", "d_p"), ("R", "R"), ("alpha", "alpha"))]
+        return rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial3DView(origin=f"sessions/{s}/body", name="target | attempt | emphatic", eye_controls=front),
+                rrb.Horizontal(
+                    rrb.Spatial3DView(origin=f"sessions/{s}/overlay", name="overlaid", eye_controls=rrb.EyeControls3D(
+                        kind=rrb.components.Eye3DKind.Orbital, position=[0.0, 1.2, 3.2] if up != 2 else [0.0, -3.2, 1.2],
+                        look_target=[0.0, 0.9, 0.0] if up != 2 else [0.0, 0.0, 0.9],
+                        eye_up=[0.0, 1.0, 0.0] if up != 2 else [0.0, 0.0, 1.0])),
+                    *curves),
+                row_shares=[3, 2]),
+            rrb.Vertical(
+                rrb.Spatial3DView(origin=f"sessions/{s}/space", name=f"space coach-{_short(s)}"),
+                rrb.Horizontal(*series),
+                rrb.TextLogView(origin=f"sessions/{s}/coaching", name="coaching", columns=_text_columns()),
+                rrb.TextDocumentView(origin="readme", name="about these views"),
+                row_shares=[2.6, 2, 1.7, 1.2]),
+            column_shares=[3, 2], name=f"session {_short(s)}")
 
-    def _skeleton(self, entity: str, clip: Clip, offset: float, colour, trial: int) -> None:
-        """Bones of every frame, sent as one column chunk (not one log call per frame)."""
+    def _estimate_tab(self, e: str) -> rrb.Container:
+        return rrb.Horizontal(
+            rrb.Vertical(rrb.TimeSeriesView(origin=f"estimates/{e}/symbols", name="felt symbol: other vs self's estimate",
+                                            plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)),
+                         rrb.TimeSeriesView(origin=f"estimates/{e}/scale", name="torque scale other / self",
+                                            plot_legend=rrb.PlotLegend(visible=False))),
+            rrb.Vertical(rrb.Spatial3DView(origin=f"estimates/{e}/space", name=f"the other's space est-{_short(e)}"),
+                         rrb.TextLogView(origin=f"estimates/{e}/transcript", name="transcript (by set)",
+                                         columns=_text_columns("set"))),
+            name=f"estimate {_short(e)}")
+
+    def blueprint(self) -> rrb.Blueprint:
+        tabs = [self._session_tab(s) for s in self.targets]
+        tabs += [self._estimate_tab(e) for e in self.estimates]
+        others = sorted(self.spaces)
+        if others:
+            tabs.append(rrb.Grid(*[rrb.Spatial3DView(origin=f"spaces/{sp}", name=f"space {_short(sp)}") for sp in others],
+                                 name="spaces"))
+        tabs.append(rrb.Horizontal(
+            rrb.TextDocumentView(origin="readme", name="about these views"),
+            rrb.Vertical(rrb.TextLogView(origin="cluster/warnings", name="failed requests", columns=_text_columns()),
+                         rrb.TextLogView(origin="estimates", name="every transcript", columns=_text_columns("set")),
+                         rrb.TimeSeriesView(origin="cluster/latency", name="request latency (ms)",
+                                            plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop))),
+            name="cluster"))
+        return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0),
+                             rrb.TimePanel(state="expanded", timeline="playback" if self.targets else "log_time"),
+                             rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"))
+
+    def _layout(self) -> None:
+        self.rec.send_blueprint(self.blueprint())
+
+    # ------------------------------------------------------------------ helpers
+    def _at(self, **times) -> None:
+        """Exactly these times for the next log calls (nothing carried over from another event)."""
+        self.rec.reset_time()
+        for k, v in times.items():
+            self.rec.set_time(k, sequence=int(v))
+
+    def _body_context(self, s: str, clip: Clip) -> None:
         sk = clip.skeleton
+        names = [j.name for j in sk.joints]
+        keypoints = [rr.AnnotationInfo(i, n, JOINT_COLOURS[_side(n, set(names))]) for i, n in enumerate(names)]
+        bones = [(j.parent, i) for i, j in enumerate(sk.joints) if j.parent >= 0]
+        ctx = rr.AnnotationContext([rr.ClassDescription(info=rr.AnnotationInfo(CLASS_OF[r], r, COLOURS[r]),
+                                                        keypoint_annotations=keypoints, keypoint_connections=bones)
+                                    for r in ROLES])
+        up = sk.up_axis
+        coords = rr.ViewCoordinates.RIGHT_HAND_Z_UP if up == 2 else rr.ViewCoordinates.RIGHT_HAND_Y_UP
+        for view in ("body", "overlay"):
+            base = f"sessions/{s}/{view}"
+            self.rec.log(base, coords, ctx, static=True)
+            half = [2.7, 1.2, 0.005] if up == 2 else [2.7, 0.005, 1.2]
+            centre = [1.5 if view == "body" else 0.0, 0.0, 0.0]
+            centre[up] = -0.006
+            self.rec.log(f"{base}/floor", rr.Boxes3D(centers=[centre], half_sizes=[half if view == "body" else
+                                                                                   [h * (0.5 if k == 0 else 1) for k, h in enumerate(half)]],
+                                                     colors=[(70, 70, 70)], fill_mode="solid"), static=True)
+            for r in ROLES:
+                self.rec.log(f"{base}/{r}", rr.Points3D.from_fields(class_ids=[CLASS_OF[r]] * len(names),
+                                                                    keypoint_ids=list(range(len(names))),
+                                                                    radii=[0.025] * len(names)), static=True)
+
+    def _people(self, s: str, role: str, clip: Clip, trial: int) -> None:
+        """One motion, resampled to the session's K frames, on the trial's block of ``playback``."""
+        target = self.targets[s]
+        sk = clip.skeleton or target.skeleton
         if sk is None:
             return
-        pos = sk.forward_kinematics(clip.data, clip.channels, ends=False)
-        pos = pos - pos[:1, :1] + np.array([offset, 0.0, 0.0])  # side by side, from the same start
-        bones = [(j.parent, i) for i, j in enumerate(sk.joints) if j.parent >= 0]
-        strips = [np.stack([pos[f, a], pos[f, b]]) for f in range(len(pos)) for a, b in bones]
-        n = len(pos)
-        rr.send_columns(entity, indexes=self._times(n, trial), recording=self.rec,
-                        columns=rr.LineStrips3D.columns(strips=strips, colors=[colour] * len(strips)).partition(
-                            lengths=[len(bones)] * n))
-
-    def _curves(self, session: str, kind: str, clip: Clip, trial: int) -> None:
-        for c in CURVE_CHANNELS:
+        k = self.frames[s]
+        data = _resample(clip, k)
+        pos = sk.forward_kinematics(data, clip.channels, ends=False)
+        up = sk.up_axis
+        ground = [a for a in range(3) if a != up]
+        pos = pos.copy()
+        pos[..., ground] -= pos[:1, :1, ground]  # from the same start, on the floor
+        pos[..., up] -= pos[..., up].min()
+        n, j = pos.shape[:2]
+        times = [rr.TimeColumn("playback", sequence=trial * k + np.arange(n)),
+                 rr.TimeColumn("trial", sequence=np.full(n, trial))]
+        for view, offset in (("body", SIDE_BY_SIDE[role]), ("overlay", 0.0)):
+            shifted = pos.copy()
+            shifted[..., ground[0]] += offset
+            rr.send_columns(f"sessions/{s}/{view}/{role}", indexes=times, recording=self.rec,
+                            columns=rr.Points3D.columns(positions=shifted.reshape(-1, 3)).partition(lengths=[j] * n))
+        for c in self.curves.get(s, []):
             if c in clip.channels:
-                x = clip.column(c).astype(float)
-                rr.send_columns(f"curves/{session}/{c}/{kind}", indexes=self._times(len(x), trial), recording=self.rec,
-                                columns=rr.Scalars.columns(scalars=x))
+                rr.send_columns(f"sessions/{s}/curves/{c}/{role}", indexes=times, recording=self.rec,
+                                columns=rr.Scalars.columns(scalars=data[:, clip.channels.index(c)]))
 
     # ------------------------------------------------------------------ events
     def session_started(self, session: str, target: Clip) -> None:
+        new = session not in self.targets
         self.targets[session] = target
+        self.frames[session] = max(2, int(round(target.n_frames * PLAYBACK_FPS / target.fps)))
         self.paths[session], self.emphatic[session] = [], []
+        self.first_dp.pop(session, None)
+        self.curves[session] = [c for c in CURVE_CHANNELS if c in target.channels][:MAX_CURVES]
+        self.trials[session] = 0
+        self._forget_oldest()
+        self._session_series(session)
         self._show_target(session, target)
+        if new:
+            self._layout()
+        if session in self.pending:
+            self.space(self.pending.pop(session))
+
+    def _session_series(self, session: str) -> None:
+        for c in self.curves[session]:
+            for r in ROLES:
+                self.rec.log(f"sessions/{session}/curves/{c}/{r}", rr.SeriesLines(colors=[COLOURS[r]], names=[r]),
+                             static=True)
+        for m, colour in (("d_p", (255, 170, 60)), ("R", (200, 200, 200)), ("alpha", (230, 60, 90))):
+            self.rec.log(f"sessions/{session}/{m}", rr.SeriesLines(colors=[colour], names=[m]),
+                         rr.SeriesPoints(colors=[colour], markers=["circle"], marker_sizes=[4.0], names=[m]), static=True)
 
     def _show_target(self, session: str, target: Clip) -> None:
-        self._skeleton(f"skeletons/{session}/target", target, SIDE_BY_SIDE["target"], COLOURS["target"], 0)
-        self._curves(session, "target", target, 0)
+        if target.skeleton is None:
+            return
+        self._body_context(session, target)
+        self._people(session, "target", target, 0)
 
     def continue_from(self, old: "Dashboard") -> None:
-        """A new recording goes on from ``old``: the sessions' targets and paths so far."""
-        self.targets, self.paths, self.emphatic = old.targets, old.paths, old.emphatic
+        """A new recording goes on from ``old``: the newest ``CARRY_OVER`` sessions' targets and
+        paths so far, the estimates and spaces it knew."""
+        keep = list(old.targets)[-CARRY_OVER:]
+        for name in ("targets", "frames", "paths", "emphatic", "first_dp", "trials", "curves"):
+            setattr(self, name, {s: v for s, v in getattr(old, name).items() if s in keep})
+        self.spaces, self.estimates, self.pending = old.spaces, old.estimates, old.pending
         for session, target in self.targets.items():
+            self._session_series(session)
             self._show_target(session, target)
+        self._layout()
+
+    def _forget_oldest(self) -> None:
+        """At most ``MAX_KEPT`` sessions, estimates and spaces (the oldest go first)."""
+        while len(self.targets) > MAX_KEPT:
+            s = next(iter(self.targets))
+            for table in (self.targets, self.frames, self.paths, self.emphatic, self.first_dp, self.trials,
+                          self.curves, self.pending):
+                table.pop(s, None)
+        while len(self.estimates) > MAX_KEPT:
+            self.estimates.pop(next(iter(self.estimates)))
+        while len(self.spaces) > MAX_KEPT:
+            self.spaces.pop(next(iter(self.spaces)))
 
     def trial(self, ev: dict, attempt: Clip | None, emphatic: Clip | None) -> None:
         s, n = ev["session"], int(ev["trial"])
-        self.rec.set_time("trial", sequence=n)
-        self.rec.log(f"coach/{s}/d_p", rr.Scalars(float(ev["d_p"])))
-        self.rec.log(f"coach/{s}/alpha", rr.Scalars(float(ev["alpha"])))
-        self.rec.log(f"coach/{s}/adverb", rr.TextLog(f"trial {n}: alpha {ev['alpha']:g}, "
-                                                     f"\"{ev.get('adverb') or 'no adverb'}\", d_p {ev['d_p']:.1f}"))
+        if s not in self.targets:
+            return  # a session started before this recording: nothing to draw it against
+        self.trials[s] = n
+        k = self.frames[s]
+        self._at(trial=n, playback=n * k)
+        d_p = float(ev["d_p"])
+        if n == 1:
+            self.first_dp[s] = d_p
+        first = self.first_dp.get(s)
+        r = ev.get("R", d_p / first if first else None)
+        self.rec.log(f"sessions/{s}/d_p", rr.Scalars(d_p))
+        self.rec.log(f"sessions/{s}/alpha", rr.Scalars(float(ev["alpha"])))
+        if r is not None:
+            self.rec.log(f"sessions/{s}/R", rr.Scalars(float(r)))
+        chosen = ev.get("alpha_chosen")
+        lowered = (f"; lowered from {chosen:g}: {ev.get('feasibility', '')}" if ev.get("alpha_reduced") and chosen
+                   else "")
+        extra = "".join(f", {name} {ev[key]:.2f}" for key, name in (("d_cop", "d_cop"),) if ev.get(key) is not None)
+        self.rec.log(f"sessions/{s}/coaching", rr.TextLog(
+            f"trial {n}: \"{ev.get('adverb') or 'no adverb'}\", alpha {ev['alpha']:g}{lowered} | d_p {d_p:.1f}"
+            + (f", R {r:.2f}" if r is not None else "") + extra,
+            level="WARN" if ev.get("alpha_reduced") else "INFO"))
         path, emph = self.paths.setdefault(s, []), self.emphatic.setdefault(s, [])
-        path.append(list(ev["x_p"])[:3] + [0.0] * (3 - len(ev["x_p"][:3])))
-        emph.append(list(ev["x_s"])[:3] + [0.0] * (3 - len(ev["x_s"][:3])))
-        x_t = list(ev["x_t"])[:3] + [0.0] * (3 - len(ev["x_t"][:3]))
-        base = f"space/coach-{s}"
-        self.rec.log(f"{base}/target", rr.Points3D([x_t], labels=["target"], radii=[2.0], colors=[COLOURS["target"]]))
+        path.append(_xyz(ev["x_p"]))
+        emph.append(_xyz(ev["x_s"]))
+        base = f"sessions/{s}/space"
+        self.rec.log(f"{base}/target", rr.Points3D([_xyz(ev["x_t"])], labels=["target"], radii=[0.0],
+                                                   colors=[COLOURS["target"]], show_labels=True))
         self.rec.log(f"{base}/path", rr.LineStrips3D([path], colors=[COLOURS["attempt"]]))
-        self.rec.log(f"{base}/attempts", rr.Points3D(path, labels=[f"x_p{i + 1}" for i in range(len(path))],
-                                                     colors=[COLOURS["attempt"]]))
-        self.rec.log(f"{base}/emphatic", rr.Points3D(emph, labels=[f"x_s{i + 1}" for i in range(len(emph))],
-                                                     colors=[COLOURS["emphatic"]]))
-        target = self.targets.get(s)
-        for kind, clip in (("attempt", attempt), ("emphatic", emphatic)):
+        self.rec.log(f"{base}/attempts", rr.Points3D(path, labels=[str(i + 1) for i in range(len(path))],
+                                                     colors=[COLOURS["attempt"]], show_labels=True))
+        self.rec.log(f"{base}/emphatic", rr.Points3D(emph, labels=[f"s{i + 1}" for i in range(len(emph))],
+                                                     colors=[COLOURS["emphatic"]], show_labels=True))
+        target = self.targets[s]
+        self._people(s, "target", target, n)
+        for role, clip in (("attempt", attempt), ("emphatic", emphatic)):
             if clip is None:
                 continue
-            if clip.skeleton is None and target is not None:
+            if clip.skeleton is None and target.skeleton is not None:
                 clip = clip.with_data(clip.data, skeleton=target.skeleton)
-            self._skeleton(f"skeletons/{s}/{kind}", clip, SIDE_BY_SIDE[kind], COLOURS[kind], n)
-            self._curves(s, kind, clip, n)
+            self._people(s, role, clip, n)
 
     def space(self, ev: dict) -> None:
+        """A session's space on the trial it changed in (``coach-<s>``: before the session's first
+        event, it waits for it), an estimate's on its conversation set (``est-<e>``), any other
+        as it is now (static: visible on every timeline)."""
         name = ev["space"]
+        static = False
+        if name.startswith("coach-"):
+            s = name[6:]
+            if s not in self.targets:
+                self.pending.pop(s, None)
+                self.pending[s] = ev
+                while len(self.pending) > MAX_KEPT:
+                    self.pending.pop(next(iter(self.pending)))
+                return
+            entity = f"sessions/{s}/space/proto_symbols"
+            n = self.trials.get(s, 0) + 1  # the trial in progress
+            self._at(trial=n, playback=n * self.frames[s])
+        elif name.startswith("est-"):
+            e = name[4:]
+            entity = f"estimates/{e}/space/proto_symbols"
+            if e not in self.estimates:
+                self.estimates[e] = 0
+                self._forget_oldest()
+                self._layout()
+            self._at(set=self.estimates[e] + 1)  # the conversation set in progress
+        else:
+            entity, static = f"spaces/{name}", True
+            if name not in self.spaces and ev["change"] != "deleted":
+                self.spaces[name] = None
+                self._forget_oldest()
+                self._layout()
+            self.rec.reset_time()
         if ev["change"] == "deleted" or not ev.get("info"):
-            self.rec.log(f"space/{name}", rr.Clear(recursive=True))
+            if static:
+                self.spaces.pop(name, None)
+                self.rec.log(entity, rr.Clear(recursive=True), static=True)
+                self._layout()
+                return
+            self.rec.log(entity, rr.Clear(recursive=True))
             return
         info = ev["info"]
         pts = np.asarray(info["points"], float)
         if pts.ndim != 2 or len(pts) == 0:
             return
         pts = np.hstack([pts[:, :3], np.zeros((len(pts), max(0, 3 - pts.shape[1])))])
-        labels = [f"{p['label']}" if p["label"] == p["name"] else f"{p['label']} ({p['name']})" for p in info["proto_symbols"]]
-        self.rec.log(f"space/{name}/proto_symbols", rr.Points3D(pts, labels=labels))
+        labels = [p["label"] for p in info["proto_symbols"]]
+        classes = sorted(set(labels))
+        ids = [classes.index(x) + 1 for x in labels]
+        self.rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(i + 1, _short(c), PALETTE[i % len(PALETTE)])
+                                                   for i, c in enumerate(classes)]), static=static)
+        scale = float(np.ptp(pts, axis=0).max()) or 1.0
+        self.rec.log(f"{entity}/points", rr.Points3D(pts, class_ids=ids, radii=[scale * 0.012], show_labels=False),
+                     static=static)
+        if name.startswith("coach-"):
+            return  # the session's own points carry the labels (target, 1, 2, ..., s1, s2, ...)
+        centres = [pts[[i for i, x in enumerate(labels) if x == c]].mean(axis=0) for c in classes]
+        self.rec.log(f"{entity}/classes", rr.Points3D(centres, class_ids=list(range(1, len(classes) + 1)),
+                                                      labels=[_short(c) for c in classes], radii=[0.0], show_labels=True),
+                     static=static)
 
     def progress(self, ev: dict) -> None:
-        e = ev["estimate"]
-        self.rec.set_time("set", sequence=int(ev["set"]))
+        e, n = ev["estimate"], int(ev["set"])
+        if e not in self.estimates:
+            self.estimates[e] = 0
+            self._forget_oldest()
+            self._layout()
+        if n == 1 or not self.estimates[e]:
+            for m, colour in (("symbols/k_other", (230, 60, 90)), ("symbols/k_self", (80, 160, 255)),
+                              ("symbols/symbol_error", (200, 200, 200)), ("scale", (255, 170, 60))):
+                name = m.split("/")[-1]
+                self.rec.log(f"estimates/{e}/{m}", rr.SeriesLines(colors=[colour], names=[name]),
+                             rr.SeriesPoints(colors=[colour], markers=["circle"], marker_sizes=[4.0], names=[name]),
+                             static=True)
+        self.estimates[e] = n
+        self._at(set=n)
         k_o, k_s = np.asarray(ev["k_other"], float), np.asarray(ev["k_self"], float)
-        self.rec.log(f"estimator/{e}/k_other", rr.Scalars(float(k_o.mean())))
-        self.rec.log(f"estimator/{e}/k_self", rr.Scalars(float(k_s.mean())))
-        self.rec.log(f"estimator/{e}/symbol_error", rr.Scalars(float(np.mean(np.abs(k_o - k_s)))))
-        self.rec.log(f"estimator/{e}/scale", rr.Scalars(float(ev["scale"])))
+        self.rec.log(f"estimates/{e}/symbols/k_other", rr.Scalars(float(k_o.mean())))
+        self.rec.log(f"estimates/{e}/symbols/k_self", rr.Scalars(float(k_s.mean())))
+        self.rec.log(f"estimates/{e}/symbols/symbol_error", rr.Scalars(float(np.mean(np.abs(k_o - k_s)))))
+        self.rec.log(f"estimates/{e}/scale", rr.Scalars(float(ev["scale"])))
 
     def transcript(self, line: dict) -> None:
+        """A line goes on the conversation set in progress: one more than the estimate has completed."""
+        d = line["dialogue"]
+        self._at(set=self.estimates.get(d, 0) + 1)
         who = line["speaker"]
         extra = f" (k = {line['k']})" if line.get("k") else (f" ({line['answer']})" if line.get("answer") else "")
         level = "WARN" if line.get("understood") is False or line["kind"] == "note" else "INFO"
-        self.rec.log(f"dialogue/{line['dialogue']}", rr.TextLog(f"{who}: {line['text']}{extra}", level=level))
+        self.rec.log(f"estimates/{d}/transcript", rr.TextLog(f"{who}: {line['text']}{extra}", level=level))
 
     def request(self, ev: dict) -> None:
-        self.rec.log(f"latency/{ev['service']}/{ev['verb']}", rr.Scalars(float(ev["ms"])))
+        self.rec.reset_time()
+        self.rec.log(f"cluster/latency/{ev['service']}/{ev['verb']}", rr.Scalars(float(ev["ms"])))
         if ev.get("code") not in (None, "ok"):
-            self.rec.log(f"warnings/{ev['service']}", rr.TextLog(f"{ev['verb']} failed: {ev['code']}",
-                                                                 level="ERROR" if ev["code"] == "internal" else "WARN"))
+            self.rec.log("cluster/warnings", rr.TextLog(f"{ev['service']}/{ev['verb']} failed: {ev['code']}",
+                                                        level="ERROR" if ev["code"] == "internal" else "WARN"))

@@ -1,0 +1,196 @@
+"""The real rerun viewer, driven without a screen (DESIGN.md "Observability", measured recipe).
+
+The viewer binary of the installed rerun (``rerun_cli/rerun``, not the Python wrapper, which
+leaves it orphaned when killed) renders on the CPU with Mesa's Vulkan driver
+(``apt-get install mesa-vulkan-drivers libvulkan1``): ``--headless --bind 127.0.0.1 --port P
+--renderer vulkan --window-size WxH``. :class:`HeadlessViewer` starts it on a free loopback
+port, waits until the recording has loaded, moves the time cursor, switches tabs, takes
+screenshots and reads what each view reported; ``mirrorcoach dashboard --screenshot DIR`` and
+the tests use it.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+from shared.errors import Unavailable
+
+VULKAN_ICDS = (Path("/usr/share/vulkan/icd.d"), Path("/etc/vulkan/icd.d"))
+
+
+def viewer_binary() -> Path:
+    import rerun_cli
+
+    return Path(rerun_cli.__file__).parent / "rerun"
+
+
+def why_no_viewer() -> str | None:
+    """Why the viewer cannot run here (``None``: it can)."""
+    try:
+        exe = viewer_binary()
+    except ImportError:
+        return "rerun-sdk's viewer (rerun_cli) is not installed"
+    if not exe.exists():
+        return f"the rerun viewer binary is missing ({exe})"
+    if not any(d.is_dir() and any(d.glob("*.json")) for d in VULKAN_ICDS):
+        return ("no Vulkan driver: the headless viewer renders with Mesa's "
+                "(`apt-get install mesa-vulkan-drivers libvulkan1`)")
+    return None
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class HeadlessViewer:
+    """``with HeadlessViewer(recording) as v: v.set_time("playback", 40); v.screenshot(path)``.
+
+    ``recording``: an ``.rrd`` file, or ``None`` for a viewer that data is streamed to
+    (``url`` is then the address to give ``MIRRORCOACH_RERUN_URL``)."""
+
+    def __init__(self, recording=None, *, size: str = "1600x1000", log=None, timeout_s: float = 90.0):
+        why = why_no_viewer()
+        if why:
+            raise Unavailable(f"the rerun viewer cannot run here: {why}", cause="no_viewer")
+        self.recording = None if recording is None else Path(recording)
+        self.size = size
+        self.port = _free_port()
+        self.url = f"rerun+http://127.0.0.1:{self.port}/proxy"
+        self.log = log
+        self.timeout_s = timeout_s
+        self.proc: subprocess.Popen | None = None
+        self.client = None
+
+    # ------------------------------------------------------------------ life cycle
+    def __enter__(self) -> "HeadlessViewer":
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def start(self) -> None:
+        from rerun.experimental import ViewerClient
+
+        args = [str(viewer_binary()), "--headless", "--bind", "127.0.0.1", "--port", str(self.port),
+                "--renderer", "vulkan", "--window-size", self.size]
+        if self.recording is not None:
+            args.append(str(self.recording))
+        if self.log:
+            Path(self.log).parent.mkdir(parents=True, exist_ok=True)
+        out = open(self.log, "ab") if self.log else subprocess.DEVNULL
+        self.proc = subprocess.Popen(args, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+                                     env={**os.environ, "RERUN_ANALYTICS": "0"})
+        deadline = time.monotonic() + self.timeout_s
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise Unavailable(f"the rerun viewer exited with {self.proc.returncode} before it answered"
+                                  + (f" (its log: {self.log})" if self.log else ""), cause="no_viewer")
+            try:
+                self.client = ViewerClient.connect(self.url)
+                self.client.get_state()
+                return
+            except Exception:  # not listening yet
+                time.sleep(0.3)
+        self.stop()
+        raise Unavailable(f"the rerun viewer did not answer within {self.timeout_s:g} s", cause="timeout")
+
+    def wait_loaded(self, settle_s: float = 8.0, timeout_s: float | None = None):
+        """Until a recording with timelines is shown and nothing is loading; then ``settle_s``
+        more for the viewer's start-up notices to fade. Returns the state."""
+        deadline = time.monotonic() + (timeout_s or self.timeout_s)
+        while time.monotonic() < deadline:
+            st = self.client.get_state()
+            if st.recordings and any(r.timelines for r in st.recordings) and not st.loading:
+                time.sleep(settle_s)
+                return self.client.get_state()
+            time.sleep(0.3)
+        raise Unavailable(f"the viewer did not load {self.recording or 'the stream'} within the time", cause="timeout")
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            self.proc.wait(timeout=30)
+        self.proc = None
+
+    # ------------------------------------------------------------------ driving it
+    def timelines(self) -> dict[str, tuple[int, int]]:
+        st = self.client.get_state()
+        rec = next(r for r in st.recordings if r.store_id == st.active_recording) if st.active_recording else st.recordings[0]
+        return {t.name: (t.start, t.end) for t in rec.timelines}
+
+    def set_time(self, timeline: str, value: int, settle_s: float = 1.5) -> None:
+        """The time cursor on ``timeline`` (a sequence, or ``log_time`` in nanoseconds), paused."""
+        if timeline == "log_time":
+            self.client.set_time(timeline, timestamp=int(value) / 1e9, play_state="paused")
+        else:
+            self.client.set_time(timeline, sequence=int(value), play_state="paused")
+        time.sleep(settle_s)
+
+    def tabs(self) -> list[str]:
+        """The names of the blueprint's tabs, in order."""
+        bp = self.client.get_blueprint().blueprint
+        tabs = next(v["ContainerBlueprint"] for v in bp.values()
+                    if v.get("ContainerBlueprint", {}).get("container_kind") == "Tabs")
+        return [bp["/" + c]["ContainerBlueprint"].get("display_name", c) for c in tabs["contents"]]
+
+    def show_tab(self, name: str, settle_s: float = 2.0) -> None:
+        info = self.client.get_blueprint()
+        bp = info.blueprint
+        key, tabs = next((k, v["ContainerBlueprint"]) for k, v in bp.items()
+                         if v.get("ContainerBlueprint", {}).get("container_kind") == "Tabs")
+        pick = next(c for c in tabs["contents"] if bp["/" + c]["ContainerBlueprint"].get("display_name") == name)
+        tabs["active_tab"] = pick
+        self.client.set_blueprint(bp, store_id=info.store_id)
+        time.sleep(settle_s)
+
+    def views(self) -> list:
+        return self.client.get_state().views
+
+    def reports(self) -> list[tuple[str, str, str]]:
+        """``(view, severity, summary)`` of every view that failed to visualize something."""
+        return [(v.name, r.severity, r.summary) for v in self.views() for r in v.reports]
+
+    def screenshot(self, path, view: str | None = None) -> Path:
+        """The whole viewer, or one view (by name) of the tab on screen, as a PNG."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        view_id = None
+        if view is not None:
+            view_id = next(v.view_id for v in self.views() if v.name == view)
+        self.client.save_screenshot(str(path.absolute()), view_id=view_id)
+        return path
+
+
+def dashboard_screenshots(recording, folder, log=None) -> list[Path]:
+    """Every tab of a recording in the real viewer: a session's tab in the middle of its last
+    trial (timeline ``playback``), an estimate's at its last conversation set, the others as
+    they open. Returns the PNG files (``<tab>.png``)."""
+    folder = Path(folder)
+    out = []
+    with HeadlessViewer(recording, log=log) as v:
+        v.wait_loaded()
+        lines = v.timelines()
+        for tab in v.tabs():
+            v.show_tab(tab)
+            if tab.startswith("session ") and "playback" in lines and "trial" in lines:
+                n = lines["trial"][1]
+                k = (lines["playback"][1] + 1) // (n + 1)
+                v.set_time("playback", n * k + k // 2)
+            elif tab.startswith("estimate ") and "set" in lines:
+                v.set_time("set", lines["set"][1])
+            elif tab == "cluster" and "log_time" in lines:
+                v.set_time("log_time", lines["log_time"][1])
+            name = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in tab)
+            out.append(v.screenshot(folder / f"{name}.png"))
+    return out
