@@ -47,18 +47,18 @@ def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of
 def test_an_observer_far_behind_drops_events_instead_of_growing(tmp_path, bundled, client_of):
     from shared.io import find_clips, load_clip
 
-    env = cluster_env(tmp_path / "home", MIRRORCOACH_OBSERVER_QUEUE_MB=1)
+    env = cluster_env(tmp_path / "home", MIRRORCOACH_OBSERVER_QUEUE_MB=0.01)  # less than one event: one waits
     with running(env, "observer") as procs:
         c = client_of(env)
         s = settings_of(env)
         target = pack({"v": 1, "session": "x", "target": clip_to_wire(load_clip(find_clips([bundled / "amc"])[0]))})
-        for _ in range(200):  # 200 x ~50 KB at once: far more than 1 MiB waits to be drawn
+        for _ in range(200):  # 200 x ~50 KB at once, each drawn in tens of ms: they arrive while one waits
             c.session.put(s.key("events", "coach", "session"), target)
         deadline = time.monotonic() + 60
         while "dropped so far" not in procs.log("observer") and time.monotonic() < deadline:
             time.sleep(0.2)
     log = procs.log("observer")
-    assert "dropped so far (more than 1 MiB waiting)" in log and "Traceback" not in log
+    assert "dropped so far (more than 0.01 MiB waiting)" in log and "Traceback" not in log
     drawn, dropped = (int(x) for x in re.search(r"stopped after (\d+) events .*; (\d+) dropped", log).groups())
     assert dropped > 0 and drawn > 0 and drawn + dropped <= 200, log[-1500:]  # (some may not have arrived yet)
 

@@ -51,7 +51,7 @@ class Observer:
         observer's memory stays bounded; the services never wait for it."""
         payload = sample.payload.to_bytes()
         with self.queued_lock:
-            if self.queued_bytes + len(payload) > self.max_queued:
+            if self.queued_bytes and self.queued_bytes + len(payload) > self.max_queued:  # one is always taken
                 self.dropped += 1
                 if self.dropped == 1 or self.dropped % 1000 == 0:
                     log.warning("behind: %d event(s) dropped so far (more than %g MiB waiting)", self.dropped,
