@@ -128,3 +128,28 @@ def test_dashboard_screenshot_from_the_cli(viewer_ok, demo_recording, tmp_path):
     files = sorted(p.name for p in (tmp_path / "shots").glob("*.png"))
     assert files == ["cluster.png", "estimate_demo.png", "session_demo.png", "spaces.png"]
     assert all((tmp_path / "shots" / f).stat().st_size > 30_000 for f in files)
+
+
+def test_the_viewer_make_dashboard_starts_listens_on_loopback_only(viewer_ok, demo_recording):
+    """`make dashboard`'s command line (shared.observe.viewer.viewer_command), run headless here:
+    every socket the viewer listens on is 127.0.0.1 (it listened on 0.0.0.0:9876)."""
+    import os
+    import signal
+
+    from shared.observe.viewer import viewer_binary, viewer_command
+
+    args = viewer_command(str(viewer_binary()), demo_recording)
+    p = subprocess.Popen(args[:1] + ["--headless", "--renderer", "vulkan"] + args[1:], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL, start_new_session=True, env={**os.environ, "RERUN_ANALYTICS": "0"})
+    try:
+        listening = []
+        deadline = time.monotonic() + 60
+        while not listening and time.monotonic() < deadline:
+            out = subprocess.run(["ss", "-ltnpH"], capture_output=True, text=True).stdout
+            listening = [line.split()[3] for line in out.splitlines() if f"pid={p.pid}," in line]
+            time.sleep(0.5)
+        assert listening, "the viewer never listened"
+        assert all(addr.startswith("127.0.0.1:") for addr in listening), listening
+    finally:
+        os.killpg(p.pid, signal.SIGKILL)
+        p.wait(timeout=30)

@@ -248,12 +248,6 @@ def schemas(service: Optional[str] = typer.Argument(None, help="Only this servic
         typer.echo("# every error (reply_err)\n" + ERROR.describe())
 
 
-def viewer_command(viewer: str, path) -> list[str]:
-    """The viewer on loopback only (it listens on 0.0.0.0 by default, issue 15) and on a free port
-    (on a taken port, ``rerun FILE`` sends the recording to whoever holds it)."""
-    return [viewer, "--bind", "127.0.0.1", "--port", "auto", str(path)]
-
-
 @app.command("dashboard")
 def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file (default: the latest recording)."),
               screenshot: Optional[Path] = typer.Option(None, help="Instead of opening a window, open the recording "
@@ -288,6 +282,8 @@ def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file
     if (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) and Path(viewer).exists():
         subprocess.run([viewer, "analytics", "disable"], capture_output=True, timeout=60)
         typer.echo(f"opening {path} in the rerun viewer (analytics disabled)")
+        from shared.observe.viewer import viewer_command
+
         subprocess.Popen(viewer_command(viewer, path), start_new_session=True)
         return
     typer.echo(f"no display here. The recording is {path}\n"

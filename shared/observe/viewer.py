@@ -29,6 +29,12 @@ def viewer_binary() -> Path:
     return Path(rerun_cli.__file__).parent / "rerun"
 
 
+def viewer_command(viewer: str, path) -> list[str]:
+    """``make dashboard``'s viewer: on loopback only (it listens on 0.0.0.0 by default, issue 15)
+    and on a free port (on a taken port, ``rerun FILE`` sends the recording to whoever holds it)."""
+    return [viewer, "--bind", "127.0.0.1", "--port", "auto", str(path)]
+
+
 def why_no_viewer() -> str | None:
     """Why the viewer cannot run here (``None``: it can)."""
     try:
