@@ -122,6 +122,16 @@ def dtw_recognition(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip]
     return _summarise("1-NN DTW, positions", [c.label for c in test], pred, secs)
 
 
+def minirocket_features(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip], seed: int = 0):
+    """MiniRocket's (aeon) features of the training and test clips, fitted on the training clips."""
+    from aeon.transformations.collection.convolution_based import MiniRocket
+
+    xtr = np.stack([position_frames(space, c).T for c in train])
+    rocket = MiniRocket(random_state=seed).fit(xtr)
+    return (np.asarray(rocket.transform(xtr), float),
+            np.asarray(rocket.transform(np.stack([position_frames(space, c).T for c in test])), float))
+
+
 def minirocket_recognition(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip], seed: int = 0) -> RecognitionResult:
     """MiniRocket (aeon) + ridge classifier on the space's z-scored positions, 64 frames."""
     from aeon.transformations.collection.convolution_based import MiniRocket
@@ -190,14 +200,16 @@ def pss_alternatives(space: ProtoSymbolSpace, recs, truth: list[str]) -> dict[st
 
 # ---------------------------------------------------------------------------- open set
 def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.ndarray] | None = None,
-             progress=None) -> dict:
+             minirocket: tuple[np.ndarray, np.ndarray] | None = None, progress=None) -> dict:
     """Hold every class out in turn: how many of its test clips come back "none of these"
     (out-of-class rejected) and how many of the others' do (in-class rejected).
 
     ``dtw``: the peer's (train x train, test x train) distances, computed once on the split's
     features; each held-out class takes its rows and columns out and calibrates the same rule
-    (:mod:`shared.pss.recognition`) on what is left."""
-    from shared.pss.recognition import calibrate, decide, hmm_features
+    (:mod:`shared.pss.recognition`) on what is left. ``minirocket``: the strongest peer's features
+    (train, test), judged by the same novelty model (a ridge classifier calibrated across
+    performers) as ours."""
+    from shared.pss.recognition import NoveltyModel, calibrate, decide, hmm_features
 
     classes = sorted({c.label for c in train})
     rows = []
@@ -227,6 +239,14 @@ def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.n
                 key = "out" if c.label == held else "in"
                 row["dtw"][key][0] += int(decide(di, labels, cal).label is None)
                 row["dtw"][key][1] += 1
+        if minirocket is not None:
+            f_tr, f_te = minirocket
+            model = NoveltyModel.fit(f_tr[keep], [c.label for c in tr], [performer(c) for c in tr])
+            row["minirocket"] = {"out": [0, 0], "in": [0, 0]}
+            for c, f in zip(test, f_te):
+                key = "out" if c.label == held else "in"
+                row["minirocket"][key][0] += int(model.novelty(f) > 1.0)
+                row["minirocket"][key][1] += 1
         rows.append(row)
         if progress:
             progress(k + 1, len(classes))
@@ -276,8 +296,11 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
                  "calibration": {"ece": _ece(conf, correct), "mean_confidence": float(conf.mean()),
                                  "scheme": space.calibration.scheme,
                                  "rejected_in_class": int(sum(r.label is None for r in recs))}}
+        rocket = None
         if avail.get("minirocket") is None:
             split["methods"]["minirocket"] = minirocket_recognition(space, train, test).__dict__
+            if open_set_test:
+                rocket = minirocket_features(space, train, test)
         kept: dict = {}
         if avail.get("dtw") is None:
             split["methods"]["dtw"] = dtw_recognition(space, train, test, keep=kept).__dict__
@@ -291,7 +314,7 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
                 tr = kept["train_frames"]
                 dtw = (_symmetric_dtw(tr), kept["test_train"])
             with threadpool_limits(1):
-                res["open_set"][who] = open_set(train, test, dtw=dtw,
+                res["open_set"][who] = open_set(train, test, dtw=dtw, minirocket=rocket,
                                                 progress=lambda k, n: progress(f"  open set: held out {k}/{n} classes"))
     res["verdicts"] = verdicts(res)
     return res
@@ -382,6 +405,7 @@ def report_markdown(res: dict) -> str:
                   f"| PSS (ours): distance rule or novelty model | {100 * rates[0]:.1f} % | {100 * rates[1]:.1f} % |"]
         for m, what in (("pss_distance", "PSS, the eq. 2.4 distance rule alone (level 0.98)"),
                         ("pss_model", "PSS, the novelty model alone (ridge on the HMMs, level 0.95)"),
+                        ("minirocket", "MiniRocket features, the same novelty model (ridge, level 0.95)"),
                         ("dtw", "1-NN DTW, the distance rule on its distances")):
             d = _open_rates(res, m)
             if d is not None:
