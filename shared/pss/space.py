@@ -631,4 +631,8 @@ class ProtoSymbolSpace:
                             else "nearest proto-symbol on the angle channels (format 1: rebuild the space from its "
                                  "clips for position-based recognition)" if self.format != FORMAT
                             else "nearest proto-symbol on the motion channels (no skeleton)"),
+            "open_set": ("none of these: the distance rule or the novelty model (ridge on the proto-symbols' HMMs, "
+                         f"calibrated {self._novelty.scheme})" if self._novelty
+                         else "none of these: the distance rule (written before the novelty model)"
+                         if self._novelty is False else "none of these: the distance rule or the novelty model"),
         }
