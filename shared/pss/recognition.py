@@ -30,9 +30,12 @@ On top of the nearest proto-symbol:
   ``1 / (1 - known_quantile) - 1`` calibration proto-symbols (49 at the default 0.98) never
   rejects, because its own motions cannot say how far a new performer may be. An
   unknown motion tends to fall between known classes; the ratio caught more of them than
-  the distance alone (held-out-class AUC 0.93 against 0.85 on HDM05).
+  the distance alone (held-out-class AUC 0.93 against 0.85 on HDM05). A second test, the
+  :class:`NoveltyModel` (a discriminative step on top of the proto-symbols), rejects too: the
+  motion is "none of these" when either test says so.
 
-Everything is computed from the space's distances, lazily, once per space object.
+The distance rule is computed from the space's distances, the novelty model from its
+proto-symbols' HMMs; both lazily, once per space object, and saved with the space.
 """
 
 from __future__ import annotations
