@@ -18,6 +18,7 @@ from contextlib import contextmanager
 from shared.errors import Unavailable
 
 _deadline: contextvars.ContextVar[tuple[float, float, str] | None] = contextvars.ContextVar("deadline", default=None)
+_kept: contextvars.ContextVar[str] = contextvars.ContextVar("kept", default="")
 
 
 class TimeLimit(Unavailable):
@@ -28,17 +29,26 @@ class TimeLimit(Unavailable):
 def time_limit(seconds: float | None, what: str):
     """Run the block under a limit of ``seconds`` (``None``: none) for the request ``what``."""
     token = _deadline.set(None if seconds is None else (time.monotonic() + seconds, seconds, what))
+    kept = _kept.set("")
     try:
         yield
     finally:
+        _kept.reset(kept)
         _deadline.reset(token)
 
 
+def completed(done: str) -> None:
+    """Say what the current request has completed and kept so far (an incremental verb, between
+    its steps): a stop anywhere later reports it instead of "nothing was changed"."""
+    _kept.set(done)
+
+
 def check_time(done: str = "") -> None:
-    """Raise :class:`TimeLimit` when the current request is past its limit. ``done`` says what
-    was completed and kept so far (for incremental verbs)."""
+    """Raise :class:`TimeLimit` when the current request is past its limit. ``done`` (or what
+    :func:`completed` last said) tells what was completed and kept so far."""
     d = _deadline.get()
     if d is not None and time.monotonic() > d[0]:
+        done = done or _kept.get()
         kept = f"; {done}" if done else "; nothing was changed"
         raise TimeLimit(f"{d[2]} passed its time limit of {d[1]:g} s and stopped{kept}", cause="time_limit",
                         limit_s=d[1])

@@ -173,3 +173,44 @@ def test_library_code_is_limited_only_inside_a_request():
     assert e.value.code == "unavailable" and e.value.details["cause"] == "time_limit"
     with time_limit(60.0, "coach/policy_fit"):
         assert len(simulated_coach_demonstrations(n=10)) == 10
+    from shared.deadline import completed
+
+    with time_limit(0.0, "coach/run"), pytest.raises(TimeLimit) as e:  # a stop deep inside a step
+        completed("3 of 5 trial(s) completed and kept")
+        simulated_coach_demonstrations(n=10)
+    assert e.value.message.endswith("stopped; 3 of 5 trial(s) completed and kept")
+    with time_limit(0.0, "pss/build"), pytest.raises(TimeLimit) as e:  # a new request starts with nothing kept
+        simulated_coach_demonstrations(n=10)
+    assert e.value.message.endswith("nothing was changed")
+
+
+def test_a_coaching_run_past_its_time_limit_keeps_the_trials_it_completed(tmp_path, bundled, client_of):
+    """The coach's limit (2 s, only the coach's) stops a 50-trial run between trials: the reply
+    says how many were completed and kept, the session holds exactly those, and it goes on."""
+    from shared.bus.client import RemoteError
+    from shared.io import load_clip
+    from tests.conftest import Processes
+
+    env = cluster_env(tmp_path / "home")
+    procs = Processes(env)
+    procs.start("router", "shared.bus.router")
+    for name in ("pss", "simulator"):
+        procs.start(name, f"services.{name}")
+    procs.env = {**env, "MIRRORCOACH_TIME_LIMIT": "2"}
+    procs.start("coach", "services.coach")
+    try:
+        procs.wait_alive({"pss", "simulator", "coach"})
+        c = client_of(env)
+        squat = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc")
+        c.request("coach", "start", {"session": "long", "target": clip_to_wire(squat), "learner": "slow"})
+        with pytest.raises(RemoteError) as e:
+            c.request("coach", "run", {"session": "long", "trials": 50}, timeout=300)
+        assert e.value.code == "unavailable" and e.value.details["cause"] == "time_limit", e.value.message
+        done = int(e.value.message.split("stopped; ")[1].split(" of 50")[0])
+        assert 0 < done < 50 and "completed and kept" in e.value.message
+        assert len(c.request("coach", "state", {"session": "long"})["trials"]) == done
+        r = c.request("coach", "run", {"session": "long", "trials": 1})
+        assert len(r["trials"]) == done + 1
+    finally:
+        procs.stop()
+    assert "Traceback" not in procs.log("coach")

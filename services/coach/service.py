@@ -21,7 +21,7 @@ from schemas.common import clip_from_wire, clip_to_wire
 from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
-from shared.deadline import check_time
+from shared.deadline import check_time, completed
 from shared.clip import Clip
 from shared.coaching.policies import (SWEEP, Calibration, Policy, fit_emu1_corrected, fit_nb,
                                       simulated_coach_demonstrations)
@@ -206,7 +206,8 @@ def make_service(settings: Settings | None = None) -> Service:
             if s.trials and last.exists():  # continue: show what the last trial chose
                 demo, adverb = load_clip(last), s.trials[-1].adverb
             for i in range(req["trials"]):
-                check_time(f"{i} of {req['trials']} trial(s) completed and kept")
+                completed(f"{i} of {req['trials']} trial(s) completed and kept")
+                check_time()
                 r = bus().request("simulator", "learner_imitate", {"learner": s.learner, "demonstration": clip_to_wire(demo),
                                                                    **({"adverb": adverb} if adverb else {})})
                 attempts = [clip_from_wire(a, s.target.skeleton) for a in r["attempts"]]

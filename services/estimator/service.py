@@ -24,7 +24,7 @@ from schemas.common import clip_from_wire, clip_to_wire
 from shared.bus.client import Client
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
-from shared.deadline import check_time
+from shared.deadline import check_time, completed
 from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
 from shared.estimation.conversation import TORQUE_PREFIX, Language, OtherEstimate, with_torques
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
@@ -153,7 +153,8 @@ def make_service(settings: Settings | None = None) -> Service:
             ports.build(est.database())  # the space matches the saved state, whatever happened before
             done, stopped = 0, None
             for _ in range(req["sets"]):
-                check_time(f"{done} of {req['sets']} conversation set(s) completed and kept")
+                completed(f"{done} of {req['sets']} conversation set(s) completed and kept")
+                check_time()
                 work = copy.deepcopy(est)
                 was_consistent = work.consistent()
                 try:
