@@ -43,12 +43,12 @@ def completed(done: str) -> None:
     _kept.set(done)
 
 
-def check_time(done: str = "") -> None:
-    """Raise :class:`TimeLimit` when the current request is past its limit. ``done`` (or what
-    :func:`completed` last said) tells what was completed and kept so far."""
+def check_time() -> None:
+    """Raise :class:`TimeLimit` when the current request is past its limit, saying what
+    :func:`completed` last said was kept."""
     d = _deadline.get()
     if d is not None and time.monotonic() > d[0]:
-        done = done or _kept.get()
+        done = _kept.get()
         kept = f"; {done}" if done else "; nothing was changed"
         raise TimeLimit(f"{d[2]} passed its time limit of {d[1]:g} s and stopped{kept}", cause="time_limit",
                         limit_s=d[1])

@@ -122,32 +122,29 @@ def dtw_recognition(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip]
     return _summarise("1-NN DTW, positions", [c.label for c in test], pred, secs)
 
 
-def minirocket_features(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip], seed: int = 0):
-    """MiniRocket's (aeon) features of the training and test clips, fitted on the training clips."""
-    from aeon.transformations.collection.convolution_based import MiniRocket
-
-    xtr = np.stack([position_frames(space, c).T for c in train])
-    rocket = MiniRocket(random_state=seed).fit(xtr)
-    return (np.asarray(rocket.transform(xtr), float),
-            np.asarray(rocket.transform(np.stack([position_frames(space, c).T for c in test])), float))
-
-
-def minirocket_recognition(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip], seed: int = 0) -> RecognitionResult:
-    """MiniRocket (aeon) + ridge classifier on the space's z-scored positions, 64 frames."""
+def minirocket_recognition(space: ProtoSymbolSpace, train: list[Clip], test: list[Clip], seed: int = 0,
+                           keep: dict | None = None) -> RecognitionResult:
+    """MiniRocket (aeon) + ridge classifier on the space's z-scored positions, 64 frames;
+    ``keep`` receives the training and test clips' MiniRocket features (for the open set)."""
     from aeon.transformations.collection.convolution_based import MiniRocket
     from sklearn.linear_model import RidgeClassifierCV
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
     xtr = np.stack([position_frames(space, c).T for c in train])
-    model = make_pipeline(MiniRocket(random_state=seed), StandardScaler(with_mean=True),
-                          RidgeClassifierCV(alphas=np.logspace(-3, 3, 10)))
-    model.fit(xtr, np.array([c.label for c in train]))
-    pred, secs = [], []
+    rocket = MiniRocket(random_state=seed).fit(xtr)
+    ftr = np.asarray(rocket.transform(xtr), float)
+    model = make_pipeline(StandardScaler(with_mean=True), RidgeClassifierCV(alphas=np.logspace(-3, 3, 10)))
+    model.fit(ftr, np.array([c.label for c in train]))
+    pred, secs, rows = [], [], []
     for c in test:
         t0 = time.perf_counter()
-        pred.append(str(model.predict(position_frames(space, c).T[None])[0]))
+        f = np.asarray(rocket.transform(position_frames(space, c).T[None]), float)
+        pred.append(str(model.predict(f)[0]))
         secs.append(time.perf_counter() - t0)
+        rows.append(f[0])
+    if keep is not None:
+        keep["train_features"], keep["test_features"] = ftr, np.array(rows)
     return _summarise("MiniRocket + ridge (aeon)", [c.label for c in test], pred, secs)
 
 
@@ -209,7 +206,7 @@ def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.n
     (:mod:`shared.pss.recognition`) on what is left. ``minirocket``: the strongest peer's features
     (train, test), judged by the same novelty model (a ridge classifier calibrated across
     performers) as ours."""
-    from shared.pss.recognition import NoveltyModel, calibrate, decide, hmm_features
+    from shared.pss.recognition import NoveltyModel, calibrate, decide
 
     classes = sorted({c.label for c in train})
     rows = []
@@ -218,15 +215,11 @@ def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.n
         tr = [c for c, kp in zip(train, keep) if kp]
         space = ProtoSymbolSpace.build(tr)
         row = {"held_out": held, **{m: {"out": [0, 0], "in": [0, 0]} for m in ("pss", "pss_distance", "pss_model")}}
-        idx = space.features.group_indices(space.recognition_groups)
         for c in test:
             r = space.recognize(c)
             key = "out" if c.label == held else "in"
-            hr = r.hmm.marginal(idx)  # each of the two tests of the decision alone (shared.pss.recognition)
-            alone = {"pss": r.label is None,
-                     "pss_distance": decide(r.recognition_distances, space.labels, space.calibration).label is None,
-                     "pss_model": space.novelty_model is not None
-                     and space.novelty_model.novelty(hmm_features(hr.means, hr.covars)) > 1.0}
+            alone = {"pss": r.label is None,  # and each of the decision's two tests alone
+                     "pss_distance": r.decision.distance_novelty > 1.0, "pss_model": r.decision.model_novelty > 1.0}
             for m, rejected in alone.items():
                 row[m][key][0] += int(rejected)
                 row[m][key][1] += 1
@@ -296,11 +289,9 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
                  "calibration": {"ece": _ece(conf, correct), "mean_confidence": float(conf.mean()),
                                  "scheme": space.calibration.scheme,
                                  "rejected_in_class": int(sum(r.label is None for r in recs))}}
-        rocket = None
+        rocket: dict = {}
         if avail.get("minirocket") is None:
-            split["methods"]["minirocket"] = minirocket_recognition(space, train, test).__dict__
-            if open_set_test:
-                rocket = minirocket_features(space, train, test)
+            split["methods"]["minirocket"] = minirocket_recognition(space, train, test, keep=rocket).__dict__
         kept: dict = {}
         if avail.get("dtw") is None:
             split["methods"]["dtw"] = dtw_recognition(space, train, test, keep=kept).__dict__
@@ -313,8 +304,9 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
                 progress(f"  open set: DTW between the {len(train)} training clips")
                 tr = kept["train_frames"]
                 dtw = (_symmetric_dtw(tr), kept["test_train"])
+            features = (rocket["train_features"], rocket["test_features"]) if rocket else None
             with threadpool_limits(1):
-                res["open_set"][who] = open_set(train, test, dtw=dtw, minirocket=rocket,
+                res["open_set"][who] = open_set(train, test, dtw=dtw, minirocket=features,
                                                 progress=lambda k, n: progress(f"  open set: held out {k}/{n} classes"))
     res["verdicts"] = verdicts(res)
     return res

@@ -153,3 +153,24 @@ def test_the_viewer_make_dashboard_starts_listens_on_loopback_only(viewer_ok, de
     finally:
         os.killpg(p.pid, signal.SIGKILL)
         p.wait(timeout=30)
+
+
+def test_dashboard_screenshot_of_other_files(viewer_ok, tmp_path):
+    """Not a recording: a one-line error before any viewer starts. A recording without this
+    dashboard's blueprint: the viewer's own layout, one picture."""
+    import rerun as rr
+
+    (tmp_path / "x.rrd").write_bytes(b"not a recording")
+    cmd = [sys.executable, "-m", "shared.cli", "dashboard"]
+    r = subprocess.run(cmd + [str(tmp_path / "x.rrd"), "--screenshot", str(tmp_path / "a")], cwd=REPO,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.startswith("error: ") and "not a rerun recording" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+    rec = rr.RecordingStream("plain")
+    rec.save(str(tmp_path / "plain.rrd"))
+    rec.log("points", rr.Points3D([[0, 0, 0], [1, 1, 1]]))
+    rec.disconnect()
+    r = subprocess.run(cmd + [str(tmp_path / "plain.rrd"), "--screenshot", str(tmp_path / "b")], cwd=REPO,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert [p.name for p in (tmp_path / "b").glob("*.png")] == ["dashboard.png"]

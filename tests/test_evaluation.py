@@ -18,14 +18,16 @@ def bundled_clips(bundled):
 
 
 def test_open_set_counts_every_clip_for_every_method(bundled_clips):
-    from shared.evaluation import minirocket_features, peers_available
+    from shared.evaluation import minirocket_recognition, peers_available
     from shared.pss.space import ProtoSymbolSpace
 
     train = [c for c in bundled_clips if performer(c) != "HDM_dg"]
     test = [c for c in bundled_clips if performer(c) == "HDM_dg"]
     rocket = None
     if peers_available().get("minirocket") is None:
-        rocket = minirocket_features(ProtoSymbolSpace.build(train), train, test)
+        kept: dict = {}
+        minirocket_recognition(ProtoSymbolSpace.build(train), train, test, keep=kept)
+        rocket = (kept["train_features"], kept["test_features"])
     res = open_set(train, test, minirocket=rocket)
     classes = sorted({c.label for c in train})
     assert [r["held_out"] for r in res["rows"]] == classes

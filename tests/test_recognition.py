@@ -245,6 +245,12 @@ def test_the_novelty_model_is_saved_with_the_space_and_older_files_keep_their_ru
     with np.load(tmp_path / "n.npz", allow_pickle=False) as z:
         arrays = {k: np.array(z[k]) for k in z.files if not k.startswith("novelty_")}
     header = json.loads(str(arrays["header"]))
+    broken = {**header, "novelty": {"classes": ["x"]}}  # a novelty header without its threshold: a clear error
+    with np.load(tmp_path / "n.npz", allow_pickle=False) as z:
+        np.savez(tmp_path / "broken.npz", **{**{k: np.array(z[k]) for k in z.files},
+                                              "header": np.array(json.dumps(broken))})
+    with pytest.raises(BadInput, match="novelty model is unreadable"):
+        ProtoSymbolSpace.load(tmp_path / "broken.npz")
     header.pop("novelty")
     arrays["header"] = np.array(json.dumps(header))
     np.savez(tmp_path / "old.npz", **arrays)

@@ -21,10 +21,10 @@ from schemas.common import clip_from_wire, clip_to_wire
 from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
-from shared.deadline import check_time, completed
 from shared.clip import Clip
 from shared.coaching.policies import (SWEEP, Calibration, Policy, fit_emu1_corrected, fit_nb,
                                       simulated_coach_demonstrations)
+from shared.deadline import check_time, completed
 from shared.coaching.session import Session, Trial, session_to_dict, start, trial
 from shared.errors import BadInput, Conflict, NotFound
 from shared.io import load_clip, save_clip

@@ -2,8 +2,9 @@
 answers into symbols (contract: ``schemas/dialogue.py``).
 
 Wording, parsing and the symbol tables are ``shared.symbols``; transcripts are JSON lines in
-``$MIRRORCOACH_HOME/data/dialogue/<dialogue>.jsonl`` (appended all or nothing and fsynced line by line; a line a full disk cut short is removed), each
-line also published as an event.
+``$MIRRORCOACH_HOME/data/dialogue/<dialogue>.jsonl`` (a question with its answer appended all
+or nothing and fsynced; what a full disk cut short is removed), each line also published as an
+event.
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 ``<prefix>/alive/observer`` so ``make up`` waits for it and ``status`` lists it.
 
 Recording: ``$MIRRORCOACH_HOME/recordings/<time>.rrd`` (``latest.rrd`` points to it); past
-``MIRRORCOACH_RECORDING_MB`` it goes on in a new file, and only the newest ``MIRRORCOACH_RECORDINGS``
-are kept. With
+``MIRRORCOACH_RECORDING_MB`` it goes on in a new file, and only the newest
+``MIRRORCOACH_RECORDINGS`` are kept. With
 ``MIRRORCOACH_RERUN_URL`` (e.g. ``rerun+http://127.0.0.1:9876/proxy``) it also streams live to
 a viewer the user started; it never binds a port itself. The Zenoh callback only queues the
 sample; one worker thread decodes and logs, so a slow disk never stalls the bus.
@@ -22,15 +22,11 @@ from collections import OrderedDict
 
 from schemas import CONTRACTS
 from schemas.common import clip_from_wire
-from shared.bus.config import Settings, _env_num, client_config
+from shared.bus.config import Settings, client_config
 from shared.codec import unpack
 from shared.errors import BadInput, MirrorcoachError
 
 log = logging.getLogger("mirrorcoach.observer")
-
-#: MiB of events waiting to be drawn (``MIRRORCOACH_OBSERVER_QUEUE_MB``); more are dropped (counted
-#: and logged), never queued without bound
-MAX_QUEUED_MB = 256.0
 
 
 class Observer:
@@ -42,13 +38,13 @@ class Observer:
         self.refused = 0
         self.spaces: OrderedDict[str, dict] = OrderedDict()
         self.queued_bytes, self.dropped = 0, 0
-        self.max_queued = _env_num("MIRRORCOACH_OBSERVER_QUEUE_MB", MAX_QUEUED_MB, float) * 2**20
+        self.max_queued = self.s.observer_queue_mb * 2**20
         self.queued_lock = threading.Lock()
 
     def enqueue(self, sample) -> None:
-        """The Zenoh callback: queue the event for the drawing thread. Events waiting beyond
-        ``MIRRORCOACH_OBSERVER_QUEUE_MB`` (the observer far behind a burst) are dropped and counted, so the
-        observer's memory stays bounded; the services never wait for it."""
+        """The Zenoh callback: queue the event for the drawing thread. Events beyond
+        ``MIRRORCOACH_OBSERVER_QUEUE_MB`` waiting (the observer far behind a burst) are dropped and
+        counted, so the observer's memory stays bounded; the services never wait for it."""
         payload = sample.payload.to_bytes()
         with self.queued_lock:
             if self.queued_bytes and self.queued_bytes + len(payload) > self.max_queued:  # one is always taken

@@ -1,28 +1,30 @@
 """Where the cluster lives: endpoints, key prefix, data folder, limits (environment variables).
 
-============================  ==========================  ===========================================
-variable                      default                     meaning
-============================  ==========================  ===========================================
-``MIRRORCOACH_ROUTER``        ``tcp/127.0.0.1:7447``      the router's endpoint (loopback only)
-``MIRRORCOACH_PREFIX``        ``mc``                      first segment of every key
-``MIRRORCOACH_HOME``          ``./var``                   data (``data/<service>``), logs, pid files
-``MIRRORCOACH_MAX_PAYLOAD``   ``67108864`` (64 MiB)       largest request a service accepts, bytes
-``MIRRORCOACH_TIMEOUT``       ``120``                     default request timeout of the CLI, seconds
-``MIRRORCOACH_WORKERS``       ``4``                       requests a service handles at once (more
-                                                          threads than cores only fight for the GIL)
-``MIRRORCOACH_QUEUE``         ``256``                     requests a service keeps waiting beyond its
-                                                          workers; more get ``unavailable`` at once
-``MIRRORCOACH_QUEUE_MB``      ``512``                     bytes of waiting requests a service keeps
-                                                          (one request is always taken when idle)
-``MIRRORCOACH_WAITING``       ``32``                      questions to people a service keeps open at
-                                                          once (verbs that wait, on their own pool)
-``MIRRORCOACH_TIME_LIMIT``    ``600``                     seconds any request may run (each verb declares
-                                                          its own limit, at most this); past it the
-                                                          request stops at a safe point: ``unavailable``
-``MIRRORCOACH_RECORDING_MB``  ``64``                      the observer starts a new recording when
-                                                          its file passes this size
-``MIRRORCOACH_RECORDINGS``    ``10``                      recordings kept (the oldest are deleted)
-============================  ==========================  ===========================================
+================================  ==========================  ===========================================
+variable                          default                     meaning
+================================  ==========================  ===========================================
+``MIRRORCOACH_ROUTER``            ``tcp/127.0.0.1:7447``      the router's endpoint (loopback only)
+``MIRRORCOACH_PREFIX``            ``mc``                      first segment of every key
+``MIRRORCOACH_HOME``              ``./var``                   data (``data/<service>``), logs, pid files
+``MIRRORCOACH_MAX_PAYLOAD``       ``67108864`` (64 MiB)       largest request a service accepts, bytes
+``MIRRORCOACH_TIMEOUT``           ``120``                     default request timeout of the CLI, seconds
+``MIRRORCOACH_WORKERS``           ``4``                       requests a service handles at once (more
+                                                              threads than cores only fight for the GIL)
+``MIRRORCOACH_QUEUE``             ``256``                     requests a service keeps waiting beyond its
+                                                              workers; more get ``unavailable`` at once
+``MIRRORCOACH_QUEUE_MB``          ``512``                     bytes of waiting requests a service keeps
+                                                              (one request is always taken when idle)
+``MIRRORCOACH_WAITING``           ``32``                      questions to people a service keeps open at
+                                                              once (verbs that wait, on their own pool)
+``MIRRORCOACH_TIME_LIMIT``        ``600``                     seconds any request may run (each verb declares
+                                                              its own limit, at most this); past it the
+                                                              request stops at a safe point: ``unavailable``
+``MIRRORCOACH_RECORDING_MB``      ``64``                      the observer starts a new recording when
+                                                              its file passes this size
+``MIRRORCOACH_RECORDINGS``        ``10``                      recordings kept (the oldest are deleted)
+``MIRRORCOACH_OBSERVER_QUEUE_MB`` ``256``                     events waiting for the observer; more are
+                                                              dropped (counted in its log)
+================================  ==========================  ===========================================
 
 The embedded default topology (DESIGN.md "Bus conventions"): one router-mode Zenoh session
 listening on the loopback endpoint, every service and the CLI as clients connecting to it,
@@ -93,6 +95,7 @@ class Settings:
     time_limit: float = field(default_factory=lambda: _env_num("MIRRORCOACH_TIME_LIMIT", 600.0, float))
     recording_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_RECORDING_MB", 64.0, float))
     recordings: int = field(default_factory=lambda: _env_num("MIRRORCOACH_RECORDINGS", 10))
+    observer_queue_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_OBSERVER_QUEUE_MB", 256.0, float))
 
     def __post_init__(self):
         check_loopback(self.router)
@@ -105,9 +108,10 @@ class Settings:
                            f"got {self.queue} and {self.queue_mb}")
         if not 0 < self.time_limit <= 1e6:
             raise BadInput(f"MIRRORCOACH_TIME_LIMIT must be positive seconds, got {self.time_limit}")
-        if not 0 < self.recording_mb <= 1e6 or not 1 <= self.recordings <= 10_000:
-            raise BadInput(f"MIRRORCOACH_RECORDING_MB must be positive and MIRRORCOACH_RECORDINGS 1..10000, "
-                           f"got {self.recording_mb} and {self.recordings}")
+        if not (0 < self.recording_mb <= 1e6 and 1 <= self.recordings <= 10_000 and 0 < self.observer_queue_mb <= 1e6):
+            raise BadInput(f"MIRRORCOACH_RECORDING_MB and MIRRORCOACH_OBSERVER_QUEUE_MB must be positive and "
+                           f"MIRRORCOACH_RECORDINGS 1..10000, got {self.recording_mb}, {self.observer_queue_mb} and "
+                           f"{self.recordings}")
         if not re.fullmatch(r"[A-Za-z0-9_-]{1,32}", self.prefix):
             raise BadInput(f"MIRRORCOACH_PREFIX {self.prefix!r} must be 1-32 letters, digits, '_' or '-'")
 

@@ -13,8 +13,9 @@ A :class:`Service` answers the verbs of its contract (``schemas/<service>.py``) 
    or when the waiting ones hold ``MIRRORCOACH_QUEUE_MB``, gets ``unavailable`` (cause
    ``saturated``) at once instead of queueing without bound (issue 17, row 1); verbs that may
    wait for a person (``Endpoint.waits``) run on a pool of their own (``MIRRORCOACH_WAITING``),
-   so questions nobody has answered yet never hold the workers (issue 17, row 3);
-   a full disk (``ENOSPC``) becomes ``unavailable`` (cause ``disk_full``); anything else becomes ``internal`` (logged with its traceback, never shown to the caller);
+   so questions nobody has answered yet never hold the workers (issue 17, row 3); a full disk
+   (``ENOSPC``) becomes ``unavailable`` (cause ``disk_full``); anything else becomes
+   ``internal`` (logged with its traceback, never shown to the caller);
 4. the query is always finalised (``with query``), so a caller never waits for a timeout.
 
 The service declares the liveliness token ``<prefix>/alive/<service>``, publishes events on

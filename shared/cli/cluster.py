@@ -275,8 +275,10 @@ def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file
                 typer.echo(f"wrote {p}")
         except MirrorcoachError as e:
             _fail(e.message)
+        except ConnectionError as e:  # the viewer's own refusal (rerun.experimental.ViewerClient)
+            _fail(f"the rerun viewer refused: {str(e).splitlines()[0]}")
         except OSError as e:
-            _fail(f"could not write the screenshots to {screenshot}: {e.strerror}")
+            _fail(f"could not write the screenshots to {screenshot}: {e.strerror or e}")
         return
     viewer = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
     if (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) and Path(viewer).exists():

@@ -76,13 +76,14 @@ def _short(name: str) -> str:
 
 
 def _side(name: str, names: set[str]) -> str:
+    """``left``, ``right``, ``head``, ``foot`` or ``centre``; ``names``: every joint, lower case."""
     n = name.lower()
     if "head" in n:
         return "head"
     if "foot" in n or "toe" in n:
         return "foot"
     for a, b, side in (("left", "right", "left"), ("right", "left", "right"), ("l", "r", "left"), ("r", "l", "right")):
-        if n.startswith(a) and (b + n[len(a):]) in {x.lower() for x in names}:
+        if n.startswith(a) and (b + n[len(a):]) in names:
             return side
     return "centre"
 
@@ -106,6 +107,23 @@ def _resample(clip: Clip, n: int) -> np.ndarray:
     return np.stack([np.interp(dst, src, x[:, j]) for j in range(x.shape[1])], axis=1)
 
 
+def _front(x: float, distance: float, up: int) -> rrb.EyeControls3D:
+    """A camera in front of people standing on the floor at ``x`` (up axis 1 = Y or 2 = Z)."""
+    position, target, eye_up = [x, 1.2, distance], [x, 0.85, 0.0], [0.0, 1.0, 0.0]
+    if up == 2:
+        position, target, eye_up = [x, -distance, 1.2], [x, 0.0, 0.85], [0.0, 0.0, 1.0]
+    return rrb.EyeControls3D(kind=rrb.components.Eye3DKind.Orbital, position=position, look_target=target,
+                             eye_up=eye_up)
+
+
+def _series_style(rec, entity: str, name: str, colour, markers: bool = True) -> None:
+    """A series' name and colour (and markers, for values per trial or per set), once."""
+    parts = [rr.SeriesLines(colors=[colour], names=[name])]
+    if markers:
+        parts.append(rr.SeriesPoints(colors=[colour], markers=["circle"], marker_sizes=[4.0], names=[name]))
+    rec.log(entity, *parts, static=True)
+
+
 def _xyz(p) -> list[float]:
     p = list(p)[:3]
     return [float(v) for v in p] + [0.0] * (3 - len(p))
@@ -125,9 +143,9 @@ class Dashboard:
             self.rec.set_sinks(*sinks)
         self.targets: dict[str, Clip] = {}
         self.frames: dict[str, int] = {}  # K per session: the target's frames at 30 fps
+        self.poses: dict[str, tuple | None] = {}  # the target's, resampled and by forward kinematics
         self.paths: dict[str, list] = {}
         self.emphatic: dict[str, list] = {}
-        self.first_dp: dict[str, float] = {}
         self.spaces: dict[str, None] = {}  # in order of arrival
         self.estimates: dict[str, int] = {}  # conversation sets completed per estimate
         self.trials: dict[str, int] = {}  # trials completed per session
@@ -142,12 +160,7 @@ class Dashboard:
 
     # ------------------------------------------------------------------ layout
     def _session_tab(self, s: str) -> rrb.Container:
-        front = rrb.EyeControls3D(kind=rrb.components.Eye3DKind.Orbital, position=[1.5, 1.2, 4.3],
-                                  look_target=[1.5, 0.85, 0.0], eye_up=[0.0, 1.0, 0.0])
-        up = self.targets[s].skeleton.up_axis if self.targets.get(s) is not None and self.targets[s].skeleton else 1
-        if up == 2:
-            front = rrb.EyeControls3D(kind=rrb.components.Eye3DKind.Orbital, position=[1.5, -4.3, 1.2],
-                                      look_target=[1.5, 0.0, 0.85], eye_up=[0.0, 0.0, 1.0])
+        up = self.targets[s].skeleton.up_axis if self.targets[s].skeleton else 1
         curves = [rrb.TimeSeriesView(origin=f"sessions/{s}/curves/{c}", name=f"{c} (deg)",
                                      plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop))
                   for c in self.curves.get(s, [])]
@@ -155,13 +168,10 @@ class Dashboard:
                   for m, label in (("d_p", "d_p"), ("R", "R"), ("alpha", "alpha"))]
         return rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial3DView(origin=f"sessions/{s}/body", name="target | attempt | emphatic", eye_controls=front),
-                rrb.Horizontal(
-                    rrb.Spatial3DView(origin=f"sessions/{s}/overlay", name="overlaid", eye_controls=rrb.EyeControls3D(
-                        kind=rrb.components.Eye3DKind.Orbital, position=[0.0, 1.2, 3.2] if up != 2 else [0.0, -3.2, 1.2],
-                        look_target=[0.0, 0.9, 0.0] if up != 2 else [0.0, 0.0, 0.9],
-                        eye_up=[0.0, 1.0, 0.0] if up != 2 else [0.0, 0.0, 1.0])),
-                    *curves),
+                rrb.Spatial3DView(origin=f"sessions/{s}/body", name="target | attempt | emphatic",
+                                  eye_controls=_front(SIDE_BY_SIDE["attempt"], 4.3, up)),
+                rrb.Horizontal(rrb.Spatial3DView(origin=f"sessions/{s}/overlay", name="overlaid",
+                                                 eye_controls=_front(0.0, 3.2, up)), *curves),
                 row_shares=[3, 2]),
             rrb.Vertical(
                 rrb.Spatial3DView(origin=f"sessions/{s}/space", name=f"space coach-{_short(s)}"),
@@ -213,7 +223,8 @@ class Dashboard:
     def _body_context(self, s: str, clip: Clip) -> None:
         sk = clip.skeleton
         names = [j.name for j in sk.joints]
-        keypoints = [rr.AnnotationInfo(i, n, JOINT_COLOURS[_side(n, set(names))]) for i, n in enumerate(names)]
+        lower = {n.lower() for n in names}
+        keypoints = [rr.AnnotationInfo(i, n, JOINT_COLOURS[_side(n, lower)]) for i, n in enumerate(names)]
         bones = [(j.parent, i) for i, j in enumerate(sk.joints) if j.parent >= 0]
         ctx = rr.AnnotationContext([rr.ClassDescription(info=rr.AnnotationInfo(CLASS_OF[r], r, COLOURS[r]),
                                                         keypoint_annotations=keypoints, keypoint_connections=bones)
@@ -223,31 +234,36 @@ class Dashboard:
         for view in ("body", "overlay"):
             base = f"sessions/{s}/{view}"
             self.rec.log(base, coords, ctx, static=True)
-            half = [2.7, 1.2, 0.005] if up == 2 else [2.7, 0.005, 1.2]
-            centre = [1.5 if view == "body" else 0.0, 0.0, 0.0]
-            centre[up] = -0.006
-            self.rec.log(f"{base}/floor", rr.Boxes3D(centers=[centre], half_sizes=[half if view == "body" else
-                                                                                   [h * (0.5 if k == 0 else 1) for k, h in enumerate(half)]],
-                                                     colors=[(70, 70, 70)], fill_mode="solid"), static=True)
+            width = 2.7 if view == "body" else 1.35  # three people side by side, or one place
+            centre, half = [SIDE_BY_SIDE["attempt"] if view == "body" else 0.0, 0.0, 0.0], [width, 1.2, 1.2]
+            centre[up], half[up] = -0.006, 0.005  # a thin slab just under the feet
+            self.rec.log(f"{base}/floor", rr.Boxes3D(centers=[centre], half_sizes=[half], colors=[(70, 70, 70)],
+                                                     fill_mode="solid"), static=True)
             for r in ROLES:
                 self.rec.log(f"{base}/{r}", rr.Points3D.from_fields(class_ids=[CLASS_OF[r]] * len(names),
                                                                     keypoint_ids=list(range(len(names))),
                                                                     radii=[0.025] * len(names)), static=True)
 
-    def _people(self, s: str, role: str, clip: Clip, trial: int) -> None:
-        """One motion, resampled to the session's K frames, on the trial's block of ``playback``."""
-        target = self.targets[s]
-        sk = clip.skeleton or target.skeleton
+    def _pose(self, s: str, clip: Clip) -> tuple[Clip, np.ndarray] | None:
+        """A motion resampled to the session's K frames, and its joints by forward kinematics,
+        from the same start and on the floor (``None`` without a skeleton)."""
+        sk = clip.skeleton or self.targets[s].skeleton
         if sk is None:
-            return
-        k = self.frames[s]
-        data = _resample(clip, k)
+            return None
+        data = _resample(clip, self.frames[s])
         pos = sk.forward_kinematics(data, clip.channels, ends=False)
-        up = sk.up_axis
-        ground = [a for a in range(3) if a != up]
-        pos = pos.copy()
-        pos[..., ground] -= pos[:1, :1, ground]  # from the same start, on the floor
-        pos[..., up] -= pos[..., up].min()
+        ground = [a for a in range(3) if a != sk.up_axis]
+        pos[..., ground] -= pos[:1, :1, ground]
+        pos[..., sk.up_axis] -= pos[..., sk.up_axis].min()
+        return clip.with_data(data, skeleton=sk), pos
+
+    def _people(self, s: str, role: str, pose: tuple[Clip, np.ndarray] | None, trial: int) -> None:
+        """One motion (:meth:`_pose`) on the trial's block of ``playback``, side by side and overlaid."""
+        if pose is None:
+            return
+        clip, pos = pose
+        k = self.frames[s]
+        data, ground = clip.data, [a for a in range(3) if a != clip.skeleton.up_axis]
         n, j = pos.shape[:2]
         times = [rr.TimeColumn("playback", sequence=trial * k + np.arange(n)),
                  rr.TimeColumn("trial", sequence=np.full(n, trial))]
@@ -267,7 +283,6 @@ class Dashboard:
         self.targets[session] = target
         self.frames[session] = max(2, int(round(target.n_frames * PLAYBACK_FPS / target.fps)))
         self.paths[session], self.emphatic[session] = [], []
-        self.first_dp.pop(session, None)
         self.curves[session] = [c for c in CURVE_CHANNELS if c in target.channels][:MAX_CURVES]
         self.trials[session] = 0
         self._forget_oldest()
@@ -281,23 +296,22 @@ class Dashboard:
     def _session_series(self, session: str) -> None:
         for c in self.curves[session]:
             for r in ROLES:
-                self.rec.log(f"sessions/{session}/curves/{c}/{r}", rr.SeriesLines(colors=[COLOURS[r]], names=[r]),
-                             static=True)
+                _series_style(self.rec, f"sessions/{session}/curves/{c}/{r}", r, COLOURS[r], markers=False)
         for m, colour in (("d_p", (255, 170, 60)), ("R", (200, 200, 200)), ("alpha", (230, 60, 90))):
-            self.rec.log(f"sessions/{session}/{m}", rr.SeriesLines(colors=[colour], names=[m]),
-                         rr.SeriesPoints(colors=[colour], markers=["circle"], marker_sizes=[4.0], names=[m]), static=True)
+            _series_style(self.rec, f"sessions/{session}/{m}", m, colour)
 
     def _show_target(self, session: str, target: Clip) -> None:
         if target.skeleton is None:
             return
         self._body_context(session, target)
-        self._people(session, "target", target, 0)
+        self.poses[session] = self._pose(session, target)  # drawn again in every trial's block, computed once
+        self._people(session, "target", self.poses[session], 0)
 
     def continue_from(self, old: "Dashboard") -> None:
         """A new recording goes on from ``old``: the newest ``CARRY_OVER`` sessions' targets and
         paths so far, the estimates and spaces it knew."""
         keep = list(old.targets)[-CARRY_OVER:]
-        for name in ("targets", "frames", "paths", "emphatic", "first_dp", "trials", "curves"):
+        for name in ("targets", "frames", "poses", "paths", "emphatic", "trials", "curves"):
             setattr(self, name, {s: v for s, v in getattr(old, name).items() if s in keep})
         self.spaces, self.estimates, self.pending = old.spaces, old.estimates, old.pending
         for session, target in self.targets.items():
@@ -309,7 +323,7 @@ class Dashboard:
         """At most ``MAX_KEPT`` sessions, estimates and spaces (the oldest go first)."""
         while len(self.targets) > MAX_KEPT:
             s = next(iter(self.targets))
-            for table in (self.targets, self.frames, self.paths, self.emphatic, self.first_dp, self.trials,
+            for table in (self.targets, self.frames, self.poses, self.paths, self.emphatic, self.trials,
                           self.curves, self.pending):
                 table.pop(s, None)
         while len(self.estimates) > MAX_KEPT:
@@ -324,11 +338,7 @@ class Dashboard:
         self.trials[s] = n
         k = self.frames[s]
         self._at(trial=n, playback=n * k)
-        d_p = float(ev["d_p"])
-        if n == 1:
-            self.first_dp[s] = d_p
-        first = self.first_dp.get(s)
-        r = ev.get("R", d_p / first if first else None)
+        d_p, r = float(ev["d_p"]), ev.get("R")  # R is absent when the first trial's d_p was 0
         self.rec.log(f"sessions/{s}/d_p", rr.Scalars(d_p))
         self.rec.log(f"sessions/{s}/alpha", rr.Scalars(float(ev["alpha"])))
         if r is not None:
@@ -336,7 +346,7 @@ class Dashboard:
         chosen = ev.get("alpha_chosen")
         lowered = (f"; lowered from {chosen:g}: {ev.get('feasibility', '')}" if ev.get("alpha_reduced") and chosen
                    else "")
-        extra = "".join(f", {name} {ev[key]:.2f}" for key, name in (("d_cop", "d_cop"),) if ev.get(key) is not None)
+        extra = f", d_cop {ev['d_cop']:.2f}" if ev.get("d_cop") is not None else ""
         self.rec.log(f"sessions/{s}/coaching", rr.TextLog(
             f"trial {n}: \"{ev.get('adverb') or 'no adverb'}\", alpha {ev['alpha']:g}{lowered} | d_p {d_p:.1f}"
             + (f", R {r:.2f}" if r is not None else "") + extra,
@@ -352,14 +362,10 @@ class Dashboard:
                                                      colors=[COLOURS["attempt"]], show_labels=True))
         self.rec.log(f"{base}/emphatic", rr.Points3D(emph, labels=[f"s{i + 1}" for i in range(len(emph))],
                                                      colors=[COLOURS["emphatic"]], show_labels=True))
-        target = self.targets[s]
-        self._people(s, "target", target, n)
+        self._people(s, "target", self.poses.get(s), n)
         for role, clip in (("attempt", attempt), ("emphatic", emphatic)):
-            if clip is None:
-                continue
-            if clip.skeleton is None and target.skeleton is not None:
-                clip = clip.with_data(clip.data, skeleton=target.skeleton)
-            self._people(s, role, clip, n)
+            if clip is not None:  # drawn with the target's skeleton when it came without one
+                self._people(s, role, self._pose(s, clip), n)
 
     def space(self, ev: dict) -> None:
         """A session's space on the trial it changed in (``coach-<s>``: before the session's first
@@ -430,10 +436,7 @@ class Dashboard:
         if n == 1 or not self.estimates[e]:
             for m, colour in (("symbols/k_other", (230, 60, 90)), ("symbols/k_self", (80, 160, 255)),
                               ("symbols/symbol_error", (200, 200, 200)), ("scale", (255, 170, 60))):
-                name = m.split("/")[-1]
-                self.rec.log(f"estimates/{e}/{m}", rr.SeriesLines(colors=[colour], names=[name]),
-                             rr.SeriesPoints(colors=[colour], markers=["circle"], marker_sizes=[4.0], names=[name]),
-                             static=True)
+                _series_style(self.rec, f"estimates/{e}/{m}", m.split("/")[-1], colour)
         self.estimates[e] = n
         self._at(set=n)
         k_o, k_s = np.asarray(ev["k_other"], float), np.asarray(ev["k_self"], float)

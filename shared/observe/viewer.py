@@ -18,9 +18,10 @@ import subprocess
 import time
 from pathlib import Path
 
-from shared.errors import Unavailable
+from shared.errors import BadInput, Unavailable
 
 VULKAN_ICDS = (Path("/usr/share/vulkan/icd.d"), Path("/etc/vulkan/icd.d"))
+RRD_MAGIC = b"RRF2"  # the first bytes of a rerun 0.41 recording file
 
 
 def viewer_binary() -> Path:
@@ -132,7 +133,7 @@ class HeadlessViewer:
     # ------------------------------------------------------------------ driving it
     def timelines(self) -> dict[str, tuple[int, int]]:
         st = self.client.get_state()
-        rec = next(r for r in st.recordings if r.store_id == st.active_recording) if st.active_recording else st.recordings[0]
+        rec = next((r for r in st.recordings if r.store_id == st.active_recording), st.recordings[0])
         return {t.name: (t.start, t.end) for t in rec.timelines}
 
     def set_time(self, timeline: str, value: int, settle_s: float = 1.5) -> None:
@@ -143,21 +144,30 @@ class HeadlessViewer:
             self.client.set_time(timeline, sequence=int(value), play_state="paused")
         time.sleep(settle_s)
 
-    def tabs(self) -> list[str]:
-        """The names of the blueprint's tabs, in order."""
-        bp = self.client.get_blueprint().blueprint
-        tabs = next(v["ContainerBlueprint"] for v in bp.values()
-                    if v.get("ContainerBlueprint", {}).get("container_kind") == "Tabs")
-        return [bp["/" + c]["ContainerBlueprint"].get("display_name", c) for c in tabs["contents"]]
-
-    def show_tab(self, name: str, settle_s: float = 2.0) -> None:
+    def _tabs(self):
+        """The blueprint as the viewer has it, and its tabs: ``{name: container key}`` in order."""
         info = self.client.get_blueprint()
         bp = info.blueprint
-        key, tabs = next((k, v["ContainerBlueprint"]) for k, v in bp.items()
-                         if v.get("ContainerBlueprint", {}).get("container_kind") == "Tabs")
-        pick = next(c for c in tabs["contents"] if bp["/" + c]["ContainerBlueprint"].get("display_name") == name)
-        tabs["active_tab"] = pick
-        self.client.set_blueprint(bp, store_id=info.store_id)
+        tabs = next((v["ContainerBlueprint"] for v in bp.values()
+                     if v.get("ContainerBlueprint", {}).get("container_kind") == "Tabs"), {"contents": []})
+        named = {}
+        for c in tabs["contents"]:  # a tab is a container or a view of the blueprint, with a display name
+            entry = bp.get(c if c.startswith("/") else "/" + c, {})
+            label = next((part["display_name"] for part in entry.values() if "display_name" in part), None)
+            if label is not None:
+                named[label] = c
+        return info, tabs, named
+
+    def tabs(self) -> list[str]:
+        """The names of the blueprint's tabs, in order."""
+        return list(self._tabs()[2])
+
+    def show_tab(self, name: str, settle_s: float = 2.0) -> None:
+        info, tabs, names = self._tabs()
+        if name not in names:
+            raise BadInput(f"the recording has no tab {name!r} (tabs: {', '.join(names)})")
+        tabs["active_tab"] = names[name]
+        self.client.set_blueprint(info.blueprint, store_id=info.store_id)
         time.sleep(settle_s)
 
     def views(self) -> list:
@@ -182,11 +192,16 @@ def dashboard_screenshots(recording, folder, log=None) -> list[Path]:
     """Every tab of a recording in the real viewer: a session's tab in the middle of its last
     trial (timeline ``playback``), an estimate's at its last conversation set, the others as
     they open. Returns the PNG files (``<tab>.png``)."""
-    folder = Path(folder)
+    folder, recording = Path(folder), Path(recording)
+    with open(recording, "rb") as f:  # before starting a viewer that would wait for it to load
+        if f.read(4) != RRD_MAGIC:
+            raise BadInput(f"{recording} is not a rerun recording (.rrd)")
     out = []
     with HeadlessViewer(recording, log=log) as v:
         v.wait_loaded()
         lines = v.timelines()
+        if not v.tabs():  # a recording without this dashboard's blueprint: the viewer as it opens it
+            return [v.screenshot(folder / "dashboard.png")]
         for tab in v.tabs():
             v.show_tab(tab)
             if tab.startswith("session ") and "playback" in lines and "trial" in lines:

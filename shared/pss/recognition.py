@@ -174,7 +174,9 @@ class Decision:
     label: str | None  # None: "none of these" (open-set rejection)
     nearest_label: str
     confidence: float  # calibrated probability of nearest_label among the space's classes
-    novelty: float  # the larger of distance / threshold and ratio / ratio threshold (> 1: unknown)
+    novelty: float  # the larger of the two tests' (> 1: unknown)
+    distance_novelty: float = 0.0  # the distance rule's: distance / threshold or ratio / ratio threshold
+    model_novelty: float = 0.0  # the novelty model's: threshold / margin (0 without a model)
 
 
 def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_model: "NoveltyModel | None" = None,
@@ -187,13 +189,14 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
     p = softmax_confidence(dc, cal.temperature)
     order = np.argsort(dc)
     k = int(order[0])
-    novelty = 0.0 if novelty_model is None or features is None else novelty_model.novelty(features)
+    model = 0.0 if novelty_model is None or features is None else novelty_model.novelty(features)
+    distance = 0.0
     if np.isfinite(cal.threshold) and cal.threshold > 0:
-        novelty = max(novelty, float(dc[k] / cal.threshold))
+        distance = float(dc[k] / cal.threshold)
     if len(dc) > 1 and np.isfinite(cal.ratio_threshold) and np.isfinite(dc[order[1]]) and cal.ratio_threshold > 0:
-        novelty = max(novelty, float(dc[k] / max(dc[order[1]], 1e-12) / cal.ratio_threshold))
-    known = novelty <= 1.0
-    return Decision(cal.classes[k] if known else None, cal.classes[k], float(p[k]), novelty)
+        distance = max(distance, float(dc[k] / max(dc[order[1]], 1e-12) / cal.ratio_threshold))
+    novelty = max(distance, model)
+    return Decision(cal.classes[k] if novelty <= 1.0 else None, cal.classes[k], float(p[k]), novelty, distance, model)
 
 
 # ---------------------------------------------------------------------------- the open set
@@ -259,9 +262,9 @@ class NoveltyModel:
     different motions: the model those that resemble several known classes at once (a hop among
     jogs, a grab among deposits), the distances those far from every class (a person lying
     down; a linear model extrapolates there and may be sure of a wrong class), so
-    :func:`decide` rejects when either does. A model of one performer judging another is less sure than the space's model of both
-    judging a new one, so the across-performer level is conservative (at 0.95 it rejected
-    about 1 % of known clips, not 5 %).
+    :func:`decide` rejects when either does. A model of one performer judging another is less
+    sure than the space's model of both judging a new one, so the across-performer level is
+    conservative (at 0.95 it rejected about 1 % of known clips, not 5 %).
 
     Recognition needs only numpy (the fitted scaler and coefficients are kept as arrays).
     """

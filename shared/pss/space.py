@@ -77,6 +77,7 @@ class Recognition:
     confidence: float = 1.0  # calibrated probability of nearest_label
     novelty: float = 0.0  # > 1: farther than the space's known motions (rejected)
     recognition_distances: np.ndarray | None = None  # eq. 2.4 on the recognition group
+    decision: object | None = None  # shared.pss.recognition.Decision: each open-set test's novelty
 
 
 @dataclass
@@ -402,11 +403,12 @@ class ProtoSymbolSpace:
                                confidence=float("nan"))
         from shared.pss.recognition import hmm_features
 
-        d = decide(fr, self.labels, self.calibration, self.novelty_model,
-                   None if hr is None else hmm_features(hr.means, hr.covars))
+        model = self.novelty_model
+        d = decide(fr, self.labels, self.calibration, model,
+                   None if model is None or hr is None else hmm_features(hr.means, hr.covars))
         return Recognition(x, f, nearest, d.label, self.symbols[in_space].label, stress, hmm,
                            nearest_label=d.nearest_label, confidence=d.confidence, novelty=d.novelty,
-                           recognition_distances=fr)
+                           recognition_distances=fr, decision=d)
 
     # ------------------------------------------------------------------ generation
     def weights(self, point, method: str = "affine") -> np.ndarray:
@@ -608,7 +610,11 @@ class ProtoSymbolSpace:
         if header.get("novelty") and novelty:
             from shared.pss.recognition import NoveltyModel
 
-            space._novelty = NoveltyModel.from_file(header["novelty"], novelty)
+            try:
+                space._novelty = NoveltyModel.from_file(header["novelty"], novelty)
+            except (KeyError, TypeError, ValueError) as e:
+                raise BadInput(f"{path}: its novelty model is unreadable ({type(e).__name__}: {e}); build the space "
+                               "again from its clips") from None
         elif header.get("calibration"):  # written before the novelty model: its open set as written
             space._novelty = False
         return space
@@ -631,8 +637,6 @@ class ProtoSymbolSpace:
                             else "nearest proto-symbol on the angle channels (format 1: rebuild the space from its "
                                  "clips for position-based recognition)" if self.format != FORMAT
                             else "nearest proto-symbol on the motion channels (no skeleton)"),
-            "open_set": ("none of these: the distance rule or the novelty model (ridge on the proto-symbols' HMMs, "
-                         f"calibrated {self._novelty.scheme})" if self._novelty
-                         else "none of these: the distance rule (written before the novelty model)"
-                         if self._novelty is False else "none of these: the distance rule or the novelty model"),
+            "open_set": "none of these: the distance rule" + (" (a file written before the novelty model)"
+                                                              if self._novelty is False else " or the novelty model"),
         }
