@@ -6,7 +6,7 @@ Keys: ``<prefix>/estimator/<verb>``; progress on ``<prefix>/events/estimator/pro
 
 from __future__ import annotations
 
-from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, Message, Str
+from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
 from schemas.common import CLIP, name
 
 SERVICE = "estimator"
@@ -37,7 +37,10 @@ START = Endpoint(
         "joints": F(List(JOINT, min_len=1, max_len=4), "joints whose torques are estimated", required=False),
         "rule": F(Str(choices=("eq3.8", "f1", "f2", "f3", "f4")), "the rule the self assumes", required=False,
                   default="eq3.8"),
-        "probes": F(Bool(), "ask bisecting probe motions (interval estimator)", required=False, default=True),
+        "probes": F(Int(0, 20), "probe motions asked per set, chosen where the body estimate is least sure "
+                                "(true: 4, false: 0)", required=False, default=4),
+        "missing": F(List(JOINT, max_len=3), "joints the other lacks (seen when it imitates); the self holds "
+                                             "them still", required=False, default=list),
         "replace": F(Bool(), required=False, default=False),
     })),
     Message("estimator.start.reply", INFO),
@@ -62,7 +65,9 @@ ESTIMATE_EP = Endpoint(
     "estimate",
     Message("estimator.estimate", Map({
         "estimate": ESTIMATE, "clip": F(CLIP, "any motion of the joints, known or not"),
-        "method": F(Str(choices=("thesis", "interval")), required=False, default="thesis"),
+        "method": F(Str(choices=("thesis", "interval", "body")), "thesis: eq. 3.5 through the space; interval: one "
+                    "torque scale; body: the regressor on the estimated body (issue 13)", required=False,
+                    default="thesis"),
     })),
     Message("estimator.estimate.reply", Map({
         "estimate": ESTIMATE, "method": F(Str(max_len=16)),
@@ -78,8 +83,12 @@ IDENTIFY = Endpoint(
         "estimate": ESTIMATE,
         "candidates": F(Str(choices=("thesis", "weighted")), "f1-f4, or f1-f4 with joint weights (12)",
                         required=False, default="thesis"),
-        "method": F(Str(choices=("auto", "thesis")), "automatic pair choice, or the thesis's m1/m2, m3/m4",
-                    required=False, default="auto"),
+        "method": F(Str(choices=("auto", "thesis")), "auto: pairs chosen on the estimated body, answers weighed "
+                    "against noise (issue 13); thesis: its m1/m2, m3/m4", required=False, default="auto"),
+        "noise": F(Float(0.0, 0.5), "auto: the share of comparisons the self allows to be wrong", required=False,
+                   default=0.1),
+        "confidence": F(Float(0.5, 0.9999), "auto: stop when one rule holds this share of the posterior",
+                        required=False, default=0.99),
         "jnd": F(Float(0.0, 1.0), "the just-noticeable difference assumed", required=False, default=0.05),
         "apply": F(Bool(), "use the identified rule in later conversation sets", required=False, default=True),
         "timeout": F(Float(1.0, 3600.0), required=False, default=120.0),
@@ -88,6 +97,7 @@ IDENTIFY = Endpoint(
         "estimate": ESTIMATE, "rule": F(Str(max_len=64), "the identified rule", required=False),
         "questions": F(List(AnyMap(), max_len=100), "pair asked and answer, in order"),
         "reason": F(Str(max_len=1000)), "design": F(AnyMap(), "m1-m4 design report (thesis method)", required=False),
+        "posterior": F(MapOf(Str(max_len=64), Float(0.0, 1.0)), "auto: each candidate rule's share of the posterior", required=False),
     })),
     "Identify the other's conversion rule by comparative questions (3.4).",
     waits=True,

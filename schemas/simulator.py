@@ -6,7 +6,7 @@ Keys: ``<prefix>/simulator/<verb>``; events on ``<prefix>/events/simulator/perfo
 
 from __future__ import annotations
 
-from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
+from schemas.base import AnyMap, Array, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
 from schemas.common import CLIP, name
 from shared.errors import BadInput
 from shared.symbols import COMPARISONS, RULES, WORDS
@@ -59,6 +59,23 @@ PERFORM = Endpoint(
     "Perform a motion with a body: torques by inverse dynamics, centre of gravity, feasibility report.",
 )
 
+JOINT = Str(choices=("shoulder_pitch", "shoulder_roll", "elbow", "knee"))
+
+REGRESSOR = Endpoint(
+    "regressor",
+    Message("simulator.regressor", Map({
+        "clip": F(CLIP, "the motion, with the small humanoid's joint channels (degrees)"),
+        "joints": F(List(JOINT, min_len=1, max_len=4), "the felt joints (rows of Y)"),
+        "missing": F(List(JOINT, max_len=4), "joints the other lacks: the self holds them still", required=False,
+                     default=list),
+    })),
+    Message("simulator.regressor.reply", Map({
+        "names": F(List(Str(max_len=64), max_len=64), "the columns: physical components of a body like the self's"),
+        "y": F(Array((None, None, None)), "Y (frames x joints x columns): tau = Y theta, theta_self = links 1"),
+    })),
+    "The self's body regressor of a motion (issue 13, shared.estimation.body): torques linear in the body's parameters.",
+)
+
 OTHER_PARAMS = Map({
     "mass": F(Float(0.1, 500.0), "the other's body mass, kg", required=False, default=4.8),
     "rule": F(Str(choices=RULES), "its conversion rule F_conv (eq. 3.8, 3.13-3.16)", required=False, default="eq3.8"),
@@ -73,6 +90,10 @@ OTHER_PARAMS = Map({
     "seed": F(Int(0, 2**32 - 1), "seed of its answer noise", required=False, default=0),
     "behaviour": F(Str(choices=("honest", "nonsense", "contradict", "silent")),
                    "fault injection for robustness tests", required=False, default="honest"),
+    "body": F(AnyMap(), "how its body differs unevenly: lengths {upper, fore, thigh, shin} (m), shares {link: share "
+                        "of the mass}, payload (kg in the hand), damping / friction {joint: N m s/rad / N m}, missing "
+                        "[joints] (shared.bodies.robot.BodySpec)", required=False),
+    "kind": F(Str(max_len=32), "the population kind it was drawn from, for reports", required=False, default=""),
 })
 
 OTHER_CREATE = Endpoint(
@@ -197,7 +218,7 @@ DELETE = Endpoint(
     "Delete an other or a learner.",
 )
 
-ENDPOINTS = {e.verb: e for e in (BODIES, PERFORM, OTHER_CREATE, OTHER_ASK, OTHER_PENDING, OTHER_ANSWER, OTHER_REVEAL,
+ENDPOINTS = {e.verb: e for e in (BODIES, PERFORM, REGRESSOR, OTHER_CREATE, OTHER_ASK, OTHER_PENDING, OTHER_ANSWER, OTHER_REVEAL,
                                  LEARNER_CREATE, LEARNER_IMITATE, LEARNER_REVEAL, LIST, DELETE)}
 
 EVENTS = {

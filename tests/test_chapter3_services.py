@@ -10,7 +10,7 @@ import pytest
 
 from schemas import dialogue as dlg
 from schemas import estimator as est
-from schemas.common import clip_to_wire
+from schemas.common import clip_from_wire, clip_to_wire
 from shared.estimation.motions import ALL, unknown_motions
 from tests.conftest import assert_refused, kill_during, state_files
 
@@ -45,7 +45,7 @@ def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services,
     r = _ok(est.CONVERSE, c.request("estimator", "converse", {"estimate": "r2", "sets": 3}))
     assert r["completed"] == 3 and r["info"]["sets_done"] == 3 and r["info"]["consistent"]
     assert r["info"]["scale"] == pytest.approx(2.0, rel=0.05)  # the other is twice as heavy
-    for method in ("thesis", "interval"):
+    for method in ("thesis", "interval", "body"):
         e = _ok(est.ESTIMATE_EP, c.request("estimator", "estimate", {"estimate": "r2", "clip": motion, "method": method}))
         assert e["clip"]["sensor"] == ["tau.shoulder_pitch", "tau.shoulder_roll", "tau.elbow"] and e["g"] > 0
     assert _ok(est.INFO_EP, c.request("estimator", "info", {"estimate": "r2"}))["sets_done"] == 3
@@ -61,9 +61,25 @@ def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services,
                                             "replace": True})
     c.request("estimator", "start", {"estimate": "r4", "other": "r4", "joints": list(ALL), "g_max": 1.2, "replace": True})
     ident = _ok(est.IDENTIFY, c.request("estimator", "identify_rule", {"estimate": "r4"}))
-    assert ident["rule"] == "f3" and 1 <= len(ident["questions"]) <= 2 and ident["design"]["max_relative_error"] < 1e-3
+    assert ident["rule"] == "f3" and 1 <= len(ident["questions"]) <= 30 and ident["design"]["max_relative_error"] < 1e-3
+    assert ident["posterior"]["f3"] >= 0.99 and sum(ident["posterior"].values()) == pytest.approx(1.0)
     assert c.request("estimator", "info", {"estimate": "r4"})["language"]["rule"] == "f3"
     assert _ok(est.DELETE, c.request("estimator", "delete", {"estimate": "r4"}))["deleted"]
+
+    # an uneven other (issue 13): no shoulder roll, a payload in the hand; the self holds its roll still
+    body = {"missing": ["shoulder_roll"], "payload": 0.2}
+    c.request("simulator", "other_create", {"other": "u", "params": {"mass": 3.0, "d": 6, "g_max": 0.6, "body": body,
+                                                                    "joints": ["shoulder_pitch", "elbow"]}, "replace": True})
+    info = _ok(est.START, c.request("estimator", "start", {"estimate": "u", "other": "u", "d": 6, "missing": ["shoulder_roll"],
+                                                          "probes": 2, "replace": True}))
+    assert info["language"]["joints"] == ["shoulder_pitch", "elbow"] and info["language"]["missing"] == ["shoulder_roll"]
+    r = _ok(est.CONVERSE, c.request("estimator", "converse", {"estimate": "u", "sets": 2}))
+    assert r["completed"] == 2 and r["info"]["probes_asked"] == 4 and r.get("stopped") is None
+    e = _ok(est.ESTIMATE_EP, c.request("estimator", "estimate", {"estimate": "u", "clip": motion, "method": "body"}))
+    truth = c.request("simulator", "other_reveal", {"other": "u"})
+    assert truth["params"]["body"] == body and e["clip"]["sensor"] == ["tau.shoulder_pitch", "tau.elbow"]
+    held = clip_from_wire(e["clip"])
+    assert np.all(held.column("shoulder_roll") == 0.0)  # the roll the other cannot make is not estimated as made
 
 
 def test_bad_requests_get_clear_errors(chapter3_services, client_of):

@@ -26,10 +26,10 @@ from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
 from shared.deadline import check_time, completed
 from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
-from shared.estimation.conversation import TORQUE_PREFIX, Language, OtherEstimate, with_torques
+from shared.estimation.conversation import TORQUE_PREFIX, Language, OtherEstimate, hold, with_torques
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
-from shared.estimation.rules import (THESIS_CANDIDATES, design_thesis_pairs, identify, identify_thesis, pair_pool,
-                                     weighted_candidates)
+from shared.estimation.rules import (THESIS_CANDIDATES, candidate_bodies, design_thesis_pairs, identify_bodies,
+                                     identify_thesis, pair_pool, weighted_candidates)
 from shared.pss.store import check_name
 from shared.symbols import word
 
@@ -52,7 +52,18 @@ class BusPorts:
         return clip.select([TORQUE_PREFIX + j for j in self.language.joints])
 
     def perform_self(self, motion):
+        motion = hold(motion, self.language.missing)
         return self._taus(self.c.request("simulator", "perform", {"body": "self", "clip": clip_to_wire(motion)})["clip"])
+
+    def regressor(self, motion) -> np.ndarray:
+        key = (motion.name, motion.fps, motion.data.tobytes(), tuple(self.language.joints), tuple(self.language.missing))
+        if key not in _REGRESSORS:  # the self's body never changes: one regressor per motion, for every estimate
+            r = self.c.request("simulator", "regressor", {"clip": clip_to_wire(motion), "joints": self.language.joints,
+                                                          "missing": self.language.missing})
+            _REGRESSORS[key] = r["y"]
+            while len(_REGRESSORS) > 4096:
+                _REGRESSORS.pop(next(iter(_REGRESSORS)))
+        return _REGRESSORS[key]
 
     def ask_open(self, motion) -> int:
         try:
@@ -97,6 +108,7 @@ def info_of(name: str, est: OtherEstimate) -> dict:
     return out
 
 
+_REGRESSORS: dict = {}  # (motion, joints, missing) -> the self's regressor Y
 _DESIGN: dict = {}  # the self's designed pairs and pair pool: they depend on the self's body only
 
 
@@ -107,6 +119,24 @@ def _design_and_pool(ports: BusPorts):
                          [(design["m1"], design["m2"]), (design["m3"], design["m4"])])
         _DESIGN.update(design=design, pool=pool)
     return _DESIGN["design"], _DESIGN["pool"]
+
+
+def _identify_on_bodies(est: OtherEstimate, cands, ports: BusPorts, pool, req: dict) -> dict:
+    """Rule identification with answers predicted from the estimated body (issue 13): per
+    candidate, the bodies the estimate's open answers allow under that rule (only when the
+    estimate feels all four joints the candidates weigh; otherwise the prior's bodies)."""
+    motions = {}
+    for p in pool:
+        motions.setdefault(p.first.name, p.first)
+        motions.setdefault(p.second.name, p.second)
+    regs = {n: ports.regressor(m) for n, m in motions.items()}
+    shared = [ports.regressor(m) for m in est.motions] if est.language.joints == list(ALL) else list(regs.values())
+    answers = []
+    if est.language.joints == list(ALL):
+        answers = [(key, est.regressor(ports, key), k) for key, k in est.body_answers]
+    bodies = candidate_bodies(ports.language, shared, answers, cands, scale=est.scale())
+    return identify_bodies(cands, list(motions.values()), regs, bodies, ports.ask_compare, jnd=req["jnd"],
+                           noise=req["noise"], confidence=req["confidence"])
 
 
 def make_service(settings: Settings | None = None) -> Service:
@@ -134,10 +164,15 @@ def make_service(settings: Settings | None = None) -> Service:
         if req["other"] not in others:  # checked before anything is built or saved (issue 17, row 5)
             raise NotFound(f"no other named {req['other']!r} (create it with `mirrorcoach other create`)",
                            other=req["other"])
-        joints = req["joints"] or list(ARM)
-        lang = Language(d=req["d"], g_max=req["g_max"], tau_max=req["tau_max"], joints=joints, rule=req["rule"])
+        joints = req["joints"] or [j for j in ARM if j not in req["missing"]]
+        felt_missing = [j for j in joints if j in req["missing"]]
+        if felt_missing:
+            raise BadInput(f"joints {felt_missing} are both felt and missing", field="missing")
+        lang = Language(d=req["d"], g_max=req["g_max"], tau_max=req["tau_max"], joints=joints, rule=req["rule"],
+                        missing=list(req["missing"]))
         lang.k(np.zeros((2, len(joints))))  # validates d
-        est = OtherEstimate(lang, basic_motions(joints if "knee" in joints else ARM), probes=req["probes"])
+        shared = basic_motions(ALL if "knee" in joints else ARM)
+        est = OtherEstimate(lang, [hold(m, lang.missing) for m in shared], probes=req["probes"])
         est.other = req["other"]
         with writing(name):
             est.start(BusPorts(bus(), name, req["other"], lang))
@@ -156,16 +191,16 @@ def make_service(settings: Settings | None = None) -> Service:
                 completed(f"{done} of {req['sets']} conversation set(s) completed and kept")
                 check_time()
                 work = copy.deepcopy(est)
-                was_consistent = work.consistent()
+                was_consistent = work.body(ports).consistent()
                 try:
                     rec = work.conversation_set(ports)
                 except Stopped as e:
                     stopped = e.message
                     break
                 est = work
-                if was_consistent and not est.consistent():
-                    stopped = ("the other's answers contradict each other (no single scale fits them all); "
-                               "the estimate so far is kept")
+                if was_consistent and not est.body(ports).consistent():
+                    stopped = ("the other's answers contradict each other (no body like the self's explains them "
+                               "all); the estimate so far is kept")
                 est.save(path(name))
                 done += 1
                 svc.publish("progress", {"estimate": name, "set": len(est.sets), "scale": float(est.scale()),
@@ -191,6 +226,7 @@ def make_service(settings: Settings | None = None) -> Service:
         missing = [j for j in est.language.joints if j not in motion.channels]
         if missing:
             raise BadInput(f"the motion lacks the joints {missing} this estimate is about", field="clip")
+        motion = hold(motion, est.language.missing)
         tau = est.estimate(motion, ports, req["method"])
         g = est.language.g(tau)
         k = est.language.k(tau)
@@ -215,7 +251,7 @@ def make_service(settings: Settings | None = None) -> Service:
                     r = identify_thesis(design, ports.ask_compare)
                 else:
                     cands = THESIS_CANDIDATES if req["candidates"] == "thesis" else weighted_candidates()
-                    r = identify(cands, pool, ports.ask_compare, jnd=req["jnd"])
+                    r = _identify_on_bodies(est, cands, ports, pool, req)
             except Stopped as e:
                 r = {"rule": None, "questions": [], "reason": e.message}
             rule = r["rule"]
@@ -226,12 +262,15 @@ def make_service(settings: Settings | None = None) -> Service:
                     est.language.rule = rule.rule
                     est.language.weights = None if rule.weights is None else list(rule.weights)
                     est.answers = []  # bounds were computed with the old rule: the interval starts again
+                    est.forget_body()  # and the body is fitted again under the identified rule
                     est.notes.append(f"identified rule {rule.name} in {len(r['questions'])} question(s); now used")
                 est.save(path(name))
         out = {"estimate": name, "questions": [{"pair": q["pair"], "answer": q["answer"]} for q in r["questions"]],
                "reason": r["reason"], "design": design["report"]}
         if rule is not None:
             out["rule"] = rule.name
+        if "posterior" in r:
+            out["posterior"] = r["posterior"]
         return out
 
     @svc.handler("info")

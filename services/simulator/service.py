@@ -85,6 +85,13 @@ def make_service(settings: Settings | None = None) -> Service:
                                   "checked": report["feasible"] is not None})
         return {"clip": clip_to_wire(out, with_skeleton=False), "report": report, "body": b.describe()}
 
+    @svc.handler("regressor")
+    def do_regressor(req):
+        from shared.estimation.body import column_names, self_regressor
+
+        y = self_regressor(clip_from_wire(req["clip"]), req["joints"], req["missing"])
+        return {"names": column_names(req["joints"]), "y": y}
+
     # ------------------------------------------------------------------ others
     @svc.handler("other_create")
     def other_create(req):

@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from shared.bodies.body import perform
-from shared.bodies.robot import JOINTS, small_humanoid
+from shared.bodies.robot import JOINTS, BodySpec, small_humanoid
 from shared.clip import Clip
 from shared.errors import BadInput
 from shared.symbols import RULES, WORDS, compare, f_conv, f_div, word
@@ -48,6 +48,17 @@ class OtherParams:
     jnd: float = 0.05
     seed: int = 0
     behaviour: str = "honest"  # fault injection for robustness tests: honest | nonsense | contradict | silent
+    body: dict | None = None  # how its body differs unevenly (BodySpec fields but mass; issue 13), None: even
+    kind: str = ""  # the population kind it was drawn from (shared.agents.population), for reports
+
+    def body_spec(self) -> BodySpec:
+        extra = dict(self.body or {})
+        if "mass" in extra:
+            raise BadInput("give the other's mass as params.mass, not in params.body", field="body")
+        try:
+            return BodySpec(mass=self.mass, **extra).check()
+        except TypeError as e:
+            raise BadInput(f"bad body description: {e}", field="body") from None
 
     def check(self) -> "OtherParams":
         if self.rule not in RULES:
@@ -57,6 +68,9 @@ class OtherParams:
         unknown = [j for j in self.joints if j not in JOINTS]
         if unknown or not self.joints:
             raise BadInput(f"joints must be among {', '.join(JOINTS)}, got {self.joints}", field="joints")
+        lacking = [j for j in self.joints if j in self.body_spec().missing]
+        if lacking:
+            raise BadInput(f"the other cannot feel joints its body lacks: {lacking}", field="joints")
         if self.behaviour not in BEHAVIOURS:
             raise BadInput(f"behaviour must be one of {', '.join(BEHAVIOURS)}, got {self.behaviour!r}", field="behaviour")
         if self.weights is not None and len(self.weights) != len(self.joints):
@@ -74,7 +88,7 @@ class SimulatedOther:
     def __init__(self, name: str, params: OtherParams | None = None, asked: int = 0):
         self.name = name
         self.params = (params or OtherParams()).check()
-        self.body = small_humanoid(self.params.mass, name=f"other:{name}")
+        self.body = small_humanoid(self.params.body_spec(), name=f"other:{name}")
         self.asked = asked
 
     def feel(self, motion: Clip) -> np.ndarray:

@@ -41,6 +41,12 @@ def _mujoco_warning(message: str) -> None:
 mujoco.set_mju_user_warning(_mujoco_warning)
 
 GRAVITY = 9.81
+FRICTION_VELOCITY = 0.05  # rad/s: Coulomb friction is smoothed as friction * tanh(qdot / this)
+
+
+def coulomb(qdot: np.ndarray) -> np.ndarray:
+    """The smoothed sign of a joint velocity that scales Coulomb friction."""
+    return np.tanh(np.asarray(qdot, float) / FRICTION_VELOCITY)
 
 
 @dataclass
@@ -74,6 +80,7 @@ class Body:
     up_axis: int = 2
     unmapped: list[str] = field(default_factory=list)  # bones no naming scheme names (human bodies)
     missing_segments: list[str] = field(default_factory=list)  # de Leva segments the skeleton lacks
+    friction: dict[str, float] = field(default_factory=dict)  # channel -> Coulomb friction, N m (robots, issue 13)
 
     @property
     def channels(self) -> list[str]:
@@ -219,7 +226,10 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
     """The clip performed by ``body``: torques, centre of gravity and a feasibility report."""
     q = _qpos_trajectory(body, clip)
     warned: dict = {}
-    _, _, tau, cog = inverse_dynamics(body, q, clip.fps, warned)
+    v, _, tau, cog = inverse_dynamics(body, q, clip.fps, warned)
+    for d in body.dofs:  # Coulomb friction, which mj_inverse does not model (damping it does)
+        if d.channel in body.friction:
+            tau[:, d.dof] += body.friction[d.channel] * coulomb(v[:, d.dof])
     limits = {}
     limited = [d for d in body.dofs if d.limits is not None and d.channel in clip.channels]
     for d in limited:

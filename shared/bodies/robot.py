@@ -1,61 +1,125 @@
 """Small humanoid robots for chapter 3 (thesis 3.3.3, 3.4): the *self* and the *other*.
 
-Both have the same layout and differ in mass (thesis: 2.4 kg and 4.8 kg). Modelled joints:
-right shoulder pitch and roll, right elbow, right knee (the closed-question experiment uses the
-knee as its fourth joint). The torso is fixed to the world; every link's mass is a fixed share
-of the robot's mass (``LINK_SHARE``), so every torque, gravity and inertial alike, scales
-exactly with the mass. Motion channels are the joint names, in degrees.
+The thesis's two robots have the same layout and differ in mass (2.4 kg and 4.8 kg). Modelled
+joints: right shoulder pitch and roll, right elbow, right knee (the closed-question experiment
+uses the knee as its fourth joint). The torso is fixed to the world; by default every link's
+mass is a fixed share of the robot's mass (``LINK_SHARE``), so every torque, gravity and
+inertial alike, scales exactly with the mass. Motion channels are the joint names, in degrees.
+
+Real bodies differ unevenly (issue 13; thesis 3.3.5 and 7.2), so a :class:`BodySpec` can also
+change the link lengths, the links' shares of the mass, add a payload held in the right hand
+(a point mass at the end of the forearm), viscous damping (MuJoCo joint damping, in the
+torques ``mj_inverse`` reports) and Coulomb friction (``friction * tanh(qdot / 0.05 rad/s)``,
+added to the torques by :func:`shared.bodies.body.perform`) per joint, and leave joints out (a
+missing joint is welded at 0: the body cannot move it and feels nothing there).
 """
 
 from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
 
 import mujoco
 import numpy as np
 
 from shared.bodies.body import Body, DofMap, check_mass
-from shared.errors import NotFound
+from shared.errors import BadInput, NotFound
 
 JOINTS = ("shoulder_pitch", "shoulder_roll", "elbow", "knee")
 LIMITS = {"shoulder_pitch": (-180.0, 180.0), "shoulder_roll": (-100.0, 100.0), "elbow": (-150.0, 5.0),
           "knee": (-5.0, 150.0)}
 LINK_SHARE = {"torso": 0.55, "upper_arm": 0.07, "forearm": 0.06, "thigh": 0.12, "shin": 0.10}  # rest: head, left side (fixed)
+LENGTHS = {"upper": 0.10, "fore": 0.10, "thigh": 0.11, "shin": 0.11}  # m
 ROBOTS = {"self": 2.4, "other": 4.8}  # the thesis's two robots, kg
+HAND_RADIUS = 0.02  # m, the payload's sphere
 
 
-def small_humanoid(mass: float = 2.4, name: str = "robot", upper: float = 0.10, fore: float = 0.10,
-                   thigh: float = 0.11, shin: float = 0.11) -> Body:
-    """A small humanoid of ``mass`` kg (link lengths in metres)."""
-    mass = check_mass(mass)
+@dataclass
+class BodySpec:
+    """A small humanoid's body (defaults: the thesis's even robot of ``mass`` kg)."""
+
+    mass: float = 2.4
+    lengths: dict[str, float] = field(default_factory=dict)  # upper, fore, thigh, shin (m); missing: LENGTHS
+    shares: dict[str, float] = field(default_factory=dict)  # link -> share of the mass; missing: LINK_SHARE
+    payload: float = 0.0  # kg held in the right hand (end of the forearm)
+    elbow_mass: float = 0.0  # kg, a point mass at the elbow (used by the self's regressor, shared.estimation.body)
+    damping: dict[str, float] = field(default_factory=dict)  # joint -> viscous damping, N m s / rad
+    friction: dict[str, float] = field(default_factory=dict)  # joint -> Coulomb friction, N m
+    missing: list[str] = field(default_factory=list)  # joints the body does not have
+
+    def check(self) -> "BodySpec":
+        check_mass(self.mass)
+        for group, table, lo, hi in (("lengths", self.lengths, 0.02, 1.0), ("shares", self.shares, 0.0, 1.0),
+                                     ("damping", self.damping, 0.0, 100.0), ("friction", self.friction, 0.0, 100.0)):
+            known = LENGTHS if group == "lengths" else LINK_SHARE if group == "shares" else JOINTS
+            for k, v in table.items():
+                if k not in known:
+                    raise BadInput(f"body {group}: unknown {k!r}; one of {', '.join(known)}", field=group)
+                if not (isinstance(v, (int, float)) and np.isfinite(v) and lo <= v <= hi):
+                    raise BadInput(f"body {group}[{k}] must be in [{lo}, {hi}], got {v}", field=group)
+        for name, v in (("payload", self.payload), ("elbow_mass", self.elbow_mass)):
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and 0.0 <= v <= 100.0):
+                raise BadInput(f"body {name} must be in [0, 100] kg, got {v}", field=name)
+        bad = [j for j in self.missing if j not in JOINTS]
+        if bad:
+            raise BadInput(f"body missing joints must be among {', '.join(JOINTS)}, got {bad}", field="missing")
+        return self
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def small_humanoid(mass: float | BodySpec = 2.4, name: str = "robot", link_masses: dict[str, float] | None = None) -> Body:
+    """A small humanoid of ``mass`` kg, or of a :class:`BodySpec`. ``link_masses`` (kg per
+    link) overrides the shares: the self's regressor builds bodies with one link's mass only."""
+    spec_in = mass if isinstance(mass, BodySpec) else BodySpec(mass=check_mass(mass))
+    b = spec_in.check()
+    length = {**LENGTHS, **b.lengths}
+    share = {**LINK_SHARE, **b.shares}
+    masses = {k: share[k] * b.mass for k in LINK_SHARE} if link_masses is None else {k: link_masses.get(k, 0.0) for k in LINK_SHARE}
+    tiny = 1e-9  # a link "without mass" in a regressor column: MuJoCo needs a positive mass
     spec = mujoco.MjSpec()
     spec.compiler.degree = False
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT  # inverse dynamics of the motion alone: no self-contacts
     spec.modelname = name
     spec.option.gravity = [0, 0, -9.81]
+
+    def joint(parent, jname: str, axis):
+        if jname not in b.missing:
+            parent.add_joint(name=jname, type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis, damping=b.damping.get(jname, 0.0))
+
     torso = spec.worldbody.add_body(name="torso", pos=[0, 0, 0.3])
-    torso.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.04, 0.06, 0.08], mass=LINK_SHARE["torso"] * mass)
+    torso.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.04, 0.06, 0.08], mass=max(masses["torso"], tiny))
     ua = torso.add_body(name="upper_arm", pos=[0, -0.08, 0.06])
-    ua.add_joint(name="shoulder_pitch", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
-    ua.add_joint(name="shoulder_roll", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[1, 0, 0])
-    ua.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -upper], size=[0.015, 0, 0],
-                mass=LINK_SHARE["upper_arm"] * mass)
-    fa = ua.add_body(name="forearm", pos=[0, 0, -upper])
-    fa.add_joint(name="elbow", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
-    fa.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -fore], size=[0.012, 0, 0],
-                mass=LINK_SHARE["forearm"] * mass)
+    joint(ua, "shoulder_pitch", [0, 1, 0])
+    joint(ua, "shoulder_roll", [1, 0, 0])
+    ua.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length["upper"]], size=[0.015, 0, 0],
+                mass=max(masses["upper_arm"], tiny))
+    fa = ua.add_body(name="forearm", pos=[0, 0, -length["upper"]])
+    joint(fa, "elbow", [0, 1, 0])
+    fa.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length["fore"]], size=[0.012, 0, 0],
+                mass=max(masses["forearm"], tiny))
+    if b.elbow_mass > 0:
+        fa.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=[0, 0, 0], size=[0.001, 0, 0], mass=b.elbow_mass)
+    if b.payload > 0:
+        fa.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=[0, 0, -length["fore"]], size=[HAND_RADIUS, 0, 0],
+                    mass=b.payload)
     th = torso.add_body(name="thigh", pos=[0, -0.03, -0.08])
-    th.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -thigh], size=[0.02, 0, 0],
-                mass=LINK_SHARE["thigh"] * mass)
-    sh = th.add_body(name="shin", pos=[0, 0, -thigh])
-    sh.add_joint(name="knee", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
-    sh.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -shin], size=[0.018, 0, 0],
-                mass=LINK_SHARE["shin"] * mass)
+    th.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length["thigh"]], size=[0.02, 0, 0],
+                mass=max(masses["thigh"], tiny))
+    sh = th.add_body(name="shin", pos=[0, 0, -length["thigh"]])
+    joint(sh, "knee", [0, 1, 0])
+    sh.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length["shin"]], size=[0.018, 0, 0],
+                mass=max(masses["shin"], tiny))
     model = spec.compile()
     dofs = []
     for j in JOINTS:
+        if j in b.missing:
+            continue
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j)
         dofs.append(DofMap(j, int(model.jnt_qposadr[jid]), int(model.jnt_dofadr[jid]), LIMITS[j]))
-    moving = float(np.sum(model.body_mass[1:]))
-    return Body(name=name, kind="robot", model=model, dofs=dofs, mass=moving / sum(LINK_SHARE.values()))
+    return Body(name=name, kind="robot", model=model, dofs=dofs,
+                mass=b.mass if link_masses is None else float(sum(link_masses.values())),
+                friction={j: v for j, v in b.friction.items() if v > 0 and j not in b.missing})
 
 
 def robot(name: str, mass: float | None = None) -> Body:

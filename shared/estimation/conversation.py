@@ -23,6 +23,13 @@ Two estimators are kept side by side:
   each other), and any motion's torques are ``s * perform_self(motion)``. Each set also asks
   about one *probe*: a shared motion at an amplitude chosen so that its answer bisects the
   interval of ``s``. The error is no longer limited by a bin's width.
+* **body** (issue 13, :mod:`shared.estimation.body`): the other's body need not be the self's
+  scaled; its torques are ``Y(motion) theta`` with the self's body regressor ``Y`` and the
+  other's unknown parameters ``theta`` (link masses and lengths, a payload, damping, friction),
+  every answer a constraint on ``theta``. Each set then asks ``probes`` probe motions (shared
+  motions at other amplitudes and speeds, and seeded random probe motions, never the
+  evaluation's) chosen where the body estimate is least sure of the answer. Every answer
+  also feeds the interval estimator.
 """
 
 from __future__ import annotations
@@ -38,6 +45,12 @@ from shared.symbols import f_conv, f_div
 
 TORQUE_PREFIX = "tau."
 PROBE_AMPLITUDES = (0.25, 0.4, 0.55, 0.7, 0.85, 1.0, 1.15)
+PROBE_SPEEDS = (0.5, 1.0, 2.0)  # a probe played at half, the same or twice the speed
+RANDOM_PROBES = 12  # random probe motions (seed PROBE_SEED, not the evaluation's unknown motions' 2012)
+PROBE_SEED = 77
+PROBE_AMPLITUDES_RANDOM = PROBE_AMPLITUDES
+PROBES_PER_SET = 4
+METHODS = ("thesis", "interval", "body")
 
 
 @dataclass
@@ -52,6 +65,7 @@ class Language:
     joints: list[str] = field(default_factory=lambda: ["shoulder_pitch", "shoulder_roll", "elbow"])
     rule: str = "eq3.8"
     weights: list[float] | None = None
+    missing: list[str] = field(default_factory=list)  # joints the other lacks: the self imitates without them
 
     def g(self, tau: np.ndarray) -> float:
         return f_conv(tau, self.rule, self.tau_max, self.weights)
@@ -71,6 +85,18 @@ class Ports(Protocol):
     def ask_open(self, motion: Clip) -> int: ...
     def build(self, clips: list[Clip]) -> None: ...
     def associate(self, motion: Clip) -> np.ndarray: ...
+    def regressor(self, motion: Clip) -> np.ndarray: ...
+
+
+def hold(motion: Clip, missing) -> Clip:
+    """The motion as the self imitates an other lacking ``missing`` joints: those held at 0
+    (thesis 3.3.5: the self can imitate by simply not using a joint)."""
+    idx = [motion.channels.index(j) for j in missing if j in motion.channels]
+    if not idx:
+        return motion
+    data = motion.data.copy()
+    data[:, idx] = 0.0
+    return motion.with_data(data)
 
 
 def with_torques(motion: Clip, tau: np.ndarray, joints: list[str]) -> Clip:
@@ -94,12 +120,16 @@ class SetRecord:
 class OtherEstimate:
     """The self's estimate of one other: ``D_other_hat`` and the answers so far."""
 
-    def __init__(self, language: Language, motions: list[Clip], probes: bool = True):
+    def __init__(self, language: Language, motions: list[Clip], probes: bool | int = True):
         if not motions:
             raise BadInput("the estimate needs at least one shared motion")
         self.language = language
         self.motions = motions
-        self.probes = probes
+        self.probes = PROBES_PER_SET if probes is True else int(probes)
+        self.body_answers: list[tuple[str, int]] = []  # (question key, k): the body estimator's answers
+        self._body = None
+        self._saved_body: dict | None = None  # theta, s and how many answers they were fitted to, from a file
+        self._regressors: dict = {}
         self.other = ""  # the other's name, for the service
         self.notes: list[str] = []  # what happened besides sets (rule identified, conversation stopped)
         self.probes_asked: list[tuple[str, int]] = []
@@ -127,6 +157,7 @@ class OtherEstimate:
         new = []
         for i, m in enumerate(self.motions):
             k_other = int(ports.ask_open(m))
+            self.body_answers.append((m.name, k_other))
             s_hat = np.asarray(ports.associate(m), float)
             k_self = self.language.k(s_hat)
             ratio = k_other / k_self
@@ -137,38 +168,76 @@ class OtherEstimate:
             self.answers.append((self.language.g(self.self_torques[i]), k_other))
         self.torques = new
         ports.build(self.database())  # eq. 3.6
-        if self.probes:
-            self.probe(ports)
+        for _ in range(self.probes):
+            if self.probe(ports) is None:
+                break
         self.sets.append(rec)
         return rec
 
-    def probe(self, ports: Ports) -> tuple[str, int] | None:
-        """Beyond the thesis: ask about one more motion, a shared motion at a chosen amplitude,
-        whose answer splits the current interval of ``s`` about in half (a bisection: the
-        interval estimate's error halves with every set)."""
-        lo, hi = self.interval()
-        target = 0.5 * (lo + hi) if np.isfinite(hi) else max(2.0 * lo, 1.0)
-        best = None
-        for name, (motion, g_self) in self._probe_table(ports).items():
-            for j in range(1, self.language.d):
-                split = self.language.g_max * j / self.language.d / max(g_self, 1e-12)
-                if lo < split < hi and (best is None or abs(split - target) < best[0]):
-                    best = (abs(split - target), name, motion, g_self)
-        if best is None:
-            return None
-        _, name, motion, g_self = best
-        k = int(ports.ask_open(motion))
-        self.answers.append((g_self, k))
-        self.probes_asked.append((name, k))
-        return name, k
-
-    def _probe_table(self, ports: Ports) -> dict:
+    # ------------------------------------------------------------------ probes and the body
+    def probe_motions(self) -> dict[str, Clip]:
+        """Every motion a probe may be (key -> clip): each shared motion at ``PROBE_AMPLITUDES``
+        and ``PROBE_SPEEDS``, and ``RANDOM_PROBES`` random probe motions at two amplitudes."""
         if not self._probe_cache:
-            for m in self.motions:
-                for f in PROBE_AMPLITUDES:
-                    pm = m.with_data(m.data * f, name=f"{m.name}_x{f:g}")
-                    self._probe_cache[pm.name] = (pm, self.language.g(np.asarray(ports.perform_self(pm), float)))
+            from shared.estimation.motions import unknown_motions
+
+            joints = list(self.motions[0].channels)
+            rand = unknown_motions(RANDOM_PROBES, seed=PROBE_SEED, joints=joints)
+            for group, amps in ((self.motions, PROBE_AMPLITUDES), ([m.with_data(m.data, name=f"probe{m.name[7:]}")
+                                                                   for m in rand], PROBE_AMPLITUDES_RANDOM)):
+                for m in group:
+                    for f in amps:
+                        for v in PROBE_SPEEDS:
+                            key = f"{m.name}_x{f:g}_v{v:g}"
+                            self._probe_cache[key] = Clip(m.data * f, m.channels, m.fps * v, name=key, label=m.name)
         return self._probe_cache
+
+    def _clip_of(self, key: str) -> Clip:
+        for m in self.motions:
+            if m.name == key:
+                return m
+        return self.probe_motions()[key]
+
+    def regressor(self, ports: Ports, key: str) -> np.ndarray:
+        if key not in self._regressors:
+            self._regressors[key] = np.asarray(ports.regressor(self._clip_of(key)), float)
+        return self._regressors[key]
+
+    def body(self, ports: Ports):
+        """The body estimate (:class:`shared.estimation.body.BodyEstimate`) from every answer."""
+        from shared.estimation.body import BodyEstimate
+
+        b = self._body
+        if b is None or [(a.key, a.k) for a in b.answers] != self.body_answers[:len(b.answers)]:
+            b = BodyEstimate(self.language, [self.regressor(ports, m.name) for m in self.motions])
+            b.start(self.scale())  # the least squares start from the interval estimator's proportional body
+            saved = self._saved_body
+            if saved and saved["answers"] <= len(self.body_answers):  # a saved estimate goes on where it stopped
+                for key, k in self.body_answers[:saved["answers"]]:
+                    b.add(key, self.regressor(ports, key), k)
+                b.theta, b.s = np.asarray(saved["theta"], float), float(saved["s"])
+            self._body = b
+        if len(b.answers) != len(self.body_answers):  # new answers: refit from the last estimate
+            for key, k in self.body_answers[len(b.answers):]:
+                b.add(key, self.regressor(ports, key), k)
+            b.fit()
+        return b
+
+    def probe(self, ports: Ports) -> tuple[str, int] | None:
+        """Beyond the thesis: ask about one more motion, the probe whose answer the body
+        estimate is least sure of (:meth:`BodyEstimate.choose_probe`); its answer feeds the
+        body and the interval estimators. ``None`` when no probe's answer is in doubt."""
+        body = self.body(ports)
+        cands = {k: self.regressor(ports, k) for k in self.probe_motions()}
+        key = body.choose_probe(cands, asked={n for n, _ in self.probes_asked})
+        if key is None:
+            return None
+        motion = self._clip_of(key)
+        k = int(ports.ask_open(motion))
+        self.answers.append((self.language.g(np.asarray(ports.perform_self(motion), float)), k))
+        self.probes_asked.append((key, k))
+        self.body_answers.append((key, k))
+        return key, k
 
     # ------------------------------------------------------------------ persistence
     def save(self, path) -> None:
@@ -179,6 +248,7 @@ class OtherEstimate:
         from shared.io.atomic import atomic_write
 
         header = {"language": asdict(self.language), "probes": self.probes, "probes_asked": self.probes_asked,
+                  "body_answers": self.body_answers, "body": self._body_state(),
                   "other": self.other, "notes": self.notes,
                   "answers": self.answers, "sets": [asdict(r) for r in self.sets],
                   "motions": [{"name": m.name, "channels": m.channels, "fps": m.fps} for m in self.motions]}
@@ -207,7 +277,20 @@ class OtherEstimate:
         est.answers = [(float(g), int(k)) for g, k in h["answers"]]
         est.sets = [SetRecord(**r) for r in h["sets"]]
         est.probes_asked = [(str(n), int(k)) for n, k in h["probes_asked"]]
+        # estimates saved before issue 13 have no body answers: the body estimate starts from the self's
+        est.body_answers = [(str(n), int(k)) for n, k in h.get("body_answers", [])]
+        est._saved_body = h.get("body")
         return est
+
+    def forget_body(self) -> None:
+        """Fit the body again from the answers (after the language's rule changed)."""
+        self._body = None
+        self._saved_body = None
+
+    def _body_state(self) -> dict | None:
+        if self._body is not None:
+            return {"theta": self._body.theta.tolist(), "s": self._body.s, "answers": len(self._body.answers)}
+        return self._saved_body
 
     # ------------------------------------------------------------------ the interval method
     def _bounds(self) -> tuple[list[float], list[float]]:
@@ -250,13 +333,15 @@ class OtherEstimate:
         return float(min(cands, key=violation))
 
     def estimate(self, motion: Clip, ports: Ports, method: str = "thesis") -> np.ndarray:
-        """The other's torques for any motion: ``associate`` in ``P_other_hat`` (thesis) or
-        ``s * perform_self`` (interval)."""
+        """The other's torques for any motion: ``associate`` in ``P_other_hat`` (thesis),
+        ``s * perform_self`` (interval) or ``Y(motion) theta`` (body)."""
         if method == "thesis":
             return np.asarray(ports.associate(motion), float)
         if method == "interval":
             return self.scale() * np.asarray(ports.perform_self(motion), float)
-        raise BadInput(f"method must be 'thesis' or 'interval', got {method!r}")
+        if method == "body":
+            return self.body(ports).torques(np.asarray(ports.regressor(motion), float))
+        raise BadInput(f"method must be one of {', '.join(METHODS)}, got {method!r}")
 
 
 # ---------------------------------------------------------------------------- evaluation
@@ -297,6 +382,11 @@ class LocalPorts:
         from shared.symbols import index_of
 
         return index_of(self.other.answer_open(motion), self.language.d)
+
+    def regressor(self, motion: Clip) -> np.ndarray:
+        from shared.estimation.body import self_regressor
+
+        return self_regressor(motion, self.language.joints, self.language.missing)
 
     def build(self, clips: list[Clip]) -> None:
         from shared.pss.space import ProtoSymbolSpace

@@ -221,3 +221,146 @@ def identify_thesis(pairs: dict, ask_compare: Callable[[Clip, Clip], str]) -> di
     rule = {"equal": "f2", "<": "f3", ">": "f4"}.get(second)
     return {"rule": Candidate(rule) if rule else None, "questions": questions,
             "reason": "identified" if rule else f"unexpected answer {second!r}"}
+
+
+# ---------------------------------------------------------------------------- uneven bodies (issue 13)
+#: the comparison noise the self allows for when it weighs answers (an answer other than the
+#: predicted one, either of the two others equally likely)
+ANSWER_NOISE = 0.1
+CONFIDENCE = 0.99
+BODY_SAMPLES = 256
+
+
+def body_samples(theta: np.ndarray, cov: np.ndarray | None, n: int = BODY_SAMPLES, seed: int = 0) -> np.ndarray:
+    """Bodies the answers so far allow: the estimate and ``n - 1`` draws from the Gaussian
+    approximation of its uncertainty (:meth:`shared.estimation.body.BodyEstimate.covariance`),
+    clipped at 0 (no negative mass, damping or friction)."""
+    theta = np.asarray(theta, float)
+    if cov is None or n <= 1:
+        return theta[None]
+    cov = 0.5 * (cov + cov.T)
+    w, v = np.linalg.eigh(cov)
+    root = v * np.sqrt(np.clip(w, 0.0, None))
+    r = np.random.default_rng(seed)
+    draws = theta + r.standard_normal((n - 1, len(theta))) @ root.T
+    return np.vstack([theta, np.clip(draws, 0.0, None)])
+
+
+ANSWERS = (">", "<", "equal")
+
+
+def g_bodies(c: Candidate, y: np.ndarray, bodies: np.ndarray) -> np.ndarray:
+    """``c.g`` of one motion (self regressor ``y``, T x J x P) on many bodies (N x P) at once."""
+    a = np.abs(np.einsum("tjp,np->ntj", y, bodies))
+    if c.weights is not None:
+        a = a * np.asarray(c.weights, float)
+    if c.rule == "f1":
+        return a.mean(axis=(1, 2))
+    if c.rule == "f2":
+        return a.max(axis=1).sum(axis=1)
+    if c.rule == "f3":
+        return a.sum(axis=2).max(axis=1)
+    if c.rule == "f4":
+        return a.max(axis=(1, 2))
+    if c.rule == "eq3.8":
+        return a.sum(axis=2).mean(axis=1)
+    raise BadInput(f"unknown conversion rule {c.rule!r}")
+
+
+def predicted_answers(g_first: np.ndarray, g_second: np.ndarray, jnd: float) -> np.ndarray:
+    """Index into ``ANSWERS`` of the comparison (eq. 3.11-3.12, :func:`shared.symbols.compare`)
+    of two motions whose ``g`` are ``g_first`` and ``g_second`` (arrays: one per body)."""
+    a, b = np.asarray(g_first, float), np.asarray(g_second, float)
+    equal = np.abs(a - b) <= jnd * np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-12)
+    return np.where(equal, 2, np.where(a > b, 0, 1))
+
+
+def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors: dict[str, np.ndarray],
+                    bodies: dict[str, np.ndarray], ask_compare: Callable[[Clip, Clip], str], jnd: float = 0.05,
+                    noise: float = ANSWER_NOISE, confidence: float = CONFIDENCE, max_questions: int = 30) -> dict:
+    """Identify the other's rule when its body is not the self's (issue 13).
+
+    Each candidate's answer about a pair of motions is predicted from the **estimated body**,
+    not the self's: ``bodies[c.name]`` are bodies the open answers allow under that rule
+    (:func:`candidate_bodies`), and a motion's torques on a body are its self regressor times
+    the body. The self keeps a posterior over (rule, body) together: every (candidate, body)
+    starts equally likely; an answer other than the one that pair predicts has probability
+    ``noise`` (either other answer equally likely). It asks the pair of motions whose answer
+    is expected to tell most about the rule (mutual information), and stops when one rule holds
+    ``confidence`` of the posterior, after ``max_questions``, or when no pair tells anything.
+
+    Returns ``{"rule", "questions", "remaining", "reason", "posterior"}`` like :func:`identify`.
+    """
+    if not candidates:
+        raise BadInput("no candidate rules")
+    names = [m.name for m in motions]
+    by_name = {m.name: m for m in motions}
+    g = {m: np.array([g_bodies(c, regressors[m], bodies[c.name]) for c in candidates]) for m in names}
+    preds = {(a, b): predicted_answers(g[a], g[b], jnd) for i, a in enumerate(names) for b in names[i + 1:]}
+    n_bodies = max(len(v) for v in bodies.values())
+    w = np.zeros((len(candidates), n_bodies))
+    for k, c in enumerate(candidates):
+        w[k, :len(bodies[c.name])] = 1.0 / len(bodies[c.name])
+    w /= w.sum()
+    like = np.array([[1 - noise if a == b else noise / 2 for b in range(3)] for a in range(3)])  # [pred, answer]
+    asked: list[dict] = []
+    reason = "identified"
+
+    def rule_posterior():
+        return w.sum(axis=1)
+
+    while rule_posterior().max() < confidence:
+        if len(asked) >= max_questions:
+            reason = f"not sure after {max_questions} questions (best {rule_posterior().max():.0%})"
+            break
+        post = rule_posterior()
+        best, best_info = None, 1e-6
+        for pair, pr in preds.items():
+            lk = like[pr]  # (candidates, bodies, answers)
+            t = np.einsum("cb,cba->ca", w, lk) / np.maximum(post[:, None], 1e-300)  # P(answer | rule)
+            p_ans = post @ t
+            info = float(np.sum(post[:, None] * t * np.log(np.maximum(t, 1e-12) / np.maximum(p_ans, 1e-12))))
+            if info > best_info:
+                best, best_info = pair, info
+        if best is None:
+            reason = "no pair of motions tells the remaining rules apart"
+            break
+        a, b = best
+        answer = ask_compare(by_name[a], by_name[b])
+        if answer not in ANSWERS:
+            reason = f"the answer {answer!r} is not a comparison"
+            break
+        w = w * like[preds[best]][..., ANSWERS.index(answer)]
+        w /= w.sum()
+        post = rule_posterior()
+        asked.append({"pair": f"{a}|{b}", "answer": answer,
+                      "posterior": {c.name: round(float(p), 4) for c, p in zip(candidates, post)}})
+        del preds[best]
+    post = rule_posterior()
+    k = int(post.argmax())
+    return {"rule": candidates[k] if post[k] >= confidence else None, "questions": asked,
+            "remaining": [c.name for c, p in zip(candidates, post) if p > 0.01], "reason": reason,
+            "posterior": {c.name: float(p) for c, p in zip(candidates, post)}}
+
+
+def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str, np.ndarray, int]],
+                     candidates: list[Candidate], scale: float = 1.0, n: int = BODY_SAMPLES) -> dict[str, np.ndarray]:
+    """Per candidate rule, the bodies the other's open answers allow if it converts with that
+    rule: a :class:`shared.estimation.body.BodyEstimate` fitted to ``answers`` (key, regressor,
+    k) in ``language`` with the candidate's rule, and :func:`body_samples` of what it leaves
+    uncertain. Without answers every candidate gets the same prior bodies (the self's,
+    proportional or not)."""
+    from dataclasses import replace
+
+    from shared.estimation.body import BodyEstimate
+
+    out = {}
+    for i, c in enumerate(candidates):
+        lang = replace(language, rule=c.rule, weights=None if c.weights is None else list(c.weights))
+        b = BodyEstimate(lang, shared)
+        b.start(scale)
+        for key, y, k in answers:
+            b.add(key, y, k)
+        b.fit()
+        out[c.name] = body_samples(b.theta, b.covariance(), n, seed=i)
+    return out

@@ -130,7 +130,7 @@ class Ch3:
                         self.new_other(other, rule=c.rule, weights=None if c.weights is None else list(c.weights),
                                        joints=list(ALL), noise=noise, seed=1000 * int(100 * noise) + seed, g_max=1.2)
                         self.c.request("estimator", "start", {"estimate": "ch3-id", "other": other, "joints": list(ALL),
-                                                              "g_max": 1.2, "replace": True, "probes": False})
+                                                              "g_max": 1.2, "replace": True, "probes": 0})
                         r = self.c.request("estimator", "identify_rule", {
                             "estimate": "ch3-id", "method": method, "apply": False,
                             "candidates": "thesis" if cands is THESIS_CANDIDATES else "weighted"})

@@ -1,0 +1,73 @@
+"""A population of simulated others whose bodies differ as real bodies do (issue 13).
+
+The thesis's other is the self scaled in mass (thesis 3.3.3), so every torque is exactly a
+multiple of the self's; it says so itself (3.3.5, 3.4.4) and leaves uneven bodies open (7.2).
+Every other here has its own mass (uniform 3.0-7.2 kg) and, by ``kind``:
+
+==========  =====================================================================================
+mass        nothing else: the thesis's proportional other (the reference)
+links       upper arm and forearm 1.15-1.5x as long
+payload     0.05-0.3 kg held in the right hand
+shares      upper arm and forearm each carry 0.6-1.6x their usual share of the mass
+damping     viscous damping 0.02-0.08 N m s/rad at every arm joint and the knee
+friction    Coulomb friction 0.01-0.05 N m at every arm joint and the knee
+joints      no shoulder roll (the self imitates it by not using its own, thesis 3.3.5), arm links
+            0.9-1.2x as long
+legs        the shin carries 1.5-2.5x its share, and is 1.0-1.4x as long
+mixed       links, payload, shares, damping and friction at once
+==========  =====================================================================================
+
+Each draw comes from ``default_rng([seed, kind index, i])``: the population replays exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shared.errors import BadInput
+
+KINDS = ("mass", "links", "payload", "shares", "damping", "friction", "joints", "legs", "mixed")
+ARM = ("shoulder_pitch", "shoulder_roll", "elbow")
+ALL = ARM + ("knee",)
+
+
+def _body(kind: str, r: np.random.Generator) -> dict:
+    body: dict = {}
+    if kind in ("links", "mixed"):
+        body["lengths"] = {"upper": 0.10 * r.uniform(1.15, 1.5), "fore": 0.10 * r.uniform(1.15, 1.5)}
+    if kind in ("payload", "mixed"):
+        body["payload"] = float(r.uniform(0.05, 0.3))
+    if kind in ("shares", "mixed"):
+        body["shares"] = {"upper_arm": 0.07 * r.uniform(0.6, 1.6), "forearm": 0.06 * r.uniform(0.6, 1.6)}
+    if kind in ("damping", "mixed"):
+        body["damping"] = {j: float(r.uniform(0.02, 0.08)) for j in ALL}
+    if kind in ("friction", "mixed"):
+        body["friction"] = {j: float(r.uniform(0.01, 0.05)) for j in ALL}
+    if kind == "joints":
+        body["missing"] = ["shoulder_roll"]
+        body["lengths"] = {"upper": 0.10 * r.uniform(0.9, 1.2), "fore": 0.10 * r.uniform(0.9, 1.2)}
+    if kind == "legs":
+        body["shares"] = {"shin": 0.10 * r.uniform(1.5, 2.5)}
+        body["lengths"] = {"shin": 0.11 * r.uniform(1.0, 1.4)}
+    for group in ("lengths", "shares"):
+        if group in body:
+            body[group] = {k: float(v) for k, v in body[group].items()}
+    return body
+
+
+def population(kind: str, n: int = 10, seed: int = 13, **params) -> list[dict]:
+    """``n`` others' parameters (``OtherParams`` fields) of one ``kind``; ``params`` (rule, d,
+    g_max, noise, ...) are the same for all of them."""
+    if kind not in KINDS:
+        raise BadInput(f"unknown population kind {kind!r}; one of {', '.join(KINDS)}", field="kind")
+    if not 1 <= n <= 1000:
+        raise BadInput(f"a population has 1 to 1000 others, got {n}", field="n")
+    out = []
+    for i in range(n):
+        r = np.random.default_rng([seed, KINDS.index(kind), i])
+        mass = float(r.uniform(3.0, 7.2))
+        body = _body(kind, r)
+        joints = [j for j in params.get("joints", ARM) if j not in body.get("missing", [])]
+        out.append({**params, "mass": mass, "body": body, "kind": kind, "joints": joints,
+                    "seed": int(params.get("seed", 0)) + i})
+    return out
