@@ -29,7 +29,7 @@ ASK_OPEN = Endpoint(
     "ask_open",
     Message("dialogue.ask_open", Map({
         "dialogue": DIALOGUE, "other": OTHER,
-        "d": F(Int(2, 8), "density of the words (2, 4, 6, 8)", required=False, default=4),
+        "d": F(Int(2, 8), "density of the words (2, 4, 5, 6, 7, 8)", required=False, default=4),
         "clip": F(CLIP, "the shared motion the other performs"),
         "timeout": F(Float(1.0, 3600.0), "seconds to wait for the answer", required=False, default=120.0),
     })),

@@ -25,6 +25,8 @@ INFO = Map({
     "probes_asked": F(Int(0), "probe questions asked"),
     "last_set": F(AnyMap(), "k_other, k_self and ratio per shared motion of the last set", required=False),
     "notes": F(List(Str(max_len=1000), max_len=10_000), "rule identification, stops"),
+    "body": F(AnyMap(), "the body estimate (issue 13): columns of the self's regressor, theta, the proportional "
+                        "scale it is nearest to, answers fitted", required=False),
 })
 
 START = Endpoint(
@@ -88,7 +90,7 @@ IDENTIFY = Endpoint(
         "noise": F(Float(0.0, 0.5), "auto: the share of comparisons the self allows to be wrong", required=False,
                    default=0.1),
         "confidence": F(Float(0.5, 0.9999), "auto: stop when one rule holds this share of the posterior",
-                        required=False, default=0.99),
+                        required=False, default=0.999),
         "jnd": F(Float(0.0, 1.0), "the just-noticeable difference assumed", required=False, default=0.05),
         "apply": F(Bool(), "use the identified rule in later conversation sets", required=False, default=True),
         "timeout": F(Float(1.0, 3600.0), required=False, default=120.0),

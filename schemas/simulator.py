@@ -80,7 +80,7 @@ OTHER_PARAMS = Map({
     "mass": F(Float(0.1, 500.0), "the other's body mass, kg", required=False, default=4.8),
     "rule": F(Str(choices=RULES), "its conversion rule F_conv (eq. 3.8, 3.13-3.16)", required=False, default="eq3.8"),
     "weights": F(List(Float(0.0, 100.0), min_len=1, max_len=4), "per-joint weights of the rule", required=False),
-    "d": F(Int(2, 8), "density of its words (2, 4, 6 or 8)", required=False, default=4),
+    "d": F(Int(2, 8), "density of its words (2, 4, 5, 6, 7 or 8)", required=False, default=4),
     "tau_max": F(Float(1e-6, 1e6), "its tau_MAX, N m", required=False, default=1.0),
     "g_max": F(Float(1e-6, 1e6), "top of the range F_div splits into d bins", required=False, default=1.0),
     "joints": F(List(Str(choices=("shoulder_pitch", "shoulder_roll", "elbow", "knee")), min_len=1, max_len=4),

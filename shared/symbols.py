@@ -22,7 +22,9 @@ RULES = ("eq3.8", "f1", "f2", "f3", "f4")
 WORDS = {
     2: ("light", "heavy"),
     4: ("light", "bit light", "bit heavy", "heavy"),
+    5: ("very light", "light", "medium", "heavy", "very heavy"),  # ours: Table 3.1 has no d = 5 (figs. 3.14 uses it)
     6: ("very light", "light", "bit light", "bit heavy", "heavy", "very heavy"),
+    7: ("very light", "light", "bit light", "medium", "bit heavy", "heavy", "very heavy"),  # ours, for fig. 3.15
     8: ("extremely light", "very light", "light", "bit light", "bit heavy", "heavy", "very heavy", "extremely heavy"),
 }
 COMPARISONS = (">", "<", "equal")

@@ -89,7 +89,7 @@ def test_answer_noise_is_one_bin_off_at_the_set_rate():
 
 
 def test_bad_other_parameters_are_refused():
-    for bad in ({"rule": "f7"}, {"d": 5}, {"joints": ["tail"]}, {"noise": 1.5}, {"tau_max": 0.0},
+    for bad in ({"rule": "f7"}, {"d": 3}, {"joints": ["tail"]}, {"noise": 1.5}, {"tau_max": 0.0},
                 {"weights": [1.0, 2.0]}, {"mass": 1e5}):
         with pytest.raises(BadInput):
             SimulatedOther("x", OtherParams(**bad))

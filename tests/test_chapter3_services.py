@@ -92,7 +92,7 @@ def test_bad_requests_get_clear_errors(chapter3_services, client_of):
     nan_clip = dict(m, data=np.where(np.arange(m["data"].size).reshape(m["data"].shape) == 3, np.nan, m["data"]))
     cases = [
         ("dialogue", "ask_open", {"dialogue": "x", "other": "nobody", "clip": m}, "not_found"),
-        ("dialogue", "ask_open", {"dialogue": "x", "other": "ok", "d": 5, "clip": m}, "bad_request"),
+        ("dialogue", "ask_open", {"dialogue": "x", "other": "ok", "d": 3, "clip": m}, "bad_request"),
         ("dialogue", "ask_compare", {"dialogue": "x", "other": "ok", "clips": [m]}, "bad_request"),
         ("dialogue", "transcript", {"dialogue": "never"}, "not_found"),
         ("dialogue", "transcript", {"dialogue": "../etc"}, "bad_request"),

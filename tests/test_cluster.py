@@ -163,7 +163,8 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
     assert r.returncode == 0 and "2 set(s)" in r.stdout, r.stderr
     r = cli(env, "dialogue", "transcript", "r2")
     assert r.returncode == 0 and "How heavy did that feel?" in r.stdout and "(k = " in r.stdout
-    r = cli(env, "reproduce", "ch3", "--out", tmp_path / "rep", "--sets", "1", "--seeds", "1", timeout=600)
+    r = cli(env, "reproduce", "ch3", "--out", tmp_path / "rep", "--sets", "1", "--others", "1", "--kinds", "mass,joints",
+            timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     report = (tmp_path / "rep/ch3/report.md").read_text()
     for fig in ("fig3_6.png", "fig3_7.png", "fig3_8.png", "fig3_14_15.png"):

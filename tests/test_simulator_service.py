@@ -171,7 +171,7 @@ def test_bad_simulator_input_gets_clear_errors_and_the_service_stays_up(simulato
         ("absurd mass", "perform", {"body": "self", "mass": 1e9, "clip": m}, "bad_request"),
         ("negative mass", "other_create", {"other": "x", "params": {"mass": -2.0}}, "bad_request"),
         ("unknown rule", "other_create", {"other": "x", "params": {"rule": "f9"}}, "bad_request"),
-        ("bad density", "other_create", {"other": "x", "params": {"d": 5}}, "bad_request"),
+        ("bad density", "other_create", {"other": "x", "params": {"d": 3}}, "bad_request"),
         ("existing other", "other_create", {"other": "bob"}, "conflict"),
         ("unknown other", "other_ask", {"other": "nobody", "kind": "open", "clips": [m]}, "not_found"),
         ("compare with one motion", "other_ask", {"other": "bob", "kind": "compare", "clips": [m]}, "bad_request"),

@@ -21,7 +21,7 @@ import numpy as np
 
 from schemas import estimator as contract
 from schemas.common import clip_from_wire, clip_to_wire
-from shared.bus.client import Client
+from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
 from shared.deadline import check_time, completed
@@ -105,6 +105,12 @@ def info_of(name: str, est: OtherEstimate) -> dict:
            "notes": list(est.notes)}
     if est.sets:
         out["last_set"] = asdict(est.sets[-1])
+    body = est.body_state()
+    if body:
+        from shared.estimation.body import column_names
+
+        out["body"] = {"columns": column_names(est.language.joints), "theta": body["theta"], "scale": body["s"],
+                       "answers": body["answers"]}
     return out
 
 
@@ -150,10 +156,21 @@ def make_service(settings: Settings | None = None) -> Service:
     def path(name: str):
         return root / f"{check_name(name)}.npz"
 
+    loaded: dict = {}  # name -> (file stamp, estimate): estimate requests reuse the last load and its body fit
+
     def load(name: str) -> OtherEstimate:
         if not path(name).exists():
             raise NotFound(f"no estimate named {name!r}", estimate=name)
-        return OtherEstimate.load(path(name))
+        st = path(name).stat()
+        stamp = (st.st_mtime_ns, st.st_size, st.st_ino)
+        hit = loaded.get(name)
+        if hit is not None and hit[0] == stamp:
+            return copy.deepcopy(hit[1])  # a copy: a handler may change it and then fail before saving
+        est = OtherEstimate.load(path(name))
+        loaded[name] = (stamp, est)
+        while len(loaded) > 64:
+            loaded.pop(next(iter(loaded)))
+        return copy.deepcopy(est)
 
     @svc.handler("start")
     def start(req):
@@ -175,7 +192,8 @@ def make_service(settings: Settings | None = None) -> Service:
         est = OtherEstimate(lang, [hold(m, lang.missing) for m in shared], probes=req["probes"])
         est.other = req["other"]
         with writing(name):
-            est.start(BusPorts(bus(), name, req["other"], lang))
+            # P_other_hat is built when first needed (converse rebuilds it anyway; estimate builds a missing one)
+            est.start(BusPorts(bus(), name, req["other"], lang), build=False)
             est.save(path(name))
         return info_of(name, est)
 
@@ -227,7 +245,13 @@ def make_service(settings: Settings | None = None) -> Service:
         if missing:
             raise BadInput(f"the motion lacks the joints {missing} this estimate is about", field="clip")
         motion = hold(motion, est.language.missing)
-        tau = est.estimate(motion, ports, req["method"])
+        try:
+            tau = est.estimate(motion, ports, req["method"])
+        except RemoteError as e:  # the space of a fresh estimate (or one pss lost): build it from the saved database
+            if e.code != "not_found" or req["method"] != "thesis":
+                raise
+            ports.build(est.database())
+            tau = est.estimate(motion, ports, req["method"])
         g = est.language.g(tau)
         k = est.language.k(tau)
         if len(tau) != motion.n_frames:  # the space's estimate is on its own frame rate

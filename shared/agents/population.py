@@ -17,7 +17,8 @@ legs        the shin carries 1.5-2.5x its share, and is 1.0-1.4x as long
 mixed       links, payload, shares, damping and friction at once
 ==========  =====================================================================================
 
-Each draw comes from ``default_rng([seed, kind index, i])``: the population replays exactly.
+Each draw comes from ``default_rng([seed, kind index, i])``: the population replays exactly. The
+body estimator's settings were chosen on the population of seed 13; reports use seed 2026.
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ def _body(kind: str, r: np.random.Generator) -> dict:
     return body
 
 
-def population(kind: str, n: int = 10, seed: int = 13, **params) -> list[dict]:
+def population(kind: str, n: int = 10, seed: int = 2026, **params) -> list[dict]:
     """``n`` others' parameters (``OtherParams`` fields) of one ``kind``; ``params`` (rule, d,
     g_max, noise, ...) are the same for all of them."""
     if kind not in KINDS:

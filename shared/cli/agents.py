@@ -79,12 +79,22 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                  person: bool = typer.Option(False, "--person", help="A person answers (with `mirrorcoach other answer`)."),
                  mass: float = typer.Option(4.8, help="Body mass, kg (simulated others)."),
                  rule: str = typer.Option("eq3.8", help="Conversion rule: eq3.8, f1, f2, f3, f4."),
-                 d: int = typer.Option(4, help="Density of words: 2, 4, 6 or 8."),
+                 d: int = typer.Option(4, help="Density of words: 2, 4, 5, 6, 7 or 8 (5 and 7 are ours; Table 3.1 has 2, 4, 6, 8)."),
                  noise: float = typer.Option(0.0, help="Probability an answer is one bin off."),
                  seed: int = typer.Option(0, help="Seed of the answer noise."),
+                 kind: Optional[str] = typer.Option(None, help="Draw an uneven body from the population (issue 13): "
+                                                    "mass, links, payload, shares, damping, friction, joints, legs, mixed "
+                                                    "(its mass replaces --mass; see `other reveal`)."),
+                 index: int = typer.Option(0, help="Which of the kind's population (0-999)."),
+                 population_seed: int = typer.Option(2026, help="Seed of the population."),
                  replace: bool = typer.Option(False, "--replace")):
     """Create an other: a simulated agent with hidden parameters, or a person's seat."""
     params = {"d": d} if person else {"mass": mass, "rule": rule, "d": d, "noise": noise, "seed": seed}
+    if kind is not None and not person:
+        from shared.agents.population import population
+
+        drawn = population(kind, index + 1, seed=population_seed)[index]
+        params.update(mass=drawn["mass"], body=drawn["body"], kind=kind, joints=drawn["joints"])
     with _client() as c:
         r = c.request("simulator", "other_create", {"other": name, "kind": "person" if person else "simulated",
                                                     "params": params, "replace": replace})
@@ -262,6 +272,10 @@ def _print_estimate(info: dict) -> None:
     typer.echo(f"estimate {info['estimate']} of {info['other']}: {info['sets_done']} set(s), d = {lang['d']}, rule "
                f"{lang['rule']}; torque scale {info['scale']:.3f} (answers allow {info['scale_low']:.3f} .. "
                f"{'inf' if hi is None else f'{hi:.3f}'}{'' if info['consistent'] else ', CONTRADICTORY'})")
+    if info.get("body"):
+        b = info["body"]
+        parts = [f"{c} {t:.3g}" for c, t in zip(b["columns"], b["theta"]) if abs(t) > 1e-6]
+        typer.echo(f"  body estimate from {b['answers']} answer(s): {', '.join(parts)}")
     for n in info["notes"][-3:]:
         typer.echo(f"  note: {n}")
 
@@ -271,12 +285,16 @@ def estimator_start(name: str = typer.Argument(..., help="Estimate id."), other:
                     d: int = typer.Option(4, help="Density of the words: 2, 4, 6, 8."),
                     g_max: float = typer.Option(0.6, help="Top of the g range the words split (shared language)."),
                     knee: bool = typer.Option(False, "--knee", help="Also the right knee (needed to identify rules)."),
+                    missing: list[str] = typer.Option([], "--missing", help="A joint the other lacks (seen when it "
+                                                      "imitates); the self holds it still. Repeatable."),
+                    probes: int = typer.Option(4, help="Probe motions per conversation set (0: the thesis's sets only)."),
                     replace: bool = typer.Option(False, "--replace")):
     """Start estimating an other from the self's own experience (step 1)."""
-    joints = ["shoulder_pitch", "shoulder_roll", "elbow"] + (["knee"] if knee else [])
+    joints = [j for j in ["shoulder_pitch", "shoulder_roll", "elbow"] + (["knee"] if knee else []) if j not in missing]
     with _client() as c:
         _print_estimate(c.request("estimator", "start", {"estimate": name, "other": other, "d": d, "g_max": g_max,
-                                                         "joints": joints, "replace": replace}))
+                                                         "joints": joints, "missing": missing, "probes": probes,
+                                                         "replace": replace}))
 
 
 @estimator_app.command("converse")
@@ -293,7 +311,8 @@ def estimator_converse(name: str = typer.Argument(...), sets: int = typer.Option
 
 @estimator_app.command("estimate")
 def estimator_estimate(name: str = typer.Argument(...), clip: Path = typer.Argument(..., help="A motion of the robot's joints."),
-                       method: str = typer.Option("interval", help="interval (beyond the thesis) or thesis (eq. 3.5)."),
+                       method: str = typer.Option("body", help="body (the estimated body, issue 13), interval (one "
+                                                  "torque scale) or thesis (eq. 3.5)."),
                        out: Optional[Path] = typer.Option(None, help="Write the motion with the estimated torques (.npz).")):
     """How heavy the other would feel a motion, and its estimated torques."""
     from schemas.common import clip_from_wire
@@ -310,13 +329,16 @@ def estimator_estimate(name: str = typer.Argument(...), clip: Path = typer.Argum
 @estimator_app.command("identify")
 def estimator_identify(name: str = typer.Argument(...),
                        candidates: str = typer.Option("thesis", help="thesis (f1-f4) or weighted (12 rules)."),
-                       method: str = typer.Option("auto", help="auto (pairs chosen to split the candidates) or thesis (m1/m2, m3/m4).")):
+                       method: str = typer.Option("auto", help="auto (pairs chosen on the estimated body, answers weighed "
+                                                  "against noise) or thesis (m1/m2, m3/m4).")):
     """Identify the other's conversion rule by comparative questions (thesis 3.4)."""
     with _client() as c:
         r = c.request("estimator", "identify_rule", {"estimate": name, "candidates": candidates, "method": method})
     for q in r["questions"]:
         typer.echo(f"  asked {q['pair']}: {q['answer']}")
     typer.echo(f"rule: {r.get('rule') or 'not identified'} ({r['reason']})")
+    if r.get("posterior"):
+        typer.echo("posterior: " + ", ".join(f"{k} {v:.1%}" for k, v in sorted(r["posterior"].items(), key=lambda x: -x[1])))
 
 
 @estimator_app.command("info")
@@ -331,7 +353,9 @@ def estimator_info(name: str = typer.Argument(...), as_json: bool = typer.Option
 def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch3 (more arrive with the coach)."),
               out: Path = typer.Option(Path("reports"), help="Folder for the reports and plots (one sub-folder per chapter)."),
               sets: int = typer.Option(6, help="Conversation sets per curve (ch3)."),
-              seeds: int = typer.Option(10, help="Noisy identification runs per rule and noise level (ch3)."),
+              others: int = typer.Option(10, help="Simulated others per kind of body (ch3; issue 13)."),
+              kinds: str = typer.Option("all", help="Kinds of body for ch3, comma-separated: mass, links, payload, "
+                                        "shares, damping, friction, joints, legs, mixed (default all)."),
               learners: int = typer.Option(12, help="Simulated learners per experiment group (ch4-6)."),
               hdm05: Optional[Path] = typer.Option(None, help="HDM05 data (ch4-6 targets; default $MIRRORCOACH_HDM05 or ../shared/data/hdm05)."),
               targets: str = typer.Option("squat,throw", help="Targets for ch4-6: squat, throw.")):
@@ -355,7 +379,15 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
             if "ch3" in chapters:
                 from shared.reproduce.ch3 import run
 
-                run(c, out / "ch3", sets=sets, echo=typer.echo, seeds=seeds)
+                from shared.agents.population import KINDS
+
+                chosen_kinds = list(KINDS) if kinds == "all" else [k.strip() for k in kinds.split(",") if k.strip()]
+                bad = [k for k in chosen_kinds if k not in KINDS]
+                if bad or not chosen_kinds:
+                    _fail(f"unknown kind(s) {bad}; choose from {', '.join(KINDS)}")
+                if not 1 <= others <= 1000:
+                    _fail(f"--others must be 1 to 1000, got {others}")
+                run(c, out / "ch3", sets=sets, echo=typer.echo, others=others, kinds=chosen_kinds)
             if {"ch4", "ch5", "ch6"} & set(chapters):
                 import os
 

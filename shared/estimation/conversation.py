@@ -50,6 +50,7 @@ RANDOM_PROBES = 12  # random probe motions (seed PROBE_SEED, not the evaluation'
 PROBE_SEED = 77
 PROBE_AMPLITUDES_RANDOM = PROBE_AMPLITUDES
 PROBES_PER_SET = 4
+_PROBES: dict = {}  # shared motions -> their probe motions (deterministic)
 METHODS = ("thesis", "interval", "body")
 
 
@@ -139,12 +140,30 @@ class OtherEstimate:
         self.sets: list[SetRecord] = []
         self.answers: list[tuple[float, int]] = []  # (g of the self's own torques, k_other): the interval method
 
+    def __deepcopy__(self, memo):
+        """A copy whose state can change without touching this one (the service works on a
+        copy during a set); the caches of regressors and probe motions, derived from the shared
+        motions alone, are shared, not copied."""
+        import copy
+
+        out = copy.copy(self)
+        for key in ("language", "motions", "notes", "probes_asked", "torques", "self_torques", "sets", "answers",
+                    "body_answers", "_saved_body"):
+            setattr(out, key, copy.deepcopy(getattr(self, key), memo))
+        if self._body is not None:
+            out._body = copy.copy(self._body)
+            out._body.answers = list(self._body.answers)
+            out._body.theta = self._body.theta.copy()
+        return out
+
     # ------------------------------------------------------------------ the thesis's loop
-    def start(self, ports: Ports) -> None:
-        """Step 1: ``D_other_hat = D_self``; build ``P_other_hat``."""
+    def start(self, ports: Ports, build: bool = True) -> None:
+        """Step 1: ``D_other_hat = D_self``; build ``P_other_hat`` (``build=False``: the caller
+        builds it when it is first needed)."""
         self.self_torques = [np.asarray(ports.perform_self(m), float) for m in self.motions]
         self.torques = [t.copy() for t in self.self_torques]
-        ports.build(self.database())
+        if build:
+            ports.build(self.database())
 
     def database(self) -> list[Clip]:
         return [with_torques(m, t, self.language.joints) for m, t in zip(self.motions, self.torques)]
@@ -179,6 +198,10 @@ class OtherEstimate:
         """Every motion a probe may be (key -> clip): each shared motion at ``PROBE_AMPLITUDES``
         and ``PROBE_SPEEDS``, and ``RANDOM_PROBES`` random probe motions at two amplitudes."""
         if not self._probe_cache:
+            key = tuple((m.name, m.fps, m.data.tobytes()) for m in self.motions)
+            if key in _PROBES:  # the same shared motions: the same probes (made once per process)
+                self._probe_cache = _PROBES[key]
+                return self._probe_cache
             from shared.estimation.motions import unknown_motions
 
             joints = list(self.motions[0].channels)
@@ -190,6 +213,7 @@ class OtherEstimate:
                         for v in PROBE_SPEEDS:
                             key = f"{m.name}_x{f:g}_v{v:g}"
                             self._probe_cache[key] = Clip(m.data * f, m.channels, m.fps * v, name=key, label=m.name)
+            _PROBES[tuple((m.name, m.fps, m.data.tobytes()) for m in self.motions)] = self._probe_cache
         return self._probe_cache
 
     def _clip_of(self, key: str) -> Clip:
@@ -229,7 +253,9 @@ class OtherEstimate:
         body and the interval estimators. ``None`` when no probe's answer is in doubt."""
         body = self.body(ports)
         cands = {k: self.regressor(ports, k) for k in self.probe_motions()}
-        key = body.choose_probe(cands, asked={n for n, _ in self.probes_asked})
+        targets = [self.regressor(ports, m.name) for m in self.motions]
+        targets += [self.regressor(ports, k) for k in self.probe_motions() if k.startswith("probe") and k.endswith("_x1_v1")]
+        key = body.choose_probe(cands, asked={n for n, _ in self.probes_asked}, targets=targets)
         if key is None:
             return None
         motion = self._clip_of(key)
@@ -248,7 +274,7 @@ class OtherEstimate:
         from shared.io.atomic import atomic_write
 
         header = {"language": asdict(self.language), "probes": self.probes, "probes_asked": self.probes_asked,
-                  "body_answers": self.body_answers, "body": self._body_state(),
+                  "body_answers": self.body_answers, "body": self.body_state(),
                   "other": self.other, "notes": self.notes,
                   "answers": self.answers, "sets": [asdict(r) for r in self.sets],
                   "motions": [{"name": m.name, "channels": m.channels, "fps": m.fps} for m in self.motions]}
@@ -287,7 +313,7 @@ class OtherEstimate:
         self._body = None
         self._saved_body = None
 
-    def _body_state(self) -> dict | None:
+    def body_state(self) -> dict | None:
         if self._body is not None:
             return {"theta": self._body.theta.tolist(), "s": self._body.s, "answers": len(self._body.answers)}
         return self._saved_body

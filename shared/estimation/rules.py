@@ -227,8 +227,8 @@ def identify_thesis(pairs: dict, ask_compare: Callable[[Clip, Clip], str]) -> di
 #: the comparison noise the self allows for when it weighs answers (an answer other than the
 #: predicted one, either of the two others equally likely)
 ANSWER_NOISE = 0.1
-CONFIDENCE = 0.99
-BODY_SAMPLES = 256
+CONFIDENCE = 0.999
+BODY_SAMPLES = 1024
 
 
 def body_samples(theta: np.ndarray, cov: np.ndarray | None, n: int = BODY_SAMPLES, seed: int = 0) -> np.ndarray:
@@ -249,9 +249,10 @@ def body_samples(theta: np.ndarray, cov: np.ndarray | None, n: int = BODY_SAMPLE
 ANSWERS = (">", "<", "equal")
 
 
-def g_bodies(c: Candidate, y: np.ndarray, bodies: np.ndarray) -> np.ndarray:
-    """``c.g`` of one motion (self regressor ``y``, T x J x P) on many bodies (N x P) at once."""
-    a = np.abs(np.einsum("tjp,np->ntj", y, bodies))
+def g_bodies(c: Candidate, y: np.ndarray, bodies: np.ndarray, torques: np.ndarray | None = None) -> np.ndarray:
+    """``c.g`` of one motion (self regressor ``y``, T x J x P) on many bodies (N x P) at once;
+    ``torques``: ``|y theta|`` (N x T x J) when already computed for these bodies."""
+    a = np.abs(np.einsum("tjp,np->ntj", y, bodies)) if torques is None else torques
     if c.weights is not None:
         a = a * np.asarray(c.weights, float)
     if c.rule == "f1":
@@ -277,7 +278,7 @@ def predicted_answers(g_first: np.ndarray, g_second: np.ndarray, jnd: float) -> 
 
 def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors: dict[str, np.ndarray],
                     bodies: dict[str, np.ndarray], ask_compare: Callable[[Clip, Clip], str], jnd: float = 0.05,
-                    noise: float = ANSWER_NOISE, confidence: float = CONFIDENCE, max_questions: int = 30) -> dict:
+                    noise: float = ANSWER_NOISE, confidence: float = CONFIDENCE, max_questions: int = 40) -> dict:
     """Identify the other's rule when its body is not the self's (issue 13).
 
     Each candidate's answer about a pair of motions is predicted from the **estimated body**,
@@ -295,14 +296,23 @@ def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors
         raise BadInput("no candidate rules")
     names = [m.name for m in motions]
     by_name = {m.name: m for m in motions}
-    g = {m: np.array([g_bodies(c, regressors[m], bodies[c.name]) for c in candidates]) for m in names}
-    preds = {(a, b): predicted_answers(g[a], g[b], jnd) for i, a in enumerate(names) for b in names[i + 1:]}
-    n_bodies = max(len(v) for v in bodies.values())
-    w = np.zeros((len(candidates), n_bodies))
-    for k, c in enumerate(candidates):
-        w[k, :len(bodies[c.name])] = 1.0 / len(bodies[c.name])
-    w /= w.sum()
-    like = np.array([[1 - noise if a == b else noise / 2 for b in range(3)] for a in range(3)])  # [pred, answer]
+    g = {}
+    for m in names:
+        shared: dict = {}  # candidates whose bodies are the same (no open answers yet) share the torques
+        rows = []
+        for c in candidates:
+            key = bodies[c.name].tobytes()
+            if key not in shared:
+                y = regressors[m]
+                shared[key] = np.abs(bodies[c.name] @ y.reshape(-1, y.shape[-1]).T).reshape(-1, *y.shape[:2])
+            rows.append(g_bodies(c, regressors[m], bodies[c.name], shared[key]))
+        g[m] = np.array(rows)
+    pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]]
+    preds = np.array([predicted_answers(g[a], g[b], jnd) for a, b in pairs], dtype=np.int8)  # (pairs, C, N)
+    onehot = np.stack([preds == k for k in range(3)], axis=2).astype(float).transpose(1, 0, 2, 3)  # (C, pairs, answers, N)
+    n_bodies = preds.shape[2]
+    w = np.full((len(candidates), n_bodies), 1.0 / (len(candidates) * n_bodies))
+    open_pairs = np.ones(len(pairs), bool)
     asked: list[dict] = []
     reason = "identified"
 
@@ -314,28 +324,28 @@ def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors
             reason = f"not sure after {max_questions} questions (best {rule_posterior().max():.0%})"
             break
         post = rule_posterior()
-        best, best_info = None, 1e-6
-        for pair, pr in preds.items():
-            lk = like[pr]  # (candidates, bodies, answers)
-            t = np.einsum("cb,cba->ca", w, lk) / np.maximum(post[:, None], 1e-300)  # P(answer | rule)
-            p_ans = post @ t
-            info = float(np.sum(post[:, None] * t * np.log(np.maximum(t, 1e-12) / np.maximum(p_ans, 1e-12))))
-            if info > best_info:
-                best, best_info = pair, info
-        if best is None:
+        # P(answer | rule, pair) = noise / 2 + (1 - 3 noise / 2) P(predicted answer | rule, pair)
+        hit = np.matmul(onehot, w[:, None, :, None])[..., 0].transpose(1, 0, 2) / np.maximum(post[None, :, None], 1e-300)
+        t = noise / 2 + (1 - 1.5 * noise) * hit
+        p_ans = np.einsum("c,pca->pa", post, t)
+        info = np.einsum("c,pca->p", post, t * np.log(np.maximum(t, 1e-12) / np.maximum(p_ans[:, None, :], 1e-12)))
+        info[~open_pairs] = -np.inf
+        best = int(np.argmax(info))
+        if info[best] <= 1e-6:
             reason = "no pair of motions tells the remaining rules apart"
             break
-        a, b = best
+        a, b = pairs[best]
         answer = ask_compare(by_name[a], by_name[b])
         if answer not in ANSWERS:
             reason = f"the answer {answer!r} is not a comparison"
             break
-        w = w * like[preds[best]][..., ANSWERS.index(answer)]
+        k = ANSWERS.index(answer)
+        w = w * np.where(preds[best] == k, 1 - noise, noise / 2)
         w /= w.sum()
         post = rule_posterior()
         asked.append({"pair": f"{a}|{b}", "answer": answer,
                       "posterior": {c.name: round(float(p), 4) for c, p in zip(candidates, post)}})
-        del preds[best]
+        open_pairs[best] = False
     post = rule_posterior()
     k = int(post.argmax())
     return {"rule": candidates[k] if post[k] >= confidence else None, "questions": asked,
@@ -348,19 +358,22 @@ def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str
     """Per candidate rule, the bodies the other's open answers allow if it converts with that
     rule: a :class:`shared.estimation.body.BodyEstimate` fitted to ``answers`` (key, regressor,
     k) in ``language`` with the candidate's rule, and :func:`body_samples` of what it leaves
-    uncertain. Without answers every candidate gets the same prior bodies (the self's,
-    proportional or not)."""
+    uncertain. Without answers every candidate gets the same bodies, those the self thinks
+    possible (:func:`shared.estimation.body.plausible_bodies`)."""
     from dataclasses import replace
 
-    from shared.estimation.body import BodyEstimate
+    from shared.estimation.body import BodyEstimate, plausible_bodies
 
+    if not answers:  # nothing known of this other yet: the bodies the self thinks possible, for every rule
+        prior = plausible_bodies(language.joints, n)
+        return {c.name: prior for c in candidates}
     out = {}
-    for i, c in enumerate(candidates):
+    for c in candidates:
         lang = replace(language, rule=c.rule, weights=None if c.weights is None else list(c.weights))
         b = BodyEstimate(lang, shared)
         b.start(scale)
         for key, y, k in answers:
             b.add(key, y, k)
         b.fit()
-        out[c.name] = body_samples(b.theta, b.covariance(), n, seed=i)
+        out[c.name] = body_samples(b.theta, b.covariance(), n, seed=0)
     return out
