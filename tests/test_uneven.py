@@ -242,6 +242,7 @@ def test_report_words_are_computed():
     assert verdict(True) == "met" and verdict(False) == "missed"
     assert level(0.12, 0.10) == "at the thesis's level" and level(0.30, 0.10) == "short of the thesis"
     assert level(0.02, 0.10) == "better than the thesis" and level(0.9, 0.7, lower_is_better=False) == "better than the thesis"
+    assert level(0.2, 0.525, lower_is_better=None) == "below the thesis's figure"
     assert trend([0.1, 0.2, 0.3]) == "grows with noise" and trend([0.1, 0.3, 0.2]) == "does not change steadily with noise"
 
 
@@ -270,5 +271,5 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
     text = write_report(tmp_path, res, 1.0).read_text()
     assert "known met" in text and "unknown missed" in text and "Kinds that miss a goal: damping" in text
     assert "1x after 2 set(s): the other's answers contradict" in text
-    assert "100 % without noise: met; at least 95 % with 10 % noise: missed" in text
+    assert "100 % without noise: met; at least 95 % with 10 % noise: missed" in text and "(lowest with noise: mass, 80 %)" in text
     assert "d = 8 missed" in text and "d = 4 met" in text

@@ -15,6 +15,7 @@ answers contradict each other.
 from __future__ import annotations
 
 import copy
+import threading
 from dataclasses import asdict
 
 import numpy as np
@@ -56,14 +57,29 @@ class BusPorts:
         return self._taus(self.c.request("simulator", "perform", {"body": "self", "clip": clip_to_wire(motion)})["clip"])
 
     def regressor(self, motion) -> np.ndarray:
+        """The self's regressor of a motion (the self's body never changes: one per motion for
+        every estimate; requests asking for the same motion at once wait for one answer)."""
+        from concurrent.futures import Future
+
         key = (motion.name, motion.fps, motion.data.tobytes(), tuple(self.language.joints), tuple(self.language.missing))
-        if key not in _REGRESSORS:  # the self's body never changes: one regressor per motion, for every estimate
-            r = self.c.request("simulator", "regressor", {"clip": clip_to_wire(motion), "joints": self.language.joints,
-                                                          "missing": self.language.missing})
-            _REGRESSORS[key] = r["y"]
-            while len(_REGRESSORS) > 4096:
-                _REGRESSORS.pop(next(iter(_REGRESSORS)))
-        return _REGRESSORS[key]
+        with _REGRESSORS_LOCK:
+            fut = _REGRESSORS.get(key)
+            mine = fut is None
+            if mine:
+                fut = _REGRESSORS[key] = Future()
+                while len(_REGRESSORS) > 4096:
+                    _REGRESSORS.pop(next(iter(_REGRESSORS)))
+        if mine:
+            try:
+                r = self.c.request("simulator", "regressor", {"clip": clip_to_wire(motion), "joints": self.language.joints,
+                                                              "missing": self.language.missing})
+                fut.set_result(r["y"])
+            except BaseException as e:
+                with _REGRESSORS_LOCK:
+                    _REGRESSORS.pop(key, None)
+                fut.set_exception(e)
+                raise
+        return fut.result(timeout=self.timeout + 60)
 
     def ask_open(self, motion) -> int:
         try:
@@ -114,7 +130,8 @@ def info_of(name: str, est: OtherEstimate) -> dict:
     return out
 
 
-_REGRESSORS: dict = {}  # (motion, joints, missing) -> the self's regressor Y
+_REGRESSORS: dict = {}  # (motion, joints, missing) -> a future of the self's regressor Y
+_REGRESSORS_LOCK = threading.Lock()
 _DESIGN: dict = {}  # the self's designed pairs and pair pool: they depend on the self's body only
 
 
@@ -156,6 +173,8 @@ def make_service(settings: Settings | None = None) -> Service:
     def path(name: str):
         return root / f"{check_name(name)}.npz"
 
+    building: dict = {}  # name -> lock: a fresh estimate's space is built by one request
+    building_lock = threading.Lock()
     loaded: dict = {}  # name -> (file stamp, estimate): estimate requests reuse the last load and its body fit
 
     def load(name: str) -> OtherEstimate:
@@ -209,14 +228,14 @@ def make_service(settings: Settings | None = None) -> Service:
                 completed(f"{done} of {req['sets']} conversation set(s) completed and kept")
                 check_time()
                 work = copy.deepcopy(est)
-                was_consistent = work.body(ports).consistent()
+                was_consistent = work.explained(ports)
                 try:
                     rec = work.conversation_set(ports)
                 except Stopped as e:
                     stopped = e.message
                     break
                 est = work
-                if was_consistent and not est.body(ports).consistent():
+                if was_consistent and not est.explained(ports):
                     stopped = ("the other's answers contradict each other (no body like the self's explains them "
                                "all); the estimate so far is kept")
                 est.save(path(name))
@@ -250,8 +269,16 @@ def make_service(settings: Settings | None = None) -> Service:
         except RemoteError as e:  # the space of a fresh estimate (or one pss lost): build it from the saved database
             if e.code != "not_found" or req["method"] != "thesis":
                 raise
-            ports.build(est.database())
-            tau = est.estimate(motion, ports, req["method"])
+            with building_lock:
+                lock = building.setdefault(name, threading.Lock())
+            with lock:  # one request builds; the others wait for it, then find the space
+                try:
+                    tau = est.estimate(motion, ports, req["method"])
+                except RemoteError as again:
+                    if again.code != "not_found":
+                        raise
+                    ports.build(est.database())
+                    tau = est.estimate(motion, ports, req["method"])
         g = est.language.g(tau)
         k = est.language.k(tau)
         if len(tau) != motion.n_frames:  # the space's estimate is on its own frame rate

@@ -213,7 +213,7 @@ class BodyEstimate:
     prior scale."""
 
     PRIOR = 1.0  # a component may differ from the proportional body by about a motion's whole g
-    ITERATIONS = 30  # Gauss-Newton steps of the fit at most
+    ITERATIONS = 15  # Gauss-Newton steps of the fit at most
     TARGETED = True  # weigh a probe by how much its answer tells about the shared and generic motions
     MIDDLE = 1.0  # weight of the pull to a bin's middle
     COUPLING = 0.5  # a link's inertial part stays within ~50 % of its gravity part (length ratio 0.5-1.5)
@@ -334,7 +334,7 @@ class BodyEstimate:
                 t *= 0.5
             if ct >= c:
                 break
-            done = c - ct < 1e-9 * c
+            done = c - ct < 1e-5 * c
             x, c = trial, ct
             if done:
                 break

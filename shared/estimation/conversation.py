@@ -308,6 +308,11 @@ class OtherEstimate:
         est._saved_body = h.get("body")
         return est
 
+    def explained(self, ports: Ports) -> bool:
+        """Whether some body explains every answer so far: the body estimate does, or (a fit of
+        a max-type rule, f2-f4, may stop short of it) one torque scale does."""
+        return self.body(ports).consistent() or self.consistent()
+
     def forget_body(self) -> None:
         """Fit the body again from the answers (after the language's rule changed)."""
         self._body = None

@@ -46,6 +46,7 @@ THESIS = {"known_error": 0.10, "unknown_error": 0.20, "match": {4: (0.8, 0.8), 6
           "identification": 1.0, "wrong_rule_error": (0.45, 0.60), "right_rule_error": 0.10}
 GOALS = {"known": 0.05, "unknown": 0.10, "identification": 1.0, "identification_noisy": 0.95,
          "match": {4: 0.8, 6: 0.7, 8: 0.3}}
+WORKERS = 4  # others conversing at a time (each waits on the services most of the time)
 THESIS_LEVEL = 0.05  # within 5 points of the thesis's figure is "at the thesis's level"
 
 
@@ -53,10 +54,14 @@ def verdict(ok: bool) -> str:
     return "met" if ok else "missed"
 
 
-def level(value: float, thesis: float, lower_is_better: bool = True) -> str:
-    """Where a number stands against the thesis's figure (within ``THESIS_LEVEL``: at its level)."""
+def level(value: float, thesis: float, lower_is_better: bool | None = True) -> str:
+    """Where a number stands against the thesis's figure (within ``THESIS_LEVEL``: at its
+    level); ``lower_is_better=None`` for a number that is neither good nor bad (a wrong rule's
+    error): below or above the thesis's figure."""
     if abs(value - thesis) <= THESIS_LEVEL:
         return "at the thesis's level"
+    if lower_is_better is None:
+        return "below the thesis's figure" if value < thesis else "above the thesis's figure"
     better = value < thesis if lower_is_better else value > thesis
     return "better than the thesis" if better else "short of the thesis"
 
@@ -164,8 +169,8 @@ class Ch3:
         return row
 
     def uneven(self) -> dict:
-        """Issue 13: every kind of other, 10 each; the three estimators after the sets (two
-        others at a time: the services are separate processes)."""
+        """Issue 13: every kind of other, 10 each; the three estimators after the sets
+        (``WORKERS`` others at a time: the services are separate processes)."""
         from concurrent.futures import ThreadPoolExecutor
 
         res = {}
@@ -173,7 +178,7 @@ class Ch3:
             # heavier legs matter only to a conversation about the knee
             joints = list(ALL) if kind == "legs" else list(ARM)
             pop = population(kind, self.others, seed=self.population_seed, d=6, g_max=G_MAX, joints=joints)
-            with ThreadPoolExecutor(2) as pool:
+            with ThreadPoolExecutor(WORKERS) as pool:
                 rows = list(pool.map(lambda ip: self.one_other(kind, *ip), enumerate(pop)))
             res[kind] = rows
             e = {m: (np.mean([r[f"{m}_known"]["error"] for r in rows]), np.mean([r[f"{m}_unknown"]["error"] for r in rows]))
@@ -186,20 +191,24 @@ class Ch3:
         noise and with 10 % answer noise; the thesis's pairs (fig. 3.11, predicted from the self)
         and the automatic method (predicted from the estimated body). The 12 weighted rules on the
         proportional kind."""
+        from concurrent.futures import ThreadPoolExecutor
+
         from shared.estimation.rules import THESIS_CANDIDATES, weighted_candidates
 
         table = {}
         plans = [(kind, "thesis", THESIS_CANDIDATES) for kind in self.kinds]
         plans += [(kind, "weighted", weighted_candidates()) for kind in ("mass",) if kind in self.kinds]
         for kind, cset, cands in plans:
-            for noise in (0.0, 0.1):
+            # the weighted rules without noise only: a doubled joint weight and a doubled link feel alike
+            for noise in (0.0, 0.1) if cset == "thesis" else (0.0,):
                 for method in ("thesis", "auto") if cset == "thesis" else ("auto",):
-                    ok, n, questions, reasons = 0, 0, 0, {}
                     n_others = max(self.others, len(cands))
                     pop = population(kind, n_others, seed=self.population_seed, joints=list(ALL), g_max=G_MAX_RULES)
-                    for i, p in enumerate(pop):
+
+                    def one(ip, cands=cands, noise=noise, method=method, cset=cset):
+                        i, p = ip
                         c = cands[i % len(cands)]
-                        name = "ch3-id"
+                        name = f"ch3-id-{i}"
                         p = {**p, "rule": c.rule, "weights": None if c.weights is None else list(c.weights),
                              "noise": noise, "seed": 1000 * int(100 * noise) + i}
                         self.new_other(name, **p)
@@ -207,12 +216,17 @@ class Ch3:
                                    g_max=G_MAX_RULES, probes=0)
                         r = self.c.request("estimator", "identify_rule", {"estimate": name, "method": method,
                                                                           "apply": False, "candidates": cset})
-                        hit = r.get("rule") == c.name
-                        ok += hit
-                        n += 1
-                        questions += len(r["questions"])
+                        return r.get("rule") == c.name, len(r["questions"]), r["reason"]
+
+                    with ThreadPoolExecutor(WORKERS) as pool:
+                        results = list(pool.map(one, enumerate(pop)))
+                    ok, n = sum(h for h, _, _ in results), len(results)
+                    questions = sum(q for _, q, _ in results)
+                    reasons: dict = {}
+                    for hit, _, reason in results:
                         if not hit:
-                            reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
+                            why = "a wrong rule identified" if reason == "identified" else reason
+                            reasons[why] = reasons.get(why, 0) + 1
                     table[f"{kind}|{cset}|{method}|{noise:g}"] = {
                         "kind": kind, "candidates": cset, "method": method, "noise": noise, "rate": ok / n, "trials": n,
                         "questions": questions / n, "failures": reasons}
@@ -244,14 +258,16 @@ class Ch3:
         for d, rule in ((5, "f4"), (7, "f2")):
             other = f"ch3-{rule}"
             params = self.new_other(other, mass=4.8, d=d, g_max=G_MAX_RULES, rule=rule, joints=list(ALL))
-            for label in ("right", "wrong"):
+            # right: identified; wrong: the self keeps eq. 3.8 (the caption's f0); at d = 5 also the
+            # other reading of the roles: the self assumes f2 and the other does not use it
+            for label, assumed in (("right", None), ("wrong", "eq3.8")) + ((("wrong-f2", "f2"),) if rule != "f2" else ()):
                 name = f"ch3-{label}-d{d}"
-                self.start(name, other, d=d, g_max=G_MAX_RULES, joints=list(ALL))
+                self.start(name, other, d=d, g_max=G_MAX_RULES, joints=list(ALL), rule=assumed or "eq3.8")
                 ident = None
                 if label == "right":
                     ident = self.c.request("estimator", "identify_rule", {"estimate": name})
                 lang = Language(d=d, g_max=G_MAX_RULES, joints=list(ALL), rule=rule)
-                out[f"{label}|{d}"] = {"d": d, "rule": rule, "assumed": ident and ident.get("rule") or "eq3.8",
+                out[f"{label}|{d}"] = {"d": d, "rule": rule, "assumed": ident and ident.get("rule") or assumed,
                                        "identified": ident and ident.get("rule"),
                                        "questions": ident and ident["questions"], "design": ident and ident.get("design"),
                                        **self.curve(name, params, lang, {"unknown": unknown})}
@@ -353,7 +369,7 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
               f"d = 6, {ch.sets if ch else SETS} conversation sets of the 4 shared motions and 4 probes each; "
               "errors (eq. 3.9) on the 4 known and 10 unknown motions, mean over the kind's others (worst in brackets).",
               "", "| kind | thesis known | thesis unknown | interval known | interval unknown | body known | body unknown | "
-              "questions per other | conversations stopped early |", "|---|---|---|---|---|---|---|---|---|"]
+              "questions per other (the thesis estimator reads the 4 shared ones per set) | conversations stopped early |", "|---|---|---|---|---|---|---|---|---|"]
     for kind, s in summ.items():
         cells = [f"{_pct(s[f'{m}_{k}'])} ({_pct(s[f'{m}_{k}_max'])})" for m in METHODS for k in ("known", "unknown")]
         lines.append(f"| {kind} | " + " | ".join(cells) + f" | {s['questions']:.0f} | {s['stops']} |")
@@ -397,19 +413,25 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
         if v["noise"] != 0:
             continue
         noisy = ident.get(key[: key.rindex("|")] + "|0.1")
-        fails = "; ".join(f"{n}x {r}" for r, n in {**v["failures"], **(noisy["failures"] if noisy else {})}.items()) or "-"
+        fails = "; ".join(f"{label}: " + ", ".join(f"{n}x {r}" for r, n in f.items())
+                          for label, f in (("no noise", v["failures"]), ("noise", noisy["failures"] if noisy else {})) if f) or "-"
+        with_noise = (f"{_pct(noisy['rate'], 0)} of {noisy['trials']} | {noisy['questions']:.1f}" if noisy
+                      else "not run | -")
         lines.append(f"| {v['kind']} | {v['candidates']} | {v['method']} | {_pct(v['rate'], 0)} of {v['trials']} | "
-                     f"{v['questions']:.1f} | {_pct(noisy['rate'], 0) if noisy else '-'} of {noisy['trials'] if noisy else 0} | "
-                     f"{noisy['questions']:.1f} | {fails} |" if noisy else "")
-        if v["method"] == "auto":
-            goal_rows[(v["kind"], v["candidates"])] = (v["rate"], noisy["rate"] if noisy else 0.0)
+                     f"{v['questions']:.1f} | {with_noise} | {fails} |")
+        if v["method"] == "auto" and v["candidates"] == "thesis" and noisy:
+            goal_rows[v["kind"]] = (v["rate"], noisy["rate"])
     ok_clean = all(a >= GOALS["identification"] for a, _ in goal_rows.values())
     ok_noisy = all(b >= GOALS["identification_noisy"] for _, b in goal_rows.values())
     worst = min(goal_rows.items(), key=lambda kv: kv[1][1]) if goal_rows else None
-    lines += ["", f"**Goal (auto, every kind): 100 % without noise: {verdict(ok_clean)}; at least 95 % with 10 % noise: "
-              f"{verdict(ok_noisy)}**" + (f" (lowest: {worst[0][0]}, {worst[0][1]}, {_pct(worst[1][1], 0)})." if worst else "."),
+    lines += ["", f"**Goal (f1-f4, auto, every kind): 100 % without noise: {verdict(ok_clean)}; at least 95 % with 10 % "
+              f"noise: {verdict(ok_noisy)}**" + (f" (lowest with noise: {worst[0]}, {_pct(worst[1][1], 0)})." if worst else "."),
               "", "A failure is either a wrong rule or no rule reaching 99.9 % within 40 questions; both count against "
-              "the rate.", ""]
+              "the rate. The 12 weighted rules (f1-f4 as they are, with the knee doubled, with the shoulder pitch "
+              "doubled) cannot all be told apart once the body is unknown: a rule that doubles the knee's torque "
+              "answers every comparison as an unweighted rule does on a body whose knee torques are twice as large, "
+              "so on bodies the self thinks possible the posterior stays split between the two. The thesis's pairs "
+              "and the self-based prediction assumed the body is the self's, which is what made them look certain.", ""]
     # ---------------- figs 3.6-3.8
     figs = {"error": ("Eq. 3.9 torque error (fig. 3.6)", "error", (0, 1)),
             "match": ("Symbol match ratio (fig. 3.7)", "match", (0, 1.05)),
@@ -445,28 +467,30 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
     for key, cur in rules.items():
         label, d = key.split("|")
         xs = [r["set"] for r in cur["rows"]]
-        color = {"5": "C0", "7": "C3"}[d]
-        series[f"d={d} {label} rule, thesis"] = (xs, [r["thesis_unknown"]["error"] for r in cur["rows"]],
-                                                  "-" if label == "right" else "--", color)
-        series[f"d={d} {label} rule, body"] = (xs, [r["body_unknown"]["error"] for r in cur["rows"]],
-                                                ":" if label == "right" else "-.", color)
+        color = {"5": "C0", "7": "C3"}[d] if label != "wrong-f2" else "C2"
+        right = label == "right"
+        series[f"d={d} {cur['assumed']} for {cur['rule']}, thesis"] = (
+            xs, [r["thesis_unknown"]["error"] for r in cur["rows"]], "-" if right else "--", color)
+        series[f"d={d} {cur['assumed']} for {cur['rule']}, body"] = (
+            xs, [r["body_unknown"]["error"] for r in cur["rows"]], ":" if right else "-.", color)
     name = _plot(out / "fig3_14_15.png", "Unknown motions: right and wrong rule (figs. 3.14, 3.15)", "error", series, (0, 1.2))
     lines += ["## Right rule versus wrong rule (figs. 3.14, 3.15)", "", f"![right vs wrong rule]({name})", "",
               "The thesis's roles: fig. 3.14, d = 5, the other converts with f4 and the self identifies it; fig. 3.15, "
               "d = 7, the other converts with f2 and the self's rule is the caption's f0, read here as the chapter's "
-              "eq. 3.8 (the self's default). Both d are run both ways. Words for d = 5 and 7 are ours (Table 3.1 has "
+              "eq. 3.8 (the self's default). Both d are run both ways; at d = 5 also the other reading of the roles "
+              "(the self assumes f2, which the other does not use). Words for d = 5 and 7 are ours (Table 3.1 has "
               "none).", "",
               "| d, other's rule | self's rule | identified in | thesis estimator | body estimator | thesis's figure | thesis estimator against it |",
               "|---|---|---|---|---|---|---|"]
     for key, cur in rules.items():
         label, d = key.split("|")
         r = cur["rows"][-1]
-        fig = THESIS["right_rule_error"] if label == "right" else np.mean(THESIS["wrong_rule_error"])
+        fig = THESIS["right_rule_error"] if label == "right" else float(np.mean(THESIS["wrong_rule_error"]))
         qs = f"{len(cur['questions'])} question(s)" if cur.get("questions") is not None else "-"
         stop = f" (stopped after {r['set']} set(s): {cur['stopped']})" if cur.get("stopped") else ""
         lines.append(f"| {d}, {cur['rule']} | {cur['assumed']} | {qs} | {_pct(r['thesis_unknown']['error'])}{stop} | "
                      f"{_pct(r['body_unknown']['error'])} | {'~10 %' if label == 'right' else '45-60 %'} | "
-                     f"{level(r['thesis_unknown']['error'], fig)} |")
+                     f"{level(r['thesis_unknown']['error'], fig, True if label == 'right' else None)} |")
     des = next((cur["design"] for cur in rules.values() if cur.get("design")), None)
     if des:
         a = des["a"]
