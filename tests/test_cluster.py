@@ -163,6 +163,16 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
     assert r.returncode == 0 and "2 set(s)" in r.stdout, r.stderr
     r = cli(env, "dialogue", "transcript", "r2")
     assert r.returncode == 0 and "How heavy did that feel?" in r.stdout and "(k = " in r.stdout
+    # an uneven other from the population (issue 13): its body is hidden until revealed
+    assert cli(env, "other", "create", "u", "--d", "6", "--kind", "joints", "--index", "2").returncode == 0
+    revealed = json.loads(cli(env, "other", "reveal", "u").stdout)
+    assert revealed["params"]["kind"] == "joints" and revealed["params"]["body"]["missing"] == ["shoulder_roll"]
+    r = cli(env, "estimator", "start", "u", "u", "--d", "6", "--missing", "shoulder_roll", "--probes", "2")
+    assert r.returncode == 0 and "0 set(s)" in r.stdout, r.stderr
+    r = cli(env, "estimator", "converse", "u", "--sets", "1")
+    assert r.returncode == 0 and "1 set(s)" in r.stdout and "body estimate from 6 answer(s)" in r.stdout, r.stdout + r.stderr
+    r = cli(env, "other", "create", "bad", "--kind", "giants")
+    assert r.returncode != 0 and "unknown population kind 'giants'" in r.stdout + r.stderr and "Traceback" not in r.stderr
     r = cli(env, "reproduce", "ch3", "--out", tmp_path / "rep", "--sets", "1", "--others", "1", "--kinds", "mass,joints",
             timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
