@@ -271,6 +271,8 @@ def make_service(settings: Settings | None = None) -> Service:
                 raise
             with building_lock:
                 lock = building.setdefault(name, threading.Lock())
+                while len(building) > 256:  # bounded: the oldest estimates' locks go (a later build takes a new one)
+                    building.pop(next(iter(building)))
             with lock:  # one request builds; the others wait for it, then find the space
                 try:
                     tau = est.estimate(motion, ports, req["method"])

@@ -10,7 +10,7 @@ objects) and on the cluster (the estimator service wires them to the bus):
 * ``associate(motion) -> torques`` ``S_hat = F_gen(F_recog(M))`` in ``P_other_hat`` (eq. 3.2),
   the torques estimated on the motion's own frames.
 
-Two estimators are kept side by side:
+Three estimators are kept side by side:
 
 * **thesis** (the reference): each conversation set asks about every shared motion, rescales
   the estimate by ``k_other / k_self`` (eq. 3.5) into the database and rebuilds the space;
