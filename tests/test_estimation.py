@@ -8,10 +8,12 @@ import pytest
 from shared.agents.other import OtherParams, SimulatedOther
 from shared.bodies.body import perform
 from shared.bodies.robot import robot
+from shared.errors import BadInput
+from shared.estimation.body import self_regressor
 from shared.estimation.conversation import Language, LocalPorts, OtherEstimate, evaluate
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
-from shared.estimation.rules import (THESIS_CANDIDATES, Candidate, design_thesis_pairs, identify, identify_thesis,
-                                     pair_pool, weighted_candidates)
+from shared.estimation.rules import (THESIS_CANDIDATES, Candidate, candidate_bodies, design_thesis_pairs,
+                                     identification_motions, identify_bodies, identify_thesis, weighted_candidates)
 
 
 @pytest.fixture(scope="module")
@@ -88,25 +90,28 @@ def test_the_thesis_pairs_are_designed_on_the_selfs_body(self_body):
 
 
 @pytest.fixture(scope="module")
-def pool(self_body):
-    ps = _perform(self_body, ALL)
-    d = design_thesis_pairs(ps)
-    return pair_pool(unknown_motions(12, joints=ALL) + basic_motions(ALL), ps, [(d["m1"], d["m2"]), (d["m3"], d["m4"])])
+def identification(self_body):
+    """The identification motions and their self regressors; bodies the self thinks possible."""
+    motions = identification_motions(design_thesis_pairs(_perform(self_body, ALL)))
+    regs = {m.name: self_regressor(m, ALL) for m in motions}
+    return motions, regs, candidate_bodies(Language(joints=list(ALL)), [], [], weighted_candidates())
 
 
-@pytest.mark.parametrize("candidates, most", [(THESIS_CANDIDATES, 2), (weighted_candidates(), 3)])
-def test_automatic_pairs_identify_any_candidate_in_log3_questions(pool, candidates, most):
-    for c in candidates:
-        other = SimulatedOther("o", OtherParams(rule=c.rule, weights=None if c.weights is None else list(c.weights),
-                                                joints=list(ALL), mass=3.7))
-        r = identify(candidates, pool, other.answer_compare)
-        assert r["rule"] == c, (c.name, r["reason"], r["remaining"])
-        assert len(r["questions"]) <= most  # 3^N >= number of candidates
-    assert 3 ** most >= len(candidates)
+def test_automatic_identification_names_the_rule_of_a_proportional_other(identification):
+    """f1-f4 on the thesis's kind of other (the self scaled in mass), no answer noise."""
+    motions, regs, bodies = identification
+    for c in THESIS_CANDIDATES:
+        other = SimulatedOther("o", OtherParams(rule=c.rule, joints=list(ALL), mass=3.7))
+        r = identify_bodies(THESIS_CANDIDATES, motions, regs, bodies, other.answer_compare)
+        assert r["rule"] == c and r["posterior"][c.name] >= 0.999, (c.name, r["reason"], r["posterior"])
+        assert 1 <= len(r["questions"]) <= 12
 
 
-def test_an_other_that_fits_no_rule_stops_with_a_reason(pool):
-    r = identify(THESIS_CANDIDATES, pool, lambda a, b: "nonsense")
-    assert r["rule"] is None and "no candidate rule explains" in r["reason"]
-    r = identify([Candidate("f1")], pool, lambda a, b: ">")
+def test_an_other_that_fits_no_rule_stops_with_a_reason(identification):
+    motions, regs, bodies = identification
+    r = identify_bodies(THESIS_CANDIDATES, motions, regs, bodies, lambda a, b: "nonsense")
+    assert r["rule"] is None and r["reason"] == "the answer 'nonsense' is not a comparison" and r["questions"] == []
+    r = identify_bodies([Candidate("f1")], motions, regs, bodies, lambda a, b: ">")
     assert r["rule"] == Candidate("f1") and r["questions"] == []  # nothing to ask
+    with pytest.raises(BadInput, match="no candidate rules"):
+        identify_bodies([], motions, regs, bodies, lambda a, b: ">")

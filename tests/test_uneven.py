@@ -15,7 +15,7 @@ from shared.estimation.body import Batch, BodyEstimate, column_names, g_and_grad
 from shared.estimation.conversation import Language, LocalPorts, OtherEstimate, evaluate, hold
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
 from shared.estimation.rules import (THESIS_CANDIDATES, body_samples, candidate_bodies, design_thesis_pairs,
-                                     identify_bodies)
+                                     identification_motions, identify_bodies)
 from shared.reproduce.ch3 import level, population_summary, trend, verdict, write_report
 from shared.symbols import f_conv
 
@@ -56,7 +56,8 @@ def test_uneven_bodies_differ_as_documented():
     with pytest.raises(BadInput, match="cannot feel joints its body lacks"):
         OtherParams(body={"missing": ["shoulder_roll"]}).check()
     for bad in ({"lengths": {"tail": 0.1}}, {"payload": -1.0}, {"damping": {"elbow": float("nan")}},
-                {"missing": ["wing"]}, {"mass": 3.0}, {"colour": "red"}):
+                {"missing": ["wing"]}, {"mass": 3.0}, {"colour": "red"}, {"lengths": 5}, {"missing": "elbow"},
+                {"damping": [1, 2]}):
         with pytest.raises(BadInput):
             OtherParams(body=bad).check()
 
@@ -208,8 +209,7 @@ def test_a_wrong_rule_makes_the_body_estimator_fail_as_documented():
 @pytest.fixture(scope="module")
 def pair_motions():
     lang = Language(d=6, g_max=1.2, joints=list(ALL))
-    d = design_thesis_pairs(LocalPorts(lang, None).perform_self)
-    motions = unknown_motions(12, joints=ALL) + basic_motions(ALL) + [d[k] for k in ("m1", "m2", "m3", "m4")]
+    motions = identification_motions(design_thesis_pairs(LocalPorts(lang, None).perform_self))
     return lang, motions, {m.name: self_regressor(m, ALL) for m in motions}
 
 

@@ -29,8 +29,8 @@ from shared.deadline import check_time, completed
 from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
 from shared.estimation.conversation import TORQUE_PREFIX, Language, OtherEstimate, hold, with_torques
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
-from shared.estimation.rules import (THESIS_CANDIDATES, candidate_bodies, design_thesis_pairs, identify_bodies,
-                                     identify_thesis, pair_pool, weighted_candidates)
+from shared.estimation.rules import (THESIS_CANDIDATES, candidate_bodies, design_thesis_pairs, identification_motions,
+                                     identify_bodies, identify_thesis, weighted_candidates)
 from shared.pss.store import check_name
 from shared.symbols import word
 
@@ -132,34 +132,32 @@ def info_of(name: str, est: OtherEstimate) -> dict:
 
 _REGRESSORS: dict = {}  # (motion, joints, missing) -> a future of the self's regressor Y
 _REGRESSORS_LOCK = threading.Lock()
-_DESIGN: dict = {}  # the self's designed pairs and pair pool: they depend on the self's body only
+_DESIGN: dict = {}  # the self's designed pairs: they depend on the self's body only
 
 
-def _design_and_pool(ports: BusPorts):
+def _design(ports: BusPorts) -> dict:
+    """The thesis's m1-m4 designed on the self's whole body (never on an estimate's view of it
+    that holds a joint still), once per process."""
     if "design" not in _DESIGN:
-        design = design_thesis_pairs(ports.perform_self)
-        pool = pair_pool(unknown_motions(12, joints=ALL) + basic_motions(ALL), ports.perform_self,
-                         [(design["m1"], design["m2"]), (design["m3"], design["m4"])])
-        _DESIGN.update(design=design, pool=pool)
-    return _DESIGN["design"], _DESIGN["pool"]
+        whole = BusPorts(ports.c, ports.name, ports.other, Language(joints=list(ALL)), ports.timeout)
+        _DESIGN["design"] = design_thesis_pairs(whole.perform_self)
+    return _DESIGN["design"]
 
 
-def _identify_on_bodies(est: OtherEstimate, cands, ports: BusPorts, pool, req: dict) -> dict:
+def _identify_on_bodies(est: OtherEstimate, cands, ports: BusPorts, design: dict, req: dict) -> dict:
     """Rule identification with answers predicted from the estimated body (issue 13): per
     candidate, the bodies the estimate's open answers allow under that rule (only when the
-    estimate feels all four joints the candidates weigh; otherwise the prior's bodies)."""
-    motions = {}
-    for p in pool:
-        motions.setdefault(p.first.name, p.first)
-        motions.setdefault(p.second.name, p.second)
-    regs = {n: ports.regressor(m) for n, m in motions.items()}
-    shared = [ports.regressor(m) for m in est.motions] if est.language.joints == list(ALL) else list(regs.values())
-    answers = []
+    estimate feels all four joints the candidates weigh; otherwise the bodies the self thinks
+    possible)."""
+    motions = identification_motions(design)
+    regs = {m.name: ports.regressor(m) for m in motions}
+    answers, shared = [], []
     if est.language.joints == list(ALL):
         answers = [(key, est.regressor(ports, key), k) for key, k in est.body_answers]
+        shared = [ports.regressor(m) for m in est.motions]
     bodies = candidate_bodies(ports.language, shared, answers, cands, scale=est.scale())
-    return identify_bodies(cands, list(motions.values()), regs, bodies, ports.ask_compare, jnd=req["jnd"],
-                           noise=req["noise"], confidence=req["confidence"])
+    return identify_bodies(cands, motions, regs, bodies, ports.ask_compare, jnd=req["jnd"], noise=req["noise"],
+                           confidence=req["confidence"])
 
 
 def make_service(settings: Settings | None = None) -> Service:
@@ -296,7 +294,7 @@ def make_service(settings: Settings | None = None) -> Service:
             est = load(name)
             lang4 = Language(**{**asdict(est.language), "joints": list(ALL)})
             ports = BusPorts(bus(), name, est.other, lang4, req["timeout"])
-            design, pool = _design_and_pool(ports)
+            design = _design(ports)
             try:
                 if req["method"] == "thesis":
                     if req["candidates"] != "thesis":
@@ -304,7 +302,7 @@ def make_service(settings: Settings | None = None) -> Service:
                     r = identify_thesis(design, ports.ask_compare)
                 else:
                     cands = THESIS_CANDIDATES if req["candidates"] == "thesis" else weighted_candidates()
-                    r = _identify_on_bodies(est, cands, ports, pool, req)
+                    r = _identify_on_bodies(est, cands, ports, design, req)
             except Stopped as e:
                 r = {"rule": None, "questions": [], "reason": e.message}
             rule = r["rule"]

@@ -48,6 +48,11 @@ class BodySpec:
 
     def check(self) -> "BodySpec":
         check_mass(self.mass)
+        for group in ("lengths", "shares", "damping", "friction"):
+            if not isinstance(getattr(self, group), dict):
+                raise BadInput(f"body {group} must be a map, got {type(getattr(self, group)).__name__}", field=group)
+        if not isinstance(self.missing, list):
+            raise BadInput(f"body missing must be a list of joints, got {type(self.missing).__name__}", field="missing")
         for group, table, lo, hi in (("lengths", self.lengths, 0.02, 1.0), ("shares", self.shares, 0.0, 1.0),
                                      ("damping", self.damping, 0.0, 100.0), ("friction", self.friction, 0.0, 100.0)):
             known = LENGTHS if group == "lengths" else LINK_SHARE if group == "shares" else JOINTS
@@ -87,29 +92,27 @@ def small_humanoid(mass: float | BodySpec = 2.4, name: str = "robot", link_masse
         if jname not in b.missing:
             parent.add_joint(name=jname, type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis, damping=b.damping.get(jname, 0.0))
 
+    def link(parent, lname: str, pos, length_key: str, radius: float, joints=()):
+        """A capsule link hanging down from ``pos`` in its parent, with its hinges."""
+        body = parent.add_body(name=lname, pos=pos)
+        for jname, axis in joints:
+            joint(body, jname, axis)
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length[length_key]],
+                      size=[radius, 0, 0], mass=max(masses[lname], tiny))
+        return body
+
     torso = spec.worldbody.add_body(name="torso", pos=[0, 0, 0.3])
     torso.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.04, 0.06, 0.08], mass=max(masses["torso"], tiny))
-    ua = torso.add_body(name="upper_arm", pos=[0, -0.08, 0.06])
-    joint(ua, "shoulder_pitch", [0, 1, 0])
-    joint(ua, "shoulder_roll", [1, 0, 0])
-    ua.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length["upper"]], size=[0.015, 0, 0],
-                mass=max(masses["upper_arm"], tiny))
-    fa = ua.add_body(name="forearm", pos=[0, 0, -length["upper"]])
-    joint(fa, "elbow", [0, 1, 0])
-    fa.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length["fore"]], size=[0.012, 0, 0],
-                mass=max(masses["forearm"], tiny))
+    ua = link(torso, "upper_arm", [0, -0.08, 0.06], "upper", 0.015,
+              (("shoulder_pitch", [0, 1, 0]), ("shoulder_roll", [1, 0, 0])))
+    fa = link(ua, "forearm", [0, 0, -length["upper"]], "fore", 0.012, (("elbow", [0, 1, 0]),))
     if b.elbow_mass > 0:
         fa.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=[0, 0, 0], size=[0.001, 0, 0], mass=b.elbow_mass)
     if b.payload > 0:
         fa.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=[0, 0, -length["fore"]], size=[HAND_RADIUS, 0, 0],
                     mass=b.payload)
-    th = torso.add_body(name="thigh", pos=[0, -0.03, -0.08])
-    th.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length["thigh"]], size=[0.02, 0, 0],
-                mass=max(masses["thigh"], tiny))
-    sh = th.add_body(name="shin", pos=[0, 0, -length["thigh"]])
-    joint(sh, "knee", [0, 1, 0])
-    sh.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length["shin"]], size=[0.018, 0, 0],
-                mass=max(masses["shin"], tiny))
+    th = link(torso, "thigh", [0, -0.03, -0.08], "thigh", 0.02)
+    link(th, "shin", [0, 0, -length["thigh"]], "shin", 0.018, (("knee", [0, 1, 0]),))
     model = spec.compile()
     dofs = []
     for j in JOINTS:

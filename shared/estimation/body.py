@@ -62,7 +62,7 @@ def _links(joints) -> list[str]:
 
 def column_names(joints) -> list[str]:
     names = [f"{link}.{part}" for link in _links(joints) for part in ("gravity", "inertial")]
-    names += [f"{p}_mass" for p in POINTS if p in ("elbow", "hand") and any(j != "knee" for j in joints)]
+    names += [f"{p}_mass" for p in POINTS if any(j != "knee" for j in joints)]  # the arm's point masses
     names += [f"damping.{j}" for j in joints] + [f"friction.{j}" for j in joints]
     return names
 
@@ -209,13 +209,11 @@ class BodyEstimate:
     """The other's body ``theta`` from its open answers (see module docstring).
 
     ``language``: a :class:`shared.estimation.conversation.Language` (d, g_max, tau_max, rule,
-    weights, joints); ``scale_of``: regressors of the shared motions, which set each column's
+    weights, joints); ``shared``: regressors of the shared motions, which set each column's
     prior scale."""
 
     PRIOR = 1.0  # a component may differ from the proportional body by about a motion's whole g
     ITERATIONS = 15  # Gauss-Newton steps of the fit at most
-    TARGETED = True  # weigh a probe by how much its answer tells about the shared and generic motions
-    MIDDLE = 1.0  # weight of the pull to a bin's middle
     COUPLING = 0.5  # a link's inertial part stays within ~50 % of its gravity part (length ratio 0.5-1.5)
     HINGE = 30.0  # how much harder a violated bin counts than the pull to a bin's middle
 
@@ -240,13 +238,14 @@ class BodyEstimate:
         for r, (i, j) in enumerate(self.pairs):
             self.coupling[r, i], self.coupling[r, j] = -1.0 / self.COUPLING, 1.0 / self.COUPLING
 
+    @property
+    def bin_sd(self) -> float:
+        """A word's bin seen as a uniform's standard deviation: its width / sqrt(12)."""
+        return self.language.g_max / self.language.d / np.sqrt(12.0)
+
     def _g(self, y, theta) -> float:
         lang = self.language
         return g_and_gradient(y, theta, lang.rule, lang.tau_max, lang.weights)[0]
-
-    def _grad(self, y, theta):
-        lang = self.language
-        return g_and_gradient(y, theta, lang.rule, lang.tau_max, lang.weights)
 
     def start(self, scale: float) -> None:
         """Start the least squares from the proportional body ``scale * theta_self``."""
@@ -275,7 +274,7 @@ class BodyEstimate:
             return None
         lang = self.language
         bounds = [lang.bounds(a.k) for a in answers]
-        sd = lang.g_max / lang.d / np.sqrt(12.0)
+        sd = self.bin_sd
         n_p = len(self.theta)
         lo = np.array([b[0] for b in bounds])
         hi = np.array([b[1] for b in bounds])
@@ -296,11 +295,11 @@ class BodyEstimate:
                 violated = ((over > 0) | (under > 0)).astype(float)
                 res = np.concatenate([(theta - s * self.theta_self) / self.prior_sd,
                                       self.coupling @ theta / max(s, 0.1),
-                                      self.HINGE * (over - under) / sd, self.MIDDLE * np.where(bounded, (g - mid) / sd, 0.0)])
+                                      self.HINGE * (over - under) / sd, np.where(bounded, (g - mid) / sd, 0.0)])
                 zero = np.zeros((len(g), 1))
                 jac = np.vstack([prior_jac, np.hstack([self.coupling / max(s, 0.1), np.zeros((len(self.pairs), 1))]),
                                  np.hstack([self.HINGE * grad / sd * violated[:, None], zero]),
-                                 np.hstack([self.MIDDLE * grad / sd * bounded[:, None], zero])])
+                                 np.hstack([grad / sd * bounded[:, None], zero])])
                 cache.clear()
                 cache[key] = (res, jac)
             return cache[key]
@@ -356,12 +355,12 @@ class BodyEstimate:
         """Whether the estimate puts every answer in its bin (within a tenth of a bin: the fit's
         hinge is soft)."""
         tol = 0.1 * self.language.g_max / self.language.d
-        for a in self._distinct():
-            lo, hi = self.language.bounds(a.k)
-            g = self._g(a.y, self.theta)
-            if g < lo - tol or g > hi + tol:
-                return False
-        return True
+        answers = self._distinct()
+        if not answers:
+            return True
+        g = Batch([a.y for a in answers], self.language).g_and_gradient(self.theta)[0]
+        bounds = np.array([self.language.bounds(a.k) for a in answers])
+        return bool(np.all((g >= bounds[:, 0] - tol) & (g <= bounds[:, 1] + tol)))
 
     def torques(self, y: np.ndarray) -> np.ndarray:
         """The other's estimated torques (T, joints) for a motion's regressor."""
@@ -375,10 +374,10 @@ class BodyEstimate:
         u = self.theta_self / max(np.linalg.norm(self.theta_self), 1e-12)
         prec = prec - np.outer(prec @ u, prec @ u) / (u @ prec @ u) + np.outer(u, u) / (self.s + 1.0) ** 2
         prec = prec + self.coupling.T @ self.coupling / max(self.s, 0.1) ** 2
-        sd = self.language.g_max / self.language.d / np.sqrt(12.0)
-        for a in self._distinct():
-            _, grad = self._grad(a.y, self.theta)
-            prec += np.outer(grad, grad) / sd ** 2
+        answers = self._distinct()
+        if answers:
+            grad = Batch([a.y for a in answers], self.language).g_and_gradient(self.theta)[1]
+            prec += grad.T @ grad / self.bin_sd ** 2
         return np.linalg.pinv(prec)
 
     def choose_probe(self, candidates: dict[str, np.ndarray], asked=(), targets=None) -> str | None:
@@ -397,9 +396,10 @@ class BodyEstimate:
         cdf = ndtr((edges[None, :] - g[:, None]) / sd[:, None])
         p = np.diff(np.hstack([np.zeros((len(g), 1)), cdf, np.ones((len(g), 1))]), axis=1)
         h = -(np.where(p > 1e-12, p * np.log(np.maximum(p, 1e-12)), 0.0)).sum(axis=1)
-        h[[i for i, k in enumerate(keys) if k in set(asked)]] = -np.inf
+        asked = set(asked)
+        h[[i for i, k in enumerate(keys) if k in asked]] = -np.inf
         score = h
-        if self.TARGETED and targets is not None and len(targets):
+        if targets:
             # how much the answer tells about the motions that matter: the squared correlation,
             # under the same Gaussian, of the probe's g with each target's g, averaged
             tgrad = Batch(list(targets), lang).g_and_gradient(self.theta)[1]
@@ -423,7 +423,8 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
     out = np.zeros((n, len(names)))
     out[0] = theta_self(joints)
     col = {name: k for k, name in enumerate(names)}
-    link_mass = {"upper_arm": 0.07 * SELF_MASS, "forearm": 0.06 * SELF_MASS}
+    from shared.bodies.robot import LINK_SHARE
+
     for i in range(1, n):
         mass = {link: float(np.exp(r.normal(0.0, 0.5))) for link in LINKS}
         length = {link: float(np.exp(r.normal(0.0, 0.2))) for link in LINKS}
@@ -432,7 +433,8 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
                 out[i, col[f"{link}.gravity"]] = mass[link] * length[link]
                 out[i, col[f"{link}.inertial"]] = mass[link] * length[link] ** 2
         if "elbow_mass" in col:  # the forearm's mass carried (length - 1) upper arms further out, about
-            out[i, col["elbow_mass"]] = max(length["upper_arm"] - 1.0, 0.0) * mass["forearm"] * link_mass["forearm"]
+            forearm_kg = mass["forearm"] * LINK_SHARE["forearm"] * SELF_MASS
+            out[i, col["elbow_mass"]] = max(length["upper_arm"] - 1.0, 0.0) * forearm_kg
         if "hand_mass" in col and r.random() < 0.5:
             out[i, col["hand_mass"]] = r.exponential(0.1)
         for kind, mean in (("damping", 0.03), ("friction", 0.02)):

@@ -48,7 +48,6 @@ PROBE_AMPLITUDES = (0.25, 0.4, 0.55, 0.7, 0.85, 1.0, 1.15)
 PROBE_SPEEDS = (0.5, 1.0, 2.0)  # a probe played at half, the same or twice the speed
 RANDOM_PROBES = 12  # random probe motions (seed PROBE_SEED, not the evaluation's unknown motions' 2012)
 PROBE_SEED = 77
-PROBE_AMPLITUDES_RANDOM = PROBE_AMPLITUDES
 PROBES_PER_SET = 4
 _PROBES: dict = {}  # shared motions -> their probe motions (deterministic)
 METHODS = ("thesis", "interval", "body")
@@ -195,25 +194,23 @@ class OtherEstimate:
 
     # ------------------------------------------------------------------ probes and the body
     def probe_motions(self) -> dict[str, Clip]:
-        """Every motion a probe may be (key -> clip): each shared motion at ``PROBE_AMPLITUDES``
-        and ``PROBE_SPEEDS``, and ``RANDOM_PROBES`` random probe motions at two amplitudes."""
+        """Every motion a probe may be (key -> clip): each shared motion and ``RANDOM_PROBES``
+        random probe motions, at every ``PROBE_AMPLITUDES`` and ``PROBE_SPEEDS``. Made once per
+        process for the same shared motions."""
         if not self._probe_cache:
-            key = tuple((m.name, m.fps, m.data.tobytes()) for m in self.motions)
-            if key in _PROBES:  # the same shared motions: the same probes (made once per process)
-                self._probe_cache = _PROBES[key]
-                return self._probe_cache
-            from shared.estimation.motions import unknown_motions
+            shared = tuple((m.name, m.fps, m.data.tobytes()) for m in self.motions)
+            if shared not in _PROBES:
+                from shared.estimation.motions import unknown_motions
 
-            joints = list(self.motions[0].channels)
-            rand = unknown_motions(RANDOM_PROBES, seed=PROBE_SEED, joints=joints)
-            for group, amps in ((self.motions, PROBE_AMPLITUDES), ([m.with_data(m.data, name=f"probe{m.name[7:]}")
-                                                                   for m in rand], PROBE_AMPLITUDES_RANDOM)):
-                for m in group:
-                    for f in amps:
+                rand = unknown_motions(RANDOM_PROBES, seed=PROBE_SEED, joints=list(self.motions[0].channels))
+                probes = {}
+                for m in self.motions + [m.with_data(m.data, name=f"probe{m.name[7:]}") for m in rand]:
+                    for f in PROBE_AMPLITUDES:
                         for v in PROBE_SPEEDS:
                             key = f"{m.name}_x{f:g}_v{v:g}"
-                            self._probe_cache[key] = Clip(m.data * f, m.channels, m.fps * v, name=key, label=m.name)
-            _PROBES[tuple((m.name, m.fps, m.data.tobytes()) for m in self.motions)] = self._probe_cache
+                            probes[key] = Clip(m.data * f, m.channels, m.fps * v, name=key, label=m.name)
+                _PROBES[shared] = probes
+            self._probe_cache = _PROBES[shared]
         return self._probe_cache
 
     def _clip_of(self, key: str) -> Clip:
@@ -253,8 +250,9 @@ class OtherEstimate:
         body and the interval estimators. ``None`` when no probe's answer is in doubt."""
         body = self.body(ports)
         cands = {k: self.regressor(ports, k) for k in self.probe_motions()}
+        # the motions that matter: the shared ones and the random probe motions as they are
         targets = [self.regressor(ports, m.name) for m in self.motions]
-        targets += [self.regressor(ports, k) for k in self.probe_motions() if k.startswith("probe") and k.endswith("_x1_v1")]
+        targets += [y for k, y in cands.items() if k.startswith("probe") and k.endswith("_x1_v1")]
         key = body.choose_probe(cands, asked={n for n, _ in self.probes_asked}, targets=targets)
         if key is None:
             return None

@@ -4,16 +4,13 @@
   ``scipy.optimize``: m1/m2 with equal mean torque (f1) and different maxima; m4 bending all
   four joints at once to the same peak torque ``a``; m3 moving them one after another to peaks
   ``(3.0a, 0.4a, 0.4a, 0.2a)`` (eq. 3.17-3.20), and reports how close the achieved torques are.
-* :func:`identify` goes beyond the thesis: for any set of candidate rules it picks, from a pool
-  of motion pairs the self can perform, the pair whose predicted answers split the remaining
-  candidates best (smallest expected number left), asks, keeps the candidates consistent with
-  the answer, and repeats until one is left: N questions can separate up to 3^N rules.
-
-A candidate's answer is predicted from the self's own torques: for bodies that differ by a
-mass scale every rule is homogeneous, so the comparison is the same for the other (thesis
-3.4.4). Predictions within the just-noticeable difference's grey zone are not trusted: a pair
-is only used when every remaining candidate's answer is clear (ratio within ``jnd/2`` of 1
-for ``equal``, at least ``2 jnd`` away for ``>``/``<``).
+* :func:`identify_thesis` asks them in the thesis's order (fig. 3.11). Its answers are
+  predicted from the self's own torques, right only when the other's body is the self's scaled
+  in mass (thesis 3.4.4).
+* :func:`identify_bodies` goes beyond the thesis (issue 13): for any set of candidate rules it
+  predicts every answer from bodies the other may have (:func:`candidate_bodies`), keeps a
+  posterior over rule and body together, and asks the pair of :func:`identification_motions`
+  that tells most, until one rule is sure.
 """
 
 from __future__ import annotations
@@ -57,17 +54,6 @@ def weighted_candidates() -> list[Candidate]:
     for r in ("f1", "f2", "f3", "f4"):
         out += [Candidate(r), Candidate(r, (1.0, 1.0, 1.0, 2.0)), Candidate(r, (2.0, 1.0, 1.0, 1.0))]
     return out
-
-
-def predict(c: Candidate, tau_a: np.ndarray, tau_b: np.ndarray, jnd: float) -> str | None:
-    """The clear answer candidate ``c`` gives about (a, b), or None in the grey zone."""
-    ga, gb = c.g(tau_a), c.g(tau_b)
-    r = ga / max(gb, 1e-12)
-    if abs(r - 1) <= jnd / 2:
-        return "equal"
-    if abs(r - 1) >= 2 * jnd:
-        return ">" if r > 1 else "<"
-    return None
 
 
 # ---------------------------------------------------------------------------- the thesis's pairs
@@ -135,78 +121,12 @@ def design_thesis_pairs(perform_self: Callable[[Clip], np.ndarray], a: float = 0
     return {"m1": m1, "m2": m2, "m3": m3, "m4": m4, "report": report}
 
 
-# ---------------------------------------------------------------------------- automatic identification
-@dataclass
-class Pair:
-    name: str
-    first: Clip
-    second: Clip
-    tau_first: np.ndarray
-    tau_second: np.ndarray
+def identification_motions(design: dict) -> list[Clip]:
+    """The motions :func:`identify_bodies` pairs up: 12 seeded random motions of the four
+    joints, the 4 basic motions and the thesis's designed m1-m4."""
+    from shared.estimation.motions import basic_motions, unknown_motions
 
-
-def pair_pool(motions: list[Clip], perform_self: Callable[[Clip], np.ndarray], designed: list[tuple[Clip, Clip]] = ()) -> list[Pair]:
-    """Every ordered-once pair of ``motions`` plus the ``designed`` pairs, with the self's torques."""
-    tau = {m.name: perform_self(m) for m in motions}
-    out = [Pair(f"{a.name}|{b.name}", a, b, perform_self(a), perform_self(b)) for a, b in designed]
-    for i, a in enumerate(motions):
-        for b in motions[i + 1:]:
-            out.append(Pair(f"{a.name}|{b.name}", a, b, tau[a.name], tau[b.name]))
-    return out
-
-
-def best_pair(candidates: list[Candidate], pool: list[Pair], jnd: float) -> tuple[Pair, dict] | None:
-    """The pair whose clear answers split ``candidates`` best, and each candidate's answer."""
-    best = None
-    for p in pool:
-        answers = {}
-        for c in candidates:
-            a = predict(c, p.tau_first, p.tau_second, jnd)
-            if a is None:
-                break
-            answers[c] = a
-        else:
-            groups = {}
-            for a in answers.values():
-                groups[a] = groups.get(a, 0) + 1
-            if len(groups) < 2:
-                continue
-            expected = sum(v * v for v in groups.values()) / len(candidates)
-            if best is None or expected < best[0]:
-                best = (expected, p, answers)
-    return None if best is None else (best[1], best[2])
-
-
-def identify(candidates: list[Candidate], pool: list[Pair], ask_compare: Callable[[Clip, Clip], str],
-             jnd: float = 0.05, max_questions: int = 10) -> dict:
-    """Ask comparative questions until one candidate is left (see module docstring).
-
-    Returns ``{"rule": Candidate | None, "questions": [...], "remaining": [...], "reason": str}``.
-    """
-    if not candidates:
-        raise BadInput("no candidate rules")
-    left = list(candidates)
-    asked = []
-    reason = "identified"
-    while len(left) > 1:
-        if len(asked) >= max_questions:
-            reason = f"stopped after {max_questions} questions"
-            break
-        choice = best_pair(left, [p for p in pool if p.name not in {q['pair'] for q in asked}], jnd)
-        if choice is None:
-            reason = "no pair of motions separates the remaining rules"
-            break
-        pair, predicted = choice
-        answer = ask_compare(pair.first, pair.second)
-        asked.append({"pair": pair.name, "answer": answer,
-                      "predicted": {c.name: a for c, a in predicted.items()}})
-        keep = [c for c in left if predicted[c] == answer]
-        if not keep:
-            reason = f"no candidate rule explains the answer {answer!r} to {pair.name}; the other contradicts every rule"
-            break
-        left = keep
-    return {"rule": left[0] if len(left) == 1 and reason == "identified" else None,
-            "questions": asked, "remaining": [c.name for c in left], "reason": reason}
+    return unknown_motions(12, joints=ALL) + basic_motions(ALL) + [design[k] for k in ("m1", "m2", "m3", "m4")]
 
 
 def identify_thesis(pairs: dict, ask_compare: Callable[[Clip, Clip], str]) -> dict:

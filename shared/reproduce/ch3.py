@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -83,16 +84,17 @@ class Ch3:
         self.others, self.kinds, self.population_seed = others, list(kinds), population_seed
         self.out.mkdir(parents=True, exist_ok=True)
         self._truth: dict = {}
-        self._lock = threading.Lock()  # the population runs two others at a time
+        self._lock = threading.Lock()  # the population runs WORKERS others at a time
 
     # ------------------------------------------------------------------ helpers
     def truth(self, name: str, params: dict, motions, joints) -> list[np.ndarray]:
         """The other's real torques: its own body performing the motions (evaluation only)."""
-        other = SimulatedOther(name, OtherParams(**params))
+        other = None
         out = []
         for m in motions:
             key = (name, m.name, tuple(joints))
             if key not in self._truth:
+                other = other or SimulatedOther(name, OtherParams(**params))  # its body, built once if needed
                 tau = other.feel(m).copy()
                 with self._lock:
                     self._truth[key] = tau
@@ -101,8 +103,6 @@ class Ch3:
 
     def estimates(self, name: str, motions, method: str, joints) -> list[np.ndarray]:
         """The estimator's torques for each motion (four requests in flight: each waits on the bus)."""
-        from concurrent.futures import ThreadPoolExecutor
-
         def one(m):
             r = self.c.request("estimator", "estimate", {"estimate": name, "clip": clip_to_wire(m), "method": method})
             return clip_from_wire(r["clip"]).select([f"tau.{j}" for j in joints])
@@ -171,8 +171,6 @@ class Ch3:
     def uneven(self) -> dict:
         """Issue 13: every kind of other, 10 each; the three estimators after the sets
         (``WORKERS`` others at a time: the services are separate processes)."""
-        from concurrent.futures import ThreadPoolExecutor
-
         res = {}
         for kind in self.kinds:
             # heavier legs matter only to a conversation about the knee
@@ -191,8 +189,6 @@ class Ch3:
         noise and with 10 % answer noise; the thesis's pairs (fig. 3.11, predicted from the self)
         and the automatic method (predicted from the estimated body). The 12 weighted rules on the
         proportional kind."""
-        from concurrent.futures import ThreadPoolExecutor
-
         from shared.estimation.rules import THESIS_CANDIDATES, weighted_candidates
 
         table = {}
