@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
 from schemas.common import CLIP, name
+from schemas.simulator import FAMILIES
 from shared.errors import BadInput
 
 SERVICE = "coach"
@@ -81,6 +82,10 @@ START = Endpoint(
                      required=False),
         "population_seed": F(Int(0, 2**32 - 1), required=False, default=0),
         "index": F(Int(0, 9999), "which learner of the population", required=False, default=0),
+        "family": F(Str(choices=FAMILIES), "the simulated learner's family (shared/agents/learner.py)",
+                    required=False, default="thesis"),
+        "replicate": F(Int(0, 2**31 - 1), "0: the population's motor noise; k > 0: fresh noise", required=False,
+                       default=0),
         "policy": F(POLICY, required=False, default=dict),
         "mode": F(Str(choices=("residual", "thesis")),
                   "residual: the emphasis applied to the real target; thesis: show F_gen(x_s) itself",

@@ -16,6 +16,8 @@ SERVICE = "simulator"
 OTHER = name("name of the other agent")
 LEARNER = name("name of the learner")
 ADVERBS = ("a little more", "more", "much more", "more like this")
+#: the learner families of shared/agents/learner.py (a test checks they agree)
+FAMILIES = ("thesis", "error_based", "copy", "fixed_step")
 
 
 def _body_or_skeleton(req: dict, path: str):
@@ -161,6 +163,9 @@ LEARNER_PARAMS = Map({
                               "offset": F(Float(-90.0, 90.0), "degrees added to the joint angles")}), max_len=3),
                    "body part -> {scale, offset}", required=False),
     "seed": F(Int(0, 2**32 - 1), required=False),
+    "family": F(Str(choices=FAMILIES), "the learner's rules (shared/agents/learner.py)", required=False),
+    "retention": F(Float(0.0, 1.0), "error_based: A, the share of the learnt change kept per trial", required=False),
+    "step": F(Float(0.0, 90.0), "fixed_step: degrees RMS moved per trial", required=False),
 })
 
 LEARNER_CREATE = Endpoint(
@@ -170,6 +175,10 @@ LEARNER_CREATE = Endpoint(
         "target": F(CLIP, "the motion to be learnt"),
         "population_seed": F(Int(0, 2**32 - 1), "which seeded population", required=False, default=0),
         "index": F(Int(0, 9999), "which learner of it", required=False, default=0),
+        "family": F(Str(choices=FAMILIES), "the learner family (shared/agents/learner.py)", required=False,
+                    default="thesis"),
+        "replicate": F(Int(0, 2**31 - 1), "0: the population's motor noise; k > 0: the same learner with fresh noise",
+                       required=False, default=0),
         "params": F(LEARNER_PARAMS, "override the drawn parameters", required=False),
         "replace": F(Bool(), required=False, default=False),
     })),

@@ -180,7 +180,8 @@ def make_service(settings: Settings | None = None) -> Service:
                 try:
                     bus().request("simulator", "learner_create", {"learner": s.learner, "target": clip_to_wire(target),
                                                                   "population_seed": req["population_seed"],
-                                                                  "index": req["index"], "replace": True})
+                                                                  "index": req["index"], "family": req["family"],
+                                                                  "replicate": req["replicate"], "replace": True})
                 except RemoteError as e:
                     raise BadInput(f"cannot create learner {s.learner!r}: {e.message}") from None
             start(s, ports_of(s))

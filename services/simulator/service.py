@@ -166,7 +166,7 @@ def make_service(settings: Settings | None = None) -> Service:
     @svc.handler("learner_create")
     def learner_create(req):
         target = clip_from_wire(req["target"])
-        params = population(req["index"] + 1, req["population_seed"])[req["index"]]
+        params = population(req["index"] + 1, req["population_seed"], req["family"], req["replicate"])[req["index"]]
         if req["params"]:
             merged = {**asdict(params), **{k: v for k, v in req["params"].items() if v is not None}}
             params = LearnerParams(**merged)

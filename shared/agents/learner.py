@@ -1,8 +1,31 @@
 """Simulated learners (thesis ch. 4-6, SPEC section 6). **A simulation, not a person.**
 
 The thesis coached people. We coach simulated learners whose behaviour is a small, documented
-model, chosen so that the effects the thesis reports can appear or fail to appear; nothing
-below is fitted to human data.
+model; nothing below is fitted to human data. A learner belongs to one of four **families**
+(:data:`FAMILIES`, issue 14), so that a finding of chapters 4-6 can be checked in learner worlds
+that do not assume it:
+
+* ``thesis``: the model described below (perception threshold, gain below 1, overshoot measured
+  against the first motion shown). It was built so that emphasis can help: a gain below 1 or a
+  threshold alone makes a demonstration beyond the target move the learner further.
+* ``error_based``: error-based adaptation with a state-space model from the motor-learning
+  literature (Thoroughman & Shadmehr 2000; Smith, Ghazizadeh & Shadmehr 2006, one rate):
+  ``m <- m0 + A (m - m0) + B_eff P(D - p)`` where ``p`` is the learner's own last performance
+  (what it did, motor noise included; its memory before the first attempt), ``A`` the
+  *retention* (drift back to its habit ``m0``) and ``B_eff = min(gain * a(adverb), 1)`` the
+  error sensitivity. It never knows the target, nor which motion was the target: it corrects
+  towards whatever it is shown;
+* ``copy`` (null model): the memory becomes the demonstration exactly, with no threshold and
+  words ignored. Whatever is shown is what it does next, so an emphatic motion can only leave it
+  further from the target than the target itself would;
+* ``fixed_step`` (null model, blind to the demonstration's magnitude): it moves towards what it
+  perceives by a fixed ``step`` (degrees RMS over the imitated channels) or all the way when the
+  difference is smaller, words ignored. Showing more of the same difference changes nothing
+  while the step is shorter than the difference, and near the target an emphatic motion makes
+  it step past.
+
+Every family shares the personal deviation, perception threshold (not ``copy``), motor noise,
+tempo and attempts below; the ``thesis`` family's rules follow.
 
 State. A learner holds its *motor memory* ``m``: its current version of the target motion,
 as joint-angle trajectories of the target's motion channels on a normalised time axis of
@@ -59,6 +82,8 @@ def _bounded(phase: np.ndarray, what: str) -> np.ndarray:
         raise BadInput(f"the {what} has values beyond {MAX_VALUE:g} (degrees or centimetres): not a motion a person "
                        "makes", field=what)
     return phase
+#: the learner families (see the module docstring)
+FAMILIES = ("thesis", "error_based", "copy", "fixed_step")
 ADVERB_FACTOR = {None: 1.0, "": 1.0, "a little more": 1.10, "more": 1.20, "much more": 1.35, "more like this": 1.20}
 ADVERBS = tuple(a for a in ADVERB_FACTOR if a)
 
@@ -90,10 +115,16 @@ class LearnerParams:
     adverb_sensitivity: float = 1.0  # sens
     deviation: dict = field(default_factory=lambda: {"legs": {"scale": 0.6, "offset": 0.0}})
     seed: int = 0
+    family: str = "thesis"  # one of FAMILIES
+    retention: float = 0.9  # A of the error_based family
+    step: float = 4.0  # fixed_step: degrees RMS per trial
 
     def check(self) -> "LearnerParams":
+        if self.family not in FAMILIES:
+            raise BadInput(f"learner family must be one of {', '.join(FAMILIES)}, got {self.family!r}", field="family")
         for name, lo, hi in (("gain", 0.0, 1.0), ("threshold", 0.0, 90.0), ("overshoot", 0.0, 5.0),
-                             ("noise", 0.0, 30.0), ("tempo", 0.5, 2.0), ("adverb_sensitivity", 0.0, 5.0)):
+                             ("noise", 0.0, 30.0), ("tempo", 0.5, 2.0), ("adverb_sensitivity", 0.0, 5.0),
+                             ("retention", 0.0, 1.0), ("step", 0.0, 90.0)):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and lo <= v <= hi):
                 raise BadInput(f"learner {name} must be in [{lo}, {hi}], got {v}", field=name)
@@ -107,15 +138,20 @@ class LearnerParams:
         return self
 
 
-def population(n: int, seed: int = 0) -> list[LearnerParams]:
+def population(n: int, seed: int = 0, family: str = "thesis", replicate: int = 0) -> list[LearnerParams]:
     """``n`` learners drawn reproducibly: learner ``i`` uses ``default_rng([seed, i])``.
 
     gain U(0.15, 0.45); threshold U(1.5, 6) deg; overshoot U(0.1, 0.6); noise U(0.3, 1.5) deg;
     tempo U(0.9, 1.1); adverb sensitivity U(0.5, 1.5); deviation on 1 or 2 random body parts
-    with amplitude scale U(0.5, 0.8) and offset U(-8, 8) deg.
+    with amplitude scale U(0.5, 0.8) and offset U(-8, 8) deg; retention U(0.8, 1.0); step
+    U(2, 8) deg. The same learner ``i`` has the same draws in every ``family`` (only the rules
+    differ). ``replicate`` > 0 gives the same learners fresh motor noise (a new session that is
+    not a replay of an earlier one).
     """
     if not 1 <= n <= 10_000:
         raise BadInput(f"population size must be 1..10000, got {n}")
+    if family not in FAMILIES:
+        raise BadInput(f"learner family must be one of {', '.join(FAMILIES)}, got {family!r}", field="family")
     out = []
     for i in range(n):
         r = np.random.default_rng([seed, i])
@@ -125,7 +161,10 @@ def population(n: int, seed: int = 0) -> list[LearnerParams]:
             overshoot=float(r.uniform(0.1, 0.6)), noise=float(r.uniform(0.3, 1.5)), tempo=float(r.uniform(0.9, 1.1)),
             adverb_sensitivity=float(r.uniform(0.5, 1.5)),
             deviation={p: {"scale": float(r.uniform(0.5, 0.8)), "offset": float(r.uniform(-8, 8))} for p in parts},
-            seed=int(r.integers(0, 2**31 - 1))))
+            seed=int(r.integers(0, 2**31 - 1)), family=family))
+        out[-1].retention, out[-1].step = float(r.uniform(0.8, 1.0)), float(r.uniform(2.0, 8.0))
+        if replicate:
+            out[-1].seed = int(np.random.default_rng([out[-1].seed, replicate]).integers(0, 2**31 - 1))
     return out
 
 
@@ -179,23 +218,41 @@ class SimulatedLearner:
         return diff * keep
 
     def imitate(self, demonstration: Clip, adverb: str | None = None) -> list[Clip]:
-        """Watch ``demonstration`` (told ``adverb``), update the motor memory, and return the
-        next attempt: ``REPETITIONS`` clips."""
+        """Watch ``demonstration`` (told ``adverb``), update the motor memory by the learner's
+        family's rule (module docstring), and return the next attempt: ``REPETITIONS`` clips."""
         if adverb not in ADVERB_FACTOR:
             raise BadInput(f"unknown adverb {adverb!r}; one of: {', '.join(ADVERBS)} (or none)", field="adverb")
         p = self.params
         demo = _bounded(to_phase(demonstration, self.channels), "demonstration")
-        if self.reference is None:  # the first motion shown is taken to be the target
-            self.reference = demo
-        diff = self.perceive((demo - self.memory) * self._imitated)
-        own = float(np.sqrt(np.mean(((self.reference - self.memory) * self._imitated) ** 2)))
-        shown = float(np.sqrt(np.mean(((demo - self.reference) * self._imitated) ** 2)))
-        exaggeration = min(shown / max(own, 1e-9), 5.0)
         a = 1.0 + p.adverb_sensitivity * (ADVERB_FACTOR[adverb] - 1.0)
-        gain = min(p.gain * a * (1.0 + p.overshoot * exaggeration), 1.0)  # never past what it saw
-        self.memory = self.memory + gain * diff
+        if p.family == "thesis":
+            if self.reference is None:  # the first motion shown is taken to be the target
+                self.reference = demo
+            diff = self.perceive((demo - self.memory) * self._imitated)
+            own = float(np.sqrt(np.mean(((self.reference - self.memory) * self._imitated) ** 2)))
+            shown = float(np.sqrt(np.mean(((demo - self.reference) * self._imitated) ** 2)))
+            exaggeration = min(shown / max(own, 1e-9), 5.0)
+            gain = min(p.gain * a * (1.0 + p.overshoot * exaggeration), 1.0)  # never past what it saw
+            self.memory = self.memory + gain * diff
+        elif p.family == "error_based":
+            habit = self._initial()
+            error = self.perceive((demo - self.performed()) * self._imitated)
+            self.memory = habit + p.retention * (self.memory - habit) + min(p.gain * a, 1.0) * error
+        elif p.family == "copy":
+            self.memory = self.memory + (demo - self.memory) * self._imitated
+        else:  # fixed_step
+            diff = self.perceive((demo - self.memory) * self._imitated)
+            size = float(np.sqrt(np.mean(diff[:, self._imitated.astype(bool)] ** 2)))
+            self.memory = self.memory + diff * (min(1.0, p.step / size) if size > 0 else 0.0)
         self.trials += 1
         return self.attempts()
+
+    def performed(self) -> np.ndarray:
+        """The learner's own last performance on the phase axis (its attempts' mean, motor
+        noise included); its memory before the first attempt."""
+        if self.trials == 0:
+            return self.memory
+        return np.mean([to_phase(c, self.channels) for c in self.attempts()], axis=0)
 
     def attempts(self) -> list[Clip]:
         """``REPETITIONS`` performances of the current memory (motor noise, own tempo)."""
