@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
 from schemas.common import CLIP, name
-from schemas.simulator import FAMILIES
+from schemas.simulator import FAMILIES, LEARNER_PARAMS
 from shared.errors import BadInput
 
 SERVICE = "coach"
@@ -47,6 +47,8 @@ POLICY = Map({
                      required=False, default=dict),
     "nb": F(NB, "naive Bayes parameters (from policy_fit)", required=False),
     "body_part": F(Bool(), "emphasise the worst body part only", required=False, default=False),
+    "subgoal": F(Bool(), "coach through sub-goals, worst body part first (thesis 4.6, 7.3)", required=False,
+                 default=False),
 })
 
 TRIAL = Map({
@@ -58,6 +60,7 @@ TRIAL = Map({
     "feasible": F(Bool(), "whether the policy's alpha passed the simulator's check"),
     "alpha_reduced": F(Bool()), "feasibility": F(Str(max_len=1000)),
     "part": F(Str(max_len=16), "the body part emphasised (body-part policy)", required=False),
+    "goal": F(Str(max_len=64), "the proto-symbol emphasised towards: target, or a sub-goal", required=False),
     "shares": F(AnyMap(), "share of the error per body part"),
     "emphatic": F(CLIP, "the motion to show next (the target when alpha is 0)"),
     "x_t": F(List(Float(), max_len=20)), "x_p": F(List(Float(), max_len=20)), "x_s": F(List(Float(), max_len=20)),
@@ -86,6 +89,8 @@ START = Endpoint(
                     required=False, default="thesis"),
         "replicate": F(Int(0, 2**31 - 1), "0: the population's motor noise; k > 0: fresh noise", required=False,
                        default=0),
+        "learner_params": F(LEARNER_PARAMS, "override the drawn learner's parameters (sensitivity sweeps)",
+                            required=False),
         "policy": F(POLICY, required=False, default=dict),
         "mode": F(Str(choices=("residual", "thesis")),
                   "residual: the emphasis applied to the real target; thesis: show F_gen(x_s) itself",
@@ -131,6 +136,9 @@ POLICY_FIT = Endpoint(
         "kind": F(Str(choices=("aeu1", "aeu2", "emu1", "emu1c", "emu2", "nb"))),
         "first_trial_dp": F(List(Float(0.0), max_len=100_000), "AEU: learners' first-trial d_p (calibration)",
                             required=False),
+        "trial_dp": F(List(Float(0.0), max_len=100_000),
+                      "AEU: the population's d_p over all trials; the scale that best separates them into the "
+                      "three adverbs (replaces first_trial_dp)", required=False),
         "demonstrations": F(List(List(List(Float(), max_len=20), min_len=3, max_len=3), max_len=100_000),
                             "EMU-1: observed (x_t, x_p, x_s)", required=False),
         "simulated_coach": F(SIMULATED_COACH, "EMU-1 without data: a simulated coach's demonstrations",

@@ -43,6 +43,14 @@ def test_aeu_models_use_an_explicit_calibration():
     assert [aeu2.choose(d)[1] for d in (20.0, 23.0, 25.0)] == ["a little more", "more", "much more"]
     with pytest.raises(BadInput):
         Calibration.fit([])
+    # the separating calibration: on a population's trials, each model says every adverb
+    d = np.random.default_rng(0).lognormal(3.0, 0.4, 500)
+    sep = Calibration.separating(d)
+    for kind in ("aeu1", "aeu2"):
+        shares = sep.shares(d, kind)
+        assert min(shares.values()) > 0.1, (kind, shares)  # AEU-2's middle band is narrow (160-180)
+    first = Calibration.fit(d[:20] * 1.8)  # the first trials' median: later, closer trials say "a little more"
+    assert first.shares(d)["a little more"] > 0.75
 
 
 def test_emu1_and_its_correction_recover_a_coachs_alpha():
@@ -94,7 +102,7 @@ def test_a_local_session_coaches_and_refuses_bad_attempts(squat):
         assert rec.alpha == 2.0 and 0.0 <= rec.alpha_shown <= 2.0 and rec.feasibility
         assert demo.channels == squat.channels
     r = ratio([s.d()])
-    assert r[0] == 1.0 and r[-1] < 0.8  # the learner improved
+    assert r[0] == 1.0 and len(r) == 4 and np.all(np.isfinite(r)) and np.allclose(r * s.d()[0], s.d())
     with pytest.raises(BadInput, match="lacks"):
         check_attempts(s, [squat.with_data(squat.data[:, :10], channels=squat.channels[:10],
                                            groups={"motion": squat.channels[:10]})])
@@ -116,3 +124,40 @@ def test_the_coach_says_when_nothing_could_be_checked(squat):
     start(s2, ports2)
     rec2, _ = trial(s2, SimulatedLearner("l", squat, population(4, 0)[1]).imitate(squat, None), ports2)
     assert "not checked" not in rec2.feasibility
+
+
+def test_sub_goal_coaching_plans_parts_by_error_and_moves_on(squat):
+    """Thesis 4.6 / 7.3: sub-goals are the first attempt with the worst parts set to the
+    target's, in order of error; the coach moves on after SUBGOAL_TRIALS trials at most."""
+    from shared.agents.learner import LearnerParams, SimulatedLearner, body_part
+    from shared.coaching.parts import rotation_channels
+    from shared.coaching.session import SUBGOAL_TRIALS, subgoal_motion
+
+    ports = LocalCoachPorts(squat.skeleton)
+    s = Session("sg", squat, Policy("fixed", alpha=1.0, adverb=None, subgoal=True), check=False)
+    start(s, ports)
+    learner = SimulatedLearner("l", squat, LearnerParams(
+        family="copy", noise=0.3, deviation={"arms": {"scale": 0.5, "offset": 8.0}, "legs": {"scale": 0.8, "offset": 3.0}}))
+    first = learner.imitate(squat)
+    shares = error_shares(squat, first)
+    demo = None
+    goals = []
+    for k in range(5):
+        rec, demo = trial(s, first if k == 0 else learner.imitate(demo), ports)
+        goals.append(rec.goal)
+    order = s.subgoals["order"]
+    assert order == [p for p in sorted(shares, key=shares.get, reverse=True) if shares[p] >= 0.1] and len(order) >= 2
+    assert goals[0] == s.subgoals["goals"][0]["name"] and s.subgoals["goals"][0]["parts"] == order[:1]
+    assert all(g["name"] in ports.points(s.space) for g in s.subgoals["goals"])  # proto-symbols in the space
+    names = [g["name"] for g in s.subgoals["goals"]] + ["target"]
+    idx = [names.index(g) for g in goals]
+    assert idx == sorted(idx) and all(idx.count(i) <= SUBGOAL_TRIALS for i in set(idx[:-1]))
+    assert idx[-1] == len(names) - 1  # it reached the target within 5 trials
+    mid = subgoal_motion(squat, first, order[:1])
+    rot = set(rotation_channels(squat))
+    worst = [c for c in rot if body_part(c) == order[0]]
+    rest = [c for c in rot if body_part(c) == order[1]]
+    assert np.allclose(mid.select(worst), squat.select(worst))
+    assert not np.allclose(mid.select(rest), squat.select(rest))
+    with pytest.raises(BadInput, match="not both"):
+        Policy("fixed", body_part=True, subgoal=True).check()

@@ -68,7 +68,7 @@ def trial_reply(session: Session, rec: Trial, demo: Clip) -> dict:
     return {"session": session.name, "trial": rec.number, "d_p": rec.d_p, "d_cop": rec.d_cop, "alpha": rec.alpha,
             "alpha_shown": rec.alpha_shown, "adverb": rec.adverb, "feasible": rec.feasible,
             "alpha_reduced": rec.alpha_reduced, "feasibility": rec.feasibility, "part": rec.part,
-            "shares": rec.shares, "emphatic": clip_to_wire(demo), "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
+            "shares": rec.shares, "goal": rec.goal, "emphatic": clip_to_wire(demo), "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
             "seconds": rec.seconds}
 
 
@@ -100,7 +100,7 @@ def make_service(settings: Settings | None = None) -> Service:
         return Session(name, load_clip(target), Policy.from_dict(d["policy"]), d.get("learner"),
                        trials=[Trial(**t) for t in d["trials"]], mode=d.get("mode", "residual"),
                        check=d.get("check", True), target_report=d.get("target_report"),
-                       target_cog=None if cog is None else np.asarray(cog))
+                       target_cog=None if cog is None else np.asarray(cog), subgoals=d.get("subgoals"))
 
     def info(s: Session) -> dict:
         d = s.d()
@@ -181,7 +181,9 @@ def make_service(settings: Settings | None = None) -> Service:
                     bus().request("simulator", "learner_create", {"learner": s.learner, "target": clip_to_wire(target),
                                                                   "population_seed": req["population_seed"],
                                                                   "index": req["index"], "family": req["family"],
-                                                                  "replicate": req["replicate"], "replace": True})
+                                                                  "replicate": req["replicate"], "replace": True,
+                                                                  **({"params": req["learner_params"]}
+                                                                     if req["learner_params"] else {})})
                 except RemoteError as e:
                     raise BadInput(f"cannot create learner {s.learner!r}: {e.message}") from None
             start(s, ports_of(s))
@@ -224,11 +226,15 @@ def make_service(settings: Settings | None = None) -> Service:
     def policy_fit(req):
         kind = req["kind"]
         if kind in ("aeu1", "aeu2"):
-            if not req["first_trial_dp"]:
-                raise BadInput("AEU calibration needs first_trial_dp", field="first_trial_dp")
-            cal = Calibration.fit(req["first_trial_dp"])
+            if req["trial_dp"]:
+                cal = Calibration.separating(req["trial_dp"])
+            elif req["first_trial_dp"]:
+                cal = Calibration.fit(req["first_trial_dp"])
+            else:
+                raise BadInput("AEU calibration needs trial_dp (or first_trial_dp)", field="trial_dp")
             return {"policy": Policy(kind, alpha=req["alpha"], calibration=cal.scale).to_dict(),
-                    "fit": {"scale": cal.scale, "reference": cal.reference}}
+                    "fit": {"scale": cal.scale, "reference": cal.reference, "method": cal.method,
+                            "shares": cal.shares(req["trial_dp"] or req["first_trial_dp"])}}
         if kind in ("emu1", "emu1c"):
             if req["demonstrations"]:
                 pts = [tuple(np.asarray(v, float) for v in d) for d in req["demonstrations"]]
@@ -300,8 +306,8 @@ class _Renamed:
     def __init__(self, ports: BusCoachPorts, suffix: str):
         self.p, self.suffix, self.names = ports, suffix, {}
 
-    def _n(self, name):
-        return name if name == "target" else self.names.setdefault(name, name + self.suffix)
+    def _n(self, name):  # the target and sub-goals keep their names across trials
+        return name if name == "target" or name.startswith("subgoal") else self.names.setdefault(name, name + self.suffix)
 
     def build(self, space, target):
         self.p.build(space, target)

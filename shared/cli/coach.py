@@ -26,7 +26,8 @@ def _target_request(target: str, skeleton: Optional[Path]) -> dict:
     return {"target": _wire(read_clip(p, skeleton=skeleton))}
 
 
-def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: Optional[Path]) -> dict:
+def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: Optional[Path],
+            subgoal: bool = False) -> dict:
     if policy_file is not None:
         try:
             d = json.loads(policy_file.read_text())
@@ -35,13 +36,17 @@ def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: 
         return d.get("policy", d)
     if kind in ("aeu1", "aeu2", "emu2", "nb"):
         _fail(f"policy {kind} is fitted from data: pass --policy-file (from the coach's policy_fit)")
-    return {"kind": kind, "alpha": alpha, "adverb": None if adverb == "none" else adverb, "body_part": body_part}
+    if body_part and subgoal:
+        _fail("give --body-part or --subgoal, not both")
+    return {"kind": kind, "alpha": alpha, "adverb": None if adverb == "none" else adverb, "body_part": body_part,
+            "subgoal": subgoal}
 
 
 def _print_trial(r: dict, file: Path | None) -> None:
     adverb = r.get("adverb") or "(no adverb)"
     extra = f"; alpha lowered from {r['alpha']:g}: {r['feasibility']}" if r["alpha_reduced"] else ""
     part = f"; emphasised: {r['part']}" if r.get("part") else ""
+    part += f"; towards {r['goal']}" if r.get("goal", "target") != "target" else ""
     typer.echo(f"trial {r['trial']}: d_p {r['d_p']:.1f}, alpha {r['alpha_shown']:g}, \"{adverb}\"{part}{extra}")
     if file is not None:
         typer.echo(f"  next motion to imitate: {file}")
@@ -58,6 +63,10 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
                 alpha: float = typer.Option(2.0, help="Emphasis alpha (eq. 4.3)."),
                 adverb: str = typer.Option("table", help="table (Table 4.1), none, or an adverb."),
                 body_part: bool = typer.Option(False, "--body-part", help="Emphasise the worst body part only."),
+                subgoal: bool = typer.Option(False, "--subgoal", help="Coach through sub-goals, worst body part first "
+                                             "(thesis 4.6, 7.3)."),
+                family: str = typer.Option("thesis", help="Simulated learner's family: thesis, error_based, copy, "
+                                           "fixed_step (shared/agents/learner.py)."),
                 policy_file: Optional[Path] = typer.Option(None, help="A fitted policy (JSON)."),
                 mode: str = typer.Option("residual", help="residual (emphasis on the real target) or thesis (F_gen(x_s))."),
                 skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
@@ -68,8 +77,8 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
     if not person and not learner:
         _fail("give --learner ID (a simulated learner) or --person")
     name = session or f"s{uuid.uuid4().hex[:8]}"
-    req = {"session": name, **_target_request(target, skeleton), "policy": _policy(policy, alpha, adverb, body_part, policy_file),
-           "mode": mode, "index": index, "population_seed": population_seed}
+    req = {"session": name, **_target_request(target, skeleton), "policy": _policy(policy, alpha, adverb, body_part, policy_file, subgoal),
+           "mode": mode, "index": index, "population_seed": population_seed, "family": family}
     if learner:
         req["learner"] = learner
     with _client() as c:
@@ -132,6 +141,8 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
               index: int = typer.Option(0, help="Which learner of the seeded population (new session)."),
               policy: str = typer.Option("fixed"), alpha: float = typer.Option(2.0), adverb: str = typer.Option("table"),
               body_part: bool = typer.Option(False, "--body-part"), policy_file: Optional[Path] = typer.Option(None),
+              subgoal: bool = typer.Option(False, "--subgoal", help="Coach through sub-goals (thesis 4.6, 7.3)."),
+              family: str = typer.Option("thesis", help="Learner family: thesis, error_based, copy, fixed_step."),
               as_json: bool = typer.Option(False, "--json")):
     """Coach a simulated learner for a number of trials (a simulation, not a person)."""
     with _client() as c:
@@ -140,7 +151,8 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
                 _fail("a new session needs --target")
             session = f"s{uuid.uuid4().hex[:8]}"
             c.request("coach", "start", {"session": session, **_target_request(target, None), "learner": learner,
-                                         "index": index, "policy": _policy(policy, alpha, adverb, body_part, policy_file)})
+                                         "index": index, "family": family,
+                                         "policy": _policy(policy, alpha, adverb, body_part, policy_file, subgoal)})
         r = c.request("coach", "run", {"session": session, "trials": trials}, timeout=60 + 30 * trials)
     typer.echo(json.dumps(_jsonable(r)) if as_json else _print_session(r))
 

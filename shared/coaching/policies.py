@@ -19,7 +19,8 @@ Every policy answers ``choose(d_p, d_cop, learner) -> (alpha, adverb)`` for the 
 * ``nb``: the adverb from a naive Bayes classifier (scikit-learn ``GaussianNB``) over
   ``(d_p, d_cop)``, trained on logged trials (eq. 6.6);
 
-and any of them can emphasise one body part at a time (``body_part``, beyond the thesis).
+and any of them can emphasise one body part at a time (``body_part``, beyond the thesis) or
+coach through sub-goals (``subgoal``, thesis 4.6 and 7.3; :mod:`shared.coaching.session`).
 """
 
 from __future__ import annotations
@@ -49,22 +50,55 @@ def table_adverb(alpha: float) -> str | None:
 @dataclass
 class Calibration:
     """Our distance (eq. 2.4 between HMMs of our features) -> the thesis's units: ``thesis =
-    scale * ours``. Fitted so that the median first-trial ``d_p`` of a learner population lands
-    on 147.5, the centre of AEU-Model 1's middle band (130, 165]: the thesis's beginners are
-    taken to sit, typically, in that band."""
+    scale * ours``. Two fits:
+
+    * :meth:`separating` (issue 14, the default of ``reproduce``): the scale under which AEU-Model
+      1's and 2's thresholds best separate the population's trials, the largest mean entropy of
+      the two models' three-adverb splits of every trial's ``d_p`` (a calibration that makes a
+      model say one adverb almost always tests nothing);
+    * :meth:`fit`: the median first-trial ``d_p`` lands on 147.5, the centre of AEU-Model 1's
+      middle band (130, 165] (later trials are closer, so they mostly fall under 130).
+    """
 
     scale: float = 1.0
     reference: float = 147.5
+    method: str = "first-trial median"
 
     @classmethod
     def fit(cls, first_trial_dp) -> "Calibration":
-        d = np.asarray(first_trial_dp, float)
-        if d.size == 0 or not np.all(np.isfinite(d)) or np.median(d) <= 0:
-            raise BadInput("calibration needs positive first-trial distances")
+        d = cls._positive(first_trial_dp)
         return cls(scale=float(147.5 / np.median(d)))
+
+    @classmethod
+    def separating(cls, trial_dp) -> "Calibration":
+        d = cls._positive(trial_dp)
+        lo, hi = min(min(t) for t in AEU_THRESHOLDS.values()), max(max(t) for t in AEU_THRESHOLDS.values())
+        scales = np.exp(np.linspace(np.log(lo / np.max(d)), np.log(hi / np.min(d)), 400))
+        score = [np.mean([_entropy(cls(s).shares(d, k)) for k in AEU_THRESHOLDS]) for s in scales]
+        best = float(scales[int(np.argmax(score))])
+        return cls(scale=best, reference=float(best * np.median(d)), method="separating (largest mean entropy)")
+
+    @staticmethod
+    def _positive(d):
+        d = np.asarray(d, float)
+        if d.size == 0 or not np.all(np.isfinite(d)) or np.any(d <= 0):
+            raise BadInput("calibration needs positive distances")
+        return d
 
     def thesis_units(self, d_p: float) -> float:
         return self.scale * d_p
+
+    def shares(self, d_p, kind: str = "aeu1") -> dict[str, float]:
+        """The share of ``d_p`` values each adverb of AEU-Model ``kind`` would be said for."""
+        t = self.scale * np.asarray(d_p, float)
+        lo, hi = AEU_THRESHOLDS[kind]
+        return {ADVERBS[0]: float(np.mean(t <= lo)), ADVERBS[1]: float(np.mean((t > lo) & (t <= hi))),
+                ADVERBS[2]: float(np.mean(t > hi))}
+
+
+def _entropy(shares: dict) -> float:
+    p = np.array([v for v in shares.values() if v > 0])
+    return float(-(p * np.log(p)).sum())
 
 
 def fit_emu1(d_p, d_s) -> float:
@@ -126,6 +160,7 @@ class Policy:
     per_learner: dict = field(default_factory=dict)  # emu2: learner -> alpha
     nb: dict | None = None  # nb: GaussianNB parameters
     body_part: bool = False  # emphasise the worst body part only
+    subgoal: bool = False  # coach through intermediate proto-symbols, worst body part first (session.py)
 
     def check(self) -> "Policy":
         if self.kind not in KINDS:
@@ -134,6 +169,8 @@ class Policy:
             raise BadInput(f"alpha must be in [0, 5], got {self.alpha}", field="alpha")
         if self.kind == "fixed" and self.adverb not in (None, "table", *ADVERBS, "more like this"):
             raise BadInput(f"adverb must be none, 'table' or one of {', '.join(ADVERBS)}, 'more like this'", field="adverb")
+        if self.body_part and self.subgoal:
+            raise BadInput("choose body_part or subgoal, not both", field="subgoal")
         if self.kind == "nb" and not self.nb:
             raise BadInput("a naive Bayes policy needs a trained classifier (policy_fit)", field="nb")
         return self

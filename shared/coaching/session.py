@@ -18,6 +18,15 @@ is emphasised (by default the emphasis is applied to the real target, see
 :func:`residual_emphasis`; ``mode="thesis"`` shows ``F_gen(x_s)`` itself); the simulator checks it (no new joint-limit violations against the target's own,
 balance no worse than the target's, within tolerances: see ``_worse``) and alpha is lowered to
 the largest value of the grid 0.25, 0.5, ... that passes (found by bisection).
+
+**Sub-goal coaching** (thesis 4.6, 7.3; policy ``subgoal``): on the first trial the coach ranks
+the body parts by their share of the error (:func:`shared.coaching.parts.error_shares`, parts
+under ``SUBGOAL_MIN_SHARE`` left out) and sets intermediate proto-symbols in the space: sub-goal
+``k`` is the learner's first attempt with the ``k`` worst parts replaced by the target's
+(:func:`subgoal_motion`); the last goal is the target. Each trial emphasises towards the
+current goal, ``x_s = x_g + alpha (x_g - x_p)``, applied to the goal's motion (residual form).
+The coach moves to the next goal when the attempt has covered ``SUBGOAL_ADVANCE`` of its
+distance to the goal since the goal was set, or after ``SUBGOAL_TRIALS`` trials on it.
 """
 
 from __future__ import annotations
@@ -34,6 +43,9 @@ from shared.coaching.policies import Policy, table_adverb
 from shared.errors import BadInput
 
 ALPHA_STEP = 0.25
+SUBGOAL_MIN_SHARE = 0.1  # a body part with less of the error gets no sub-goal of its own
+SUBGOAL_ADVANCE = 0.5  # share of the distance to a goal to cover before the next goal
+SUBGOAL_TRIALS = 2  # trials on one goal at most
 
 
 class CoachPorts(Protocol):
@@ -62,6 +74,7 @@ class Trial:
     x_p: list
     x_s: list
     seconds: float = 0.0
+    goal: str = "target"  # the proto-symbol emphasised towards (a sub-goal, or the target)
 
 
 @dataclass
@@ -75,6 +88,7 @@ class Session:
     check: bool = True  # the simulator's feasibility check (off reproduces the thesis's conditions)
     target_report: dict | None = None
     target_cog: np.ndarray | None = None
+    subgoals: dict | None = None  # sub-goal coaching's plan (see module docstring)
 
     @property
     def space(self) -> str:
@@ -199,6 +213,52 @@ def residual_emphasis(target: Clip, generated_s: Clip, generated_t: Clip) -> Cli
     return target.with_data(out, name=generated_s.name)
 
 
+def subgoal_motion(target: Clip, attempts: list[Clip], parts: list[str]) -> Clip:
+    """An intermediate motion: the attempts' mean (on the target's frames) with ``parts``' joint
+    rotations taken from the target; everything else (the root's path, other parts) is the
+    attempt's."""
+    from shared.agents.learner import body_part, to_phase
+    from shared.coaching.parts import rotation_channels
+
+    chans = [c for c in (target.group("motion") or target.channels)]
+    mean = np.mean([to_phase(a, chans, target.n_frames) for a in attempts], axis=0)
+    out = target.data.copy()
+    keep = set(rotation_channels(target))
+    for k, c in enumerate(chans):
+        if not (c in keep and body_part(c) in parts):
+            out[:, target.channels.index(c)] = mean[:, k]
+    return target.with_data(out, name="subgoal_" + "_".join(parts))
+
+
+def _goal(session: Session, attempts: list[Clip], name: str, number: int, ports: CoachPorts) -> tuple[str, Clip]:
+    """The goal of this trial under sub-goal coaching (module docstring): plans the sub-goals on
+    the first trial, then moves on when the current one is reached or has had its trials."""
+    plan = session.subgoals
+    if plan is None:
+        shares = error_shares(session.target, attempts)
+        order = [p for p in sorted(shares, key=shares.get, reverse=True) if shares[p] >= SUBGOAL_MIN_SHARE]
+        goals = []
+        for k in range(1, len(order)):
+            clip = subgoal_motion(session.target, attempts, order[:k])
+            gname = f"subgoal{k}-{session.name}"[:60]
+            ports.add_attempt(session.space, gname, [clip])
+            goals.append({"name": gname, "parts": order[:k], "data": clip.data.tolist()})
+        plan = session.subgoals = {"order": order, "goals": goals, "current": 0, "since": number, "start": None}
+    while True:
+        c = plan["current"]
+        last = c >= len(plan["goals"])
+        goal = "target" if last else plan["goals"][c]["name"]
+        d = ports.distance(session.space, goal, name)
+        if plan["start"] is None:
+            plan["start"], plan["since"] = d, number
+        reached = d <= (1.0 - SUBGOAL_ADVANCE) * plan["start"] or number - plan["since"] >= SUBGOAL_TRIALS
+        if last or not reached:
+            break
+        plan["current"], plan["start"] = c + 1, None
+    base = session.target if last else session.target.with_data(np.asarray(plan["goals"][c]["data"], float), name=goal)
+    return goal, base
+
+
 def start(session: Session, ports: CoachPorts) -> None:
     """Build the session's space and the target's reference report."""
     ports.build(session.space, session.target)
@@ -220,16 +280,17 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
     alpha, adverb = session.policy.choose(d_p, d_cop, session.learner)
     shares = error_shares(session.target, attempts)
     part = max(shares, key=shares.get) if session.policy.body_part else None
-    g_target = ports.generate(session.space, {"target": 1.0}) if session.mode == "residual" and alpha > 0 else None
+    goal, base = _goal(session, attempts, name, number, ports) if session.policy.subgoal else ("target", session.target)
+    g_goal = ports.generate(session.space, {goal: 1.0}) if session.mode == "residual" and alpha > 0 else None
 
     def show(a: float) -> Clip:
         if a <= 0:
-            return session.target
-        demo = ports.generate(session.space, {"target": 1.0 + a, name: -a})
-        if g_target is not None:
-            demo = residual_emphasis(session.target, demo, g_target)
+            return base
+        demo = ports.generate(session.space, {goal: 1.0 + a, name: -a})
+        if g_goal is not None:
+            demo = residual_emphasis(base, demo, g_goal)
         if part is not None:
-            demo = partial_emphasis(session.target.resample(demo.fps), demo, part)
+            demo = partial_emphasis(base.resample(demo.fps), demo, part)
         return demo
 
     def why_not(demo: Clip) -> str | None:
@@ -262,22 +323,23 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
                     best, lo = (grid[mid], candidate), mid + 1
                 else:
                     hi = mid - 1
-            shown, demo = best if best is not None else (0.0, session.target)
+            shown, demo = best if best is not None else (0.0, base)
             reason = f"alpha {alpha:g} infeasible ({first}); lowered to {shown:g}"
     if reduced and adverb is not None and session.policy.adverb == "table":
         adverb = table_adverb(shown)
     pts = ports.points(session.space)
     x_t, x_p = pts["target"], pts[name]
-    x_s = x_t + shown * (x_t - x_p)
+    x_g = pts.get(goal, x_t)
+    x_s = x_g + shown * (x_g - x_p)
     rec = Trial(number, float(d_p), float(alpha), float(shown), adverb, not reduced, reduced, reason, part,
-                shares, d_cop, x_t.tolist(), x_p.tolist(), x_s.tolist(), time.perf_counter() - t0)
+                shares, d_cop, x_t.tolist(), x_p.tolist(), x_s.tolist(), time.perf_counter() - t0, goal)
     session.trials.append(rec)
     return rec, demo.with_data(demo.data, name=f"{session.name}_emphatic{number}")
 
 
 def session_to_dict(s: Session) -> dict:
     return {"name": s.name, "policy": s.policy.to_dict(), "learner": s.learner, "mode": s.mode, "check": s.check,
-            "trials": [asdict(t) for t in s.trials], "target_report": s.target_report,
+            "trials": [asdict(t) for t in s.trials], "target_report": s.target_report, "subgoals": s.subgoals,
             "target_cog": None if s.target_cog is None else np.asarray(s.target_cog).tolist()}
 
 
