@@ -358,7 +358,11 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                                         "shares, damping, friction, joints, legs, mixed (default all)."),
               learners: int = typer.Option(12, help="Simulated learners per experiment group (ch4-6)."),
               hdm05: Optional[Path] = typer.Option(None, help="HDM05 data (ch4-6 targets; default $MIRRORCOACH_HDM05 or ../shared/data/hdm05)."),
-              targets: str = typer.Option("squat,throw", help="Targets for ch4-6: squat, throw.")):
+              targets: str = typer.Option("squat,throw", help="Targets for ch4-6: squat, throw."),
+              families: str = typer.Option("all", help="Learner families for ch4-6, comma-separated: thesis, "
+                                           "error_based, copy, fixed_step (default all; issue 14)."),
+              sensitivity_learners: int = typer.Option(8, help="Learners per setting of each family's sensitivity "
+                                                       "sweep (ch4-6; 0 skips it).")):
     """Rerun the thesis's experiments on the cluster (simulated agents) and write reports with plots."""
     from shared.bus.client import Client
     from shared.bus.config import Settings
@@ -401,7 +405,16 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                     _fail(f"unknown target(s) {bad}; choose from {', '.join(TARGETS)}")
                 if not (data / "amc").is_dir():
                     _fail(f"HDM05 data not found at {data} (give --hdm05 or set MIRRORCOACH_HDM05)")
-                run_coaching(c, data, out / "ch4-6", learners=learners, targets=chosen, echo=typer.echo)
+                from shared.agents.learner import FAMILIES
+
+                fams = list(FAMILIES) if families == "all" else [f.strip() for f in families.split(",") if f.strip()]
+                bad = [f for f in fams if f not in FAMILIES]
+                if bad or not fams:
+                    _fail(f"unknown learner famil(ies) {bad}; choose from {', '.join(FAMILIES)}")
+                if not 2 <= learners <= 1000 or not 0 <= sensitivity_learners <= 1000:
+                    _fail("--learners must be 2 to 1000 and --sensitivity-learners 0 to 1000 (statistics need two)")
+                run_coaching(c, data, out / "ch4-6", learners=learners, targets=chosen, families=fams,
+                             sensitivity_learners=sensitivity_learners, echo=typer.echo)
     finally:
         if started:
             down(settings, echo=typer.echo)
