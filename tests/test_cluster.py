@@ -484,3 +484,85 @@ def test_sigkill_during_a_build_leaves_other_spaces_intact(cluster, dev_split, b
         assert c.request("pss", "list")["interrupted"] == []
     log = (s.log_dir / "supervisor.log").read_text()
     assert "pss exited with code -9; restarting" in log
+
+
+def test_a_study_with_scripted_participants_and_a_coach_seat(cluster, bundled, tmp_path):
+    """Issue 14: `mirrorcoach study` runs fig. 4.3 / Table 4.2 with people's own attempts
+    (here: scripted participants sending real HDM05 squats), counterbalanced and seeded, keeps a
+    trial whose log line a kill lost, and exports the tidy table the report reads."""
+    from shared.reproduce.tidy import matrix, read
+
+    env = cluster
+    squats = sorted((bundled / "amc/squat1Reps").glob("*.amc"))
+    target, mine = squats[0], squats[1:]
+    study = tmp_path / "study"
+    r = cli(env, "study", "init", study, "--target", target, "--participants", "2", "--cases", "1,3", "--seed", "7",
+            "--trials", "2")
+    assert r.returncode == 0, r.stderr
+    orders = [line.split("cases ")[1] for line in r.stdout.splitlines() if line.strip().startswith("P0")]
+    assert sorted(orders) == ["1 -> 3", "3 -> 1"]  # counterbalanced: each order once
+    assert cli(env, "study", "init", study, "--target", target, "--participants", "2", "--seed", "7").returncode == 2
+    k = 0
+    while True:
+        r = cli(env, "study", "next", study, "--json")
+        assert r.returncode == 0, r.stderr
+        step = json.loads(r.stdout)
+        if step.get("done"):
+            break
+        assert Path(step["show"]).exists()
+        r = cli(env, "study", "attempt", study, mine[k % len(mine)], mine[(k + 1) % len(mine)], "--participant",
+                step["participant"])
+        assert r.returncode == 0, r.stderr
+        k += 1
+        if k == 3:  # a kill after the coach kept the trial, before the log line was whole
+            log = study / "log.jsonl"
+            text = log.read_text()
+            log.write_text(text[: text.rstrip("\n").rfind("\n") + 1] + '{"event": "tri')
+    assert k == 8  # 2 participants x 2 cases x 2 trials
+    events = [json.loads(x) for x in (study / "log.jsonl").read_text().splitlines() if x.startswith('{"event":"')]
+    assert sum(e.get("recovered_from_coach", False) for e in events) == 1
+    r = cli(env, "study", "export", study, "--out", tmp_path / "trials.csv")
+    assert r.returncode == 0, r.stderr
+    rows = read(tmp_path / "trials.csv")
+    assert len(rows) == 8 and {r["world"] for r in rows} == {"people"}
+    assert matrix(rows, "case 3").shape == (2, 2) and np.all(matrix(rows, "case 1") > 0)
+    # the coach seat: a person types adverbs (a wrong word is asked again)
+    from shared.bus.client import Client  # noqa: F401  (the seat runs through the CLI only)
+
+    r = subprocess.run([sys.executable, "-m", "shared.cli", "study", "seat", str(study), "--coach", "c1", "--count",
+                        "3"], input="more\nway more\nmuch more\na little more\n", capture_output=True, text=True,
+                       env=env, cwd=REPO, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "one of:" in r.stderr and "3 attempts judged" in r.stdout
+    seat = [e for e in (json.loads(x) for x in (study / "log.jsonl").read_text().splitlines()) if e["event"] == "seat"]
+    assert [e["adverb"] for e in seat] == ["more", "much more", "a little more"] and all(e["d_p"] > 0 for e in seat)
+    r = cli(env, "study", "report", study)
+    assert r.returncode == 0, r.stderr
+    text = (study / "report.md").read_text()
+    assert "Coach seat" in text and "Table 4.3" in text and "not enough units" in text  # 2 cases of table 4.3 only
+    r = cli(env, "study", "attempt", study, mine[0], "--participant", "P09")
+    assert r.returncode == 2 and r.stderr.startswith("error: ") and "P09" in r.stderr
+
+
+def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
+    """A world that does not agree with the method: learners that copy what they see. The
+    report's words are computed, so emphasis must not come out as helping there, and every
+    trial is in tidy.csv (issue 14)."""
+    from shared.reproduce.tidy import read
+
+    env = cluster
+    r = cli(env, "reproduce", "ch4", "--out", tmp_path / "rep", "--learners", "3", "--targets", "squat", "--families",
+            "copy", "--sensitivity-learners", "2", timeout=900)
+    assert r.returncode == 0, r.stdout + r.stderr
+    text = (tmp_path / "rep/ch4-6/report.md").read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| Emphasis (case 3"))
+    assert "holds" not in row and ("reversed" in row or "not lower" in row), row
+    assert "- `copy`: none" in text or "holds" not in text.split("Findings that hold")[1].split("##")[0]
+    rows = read(tmp_path / "rep/ch4-6/tidy.csv")
+    cases = {r["condition"] for r in rows}
+    assert {f"case {c}" for c in range(1, 9)} <= cases and {"sub-goal", "body part"} <= cases
+    assert len([r for r in rows if r["condition"] == "case 3"]) == 3 * 4
+    for fig in ("fig6_1", "fig6_2", "fig6_5", "fig6_6", "fig6_7"):
+        assert (tmp_path / f"rep/ch4-6/copy_squat_{fig}.png").stat().st_size > 5000
+    r = cli(env, "reproduce", "ch4", "--out", tmp_path / "rep", "--families", "oracle")
+    assert r.returncode == 2 and "oracle" in r.stderr and "Traceback" not in r.stderr

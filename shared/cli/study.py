@@ -1,0 +1,237 @@
+"""CLI of studies with people (issue 14): ``study init | next | attempt | seat | export | report``.
+
+See :mod:`shared.study` for the folder, the counterbalanced plan and why no trial is lost."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
+from shared.cli.cluster import _client, _wire
+
+study_app = typer.Typer(help="Run the thesis's studies with people: participants send their own attempts (fig. 4.3, "
+                             "Table 4.2) and human coaches name adverbs from a coach seat (chapter 5).",
+                        no_args_is_help=True)
+app.add_typer(study_app, name="study")
+
+FOLDER = typer.Argument(..., help="The study's folder (made by `study init`).")
+
+
+def _study(folder: Path) -> tuple[dict, list[dict]]:
+    from shared.study import load, read_log
+
+    return load(folder), read_log(folder)
+
+
+def _save_shown(folder: Path, name: str, clip, fps: float) -> Path:
+    from shared.io import save_clip
+
+    out = folder / "show"
+    out.mkdir(exist_ok=True)
+    clip = clip.resample(fps) if clip.fps != fps else clip
+    path = out / (f"{name}.bvh" if clip.skeleton is not None else f"{name}.npz")
+    save_clip(clip, path)
+    return path
+
+
+@study_app.command("init")
+def study_init(folder: Path = FOLDER,
+               target: Path = typer.Option(..., help="The target motion (a clip file)."),
+               participants: int = typer.Option(..., help="How many participants."),
+               cases: str = typer.Option("1,2,3,4", help="Cases to run, comma-separated (Table 4.2: 1-4; 6.1: 5, 6; "
+                                         "6.4: 7, 8)."),
+               seed: int = typer.Option(..., help="Seed of the assignment of case orders to participants (log it)."),
+               trials: int = typer.Option(4, help="Trials per case (the first shows the target)."),
+               emu2: Optional[Path] = typer.Option(None, help="Cases 5, 6: JSON {participant: [alpha without, alpha "
+                                                   "with adverb]} from each participant's own sweep."),
+               aeu_scale: Optional[float] = typer.Option(None, help="Cases 7, 8: thesis units per our distance unit."),
+               skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+    """Plan a study: counterbalanced, seeded case orders; the target kept in the folder."""
+    from shared.study import append, check_new, plan
+
+    check_new(folder)
+    try:
+        case_list = [int(c) for c in cases.split(",") if c.strip()]
+    except ValueError:
+        _fail(f"--cases must be numbers separated by commas, got {cases!r}")
+    table = None
+    if emu2 is not None:
+        try:
+            table = json.loads(emu2.read_text())
+        except (OSError, ValueError) as e:
+            _fail(f"{emu2}: cannot read EMU-Model 2's alphas ({e})")
+    p = plan(participants, case_list, seed, trials, table, aeu_scale)
+    clip = read_clip(target, skeleton=skeleton)
+    folder.mkdir(parents=True, exist_ok=True)
+    from shared.io import save_clip
+
+    save_clip(clip, folder / "target.npz")
+    append(folder, {"event": "plan", "plan": {**p, "target": clip.name, "study": folder.resolve().name[:20]}})
+    typer.echo(f"study in {folder}: {participants} participant(s), cases {case_list}, {trials} trials each")
+    for who, order in p["participants"].items():
+        typer.echo(f"  {who}: cases {' -> '.join(map(str, order))}")
+
+
+def _reconcile(c, folder: Path, p: dict, events: list[dict]) -> list[dict]:
+    """Trials the coach kept but the log lost (a kill in between) go back into the log."""
+    from shared.bus.client import RemoteError
+    from shared.study import append, missing_trials, read_log, session_name, trial_event
+
+    for person, order in p["participants"].items():
+        for case in order:
+            try:
+                info = c.request("coach", "state", {"session": session_name(p["study"], person, case)})
+            except RemoteError as e:
+                if e.code == "not_found":
+                    continue
+                raise
+            for t in missing_trials(events, person, case, info["trials"]):
+                append(folder, trial_event(person, case, t, None, recovered=True))
+    return read_log(folder)
+
+
+@study_app.command("next")
+def study_next(folder: Path = FOLDER, participant: Optional[str] = typer.Option(None, help="This participant's next step."),
+               as_json: bool = typer.Option(False, "--json")):
+    """What to do next: who, which case and trial, what to show and say."""
+    from shared.study import next_step, trials_of
+
+    p, events = _study(folder)
+    with _client() as c:
+        events = _reconcile(c, folder, p, events)
+    step = next_step(p, events, participant)
+    if step is None:
+        typer.echo(json.dumps({"done": True}) if as_json else "nothing left: every case of every participant is done")
+        return
+    done = trials_of(events).get((step["participant"], step["case"]), [])
+    shown = done[-1].get("shown_next") if done else None
+    step.update({"show": shown or str(folder / "target.npz"), "say": done[-1].get("adverb") if done else None})
+    if as_json:
+        typer.echo(json.dumps(step))
+    else:
+        typer.echo(f"{step['participant']}, case {step['case']}, trial {step['trial']}: show {step['show']}"
+                   + (f' and say "{step["say"]}"' if step["say"] else "") + "; then send the attempt with `study attempt`")
+
+
+@study_app.command("attempt")
+def study_attempt(folder: Path = FOLDER,
+                  clips: list[Path] = typer.Argument(..., help="The participant's attempt: its repetitions."),
+                  participant: str = typer.Option(..., help="Whose attempt (the plan's id, e.g. P01)."),
+                  skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+    """One trial of the participant's current case: recorded, and the next motion written to show/."""
+    from schemas.common import clip_from_wire
+    from shared.io import load_clip
+    from shared.study import append, next_step, policy, session_name, trial_event
+
+    p, events = _study(folder)
+    attempts = [read_clip(x, skeleton=skeleton) for x in clips]
+    with _client() as c:
+        events = _reconcile(c, folder, p, events)
+        step = next_step(p, events, participant)
+        if step is None:
+            _fail(f"{participant} has done every case")
+        case, name = step["case"], session_name(p["study"], participant, step["case"])
+        if step["trial"] == 1:
+            c.request("coach", "start", {"session": name, "target": _wire(load_clip(folder / "target.npz")),
+                                         "policy": policy(p, participant, case), "replace": True})
+        r = c.request("coach", "attempt", {"session": name, "clips": [_wire(a) for a in attempts]})
+    last = step["trial"] == p["trials"]
+    shown = None if last else str(_save_shown(folder, f"{participant}_case{case}_trial{step['trial'] + 1}",
+                                              clip_from_wire(r["emphatic"]), attempts[0].fps))
+    append(folder, trial_event(participant, case, {"number": r["trial"], "d_p": r["d_p"], "alpha_shown": r["alpha_shown"],
+                                                   "adverb": r.get("adverb")}, shown))
+    typer.echo(f"{participant}, case {case}, trial {step['trial']}: d_p {r['d_p']:.1f}"
+               + ("; case done" if last else f"; next: show {shown}" + (f' and say "{r["adverb"]}"' if r.get("adverb") else "")))
+
+
+@study_app.command("seat")
+def study_seat(folder: Path = FOLDER, coach: str = typer.Option(..., help="The human coach's id."),
+               count: int = typer.Option(12, help="How many learner attempts to judge."),
+               seed: int = typer.Option(0, help="Seed of the simulated robot-learners whose attempts are shown.")):
+    """Chapter 5's coach seat: watch a learner's attempt next to the target and type the adverb.
+
+    The attempts are simulated learners' (seeded, thesis family, at 1 to 4 trials of progress,
+    so d_p varies, as the thesis's robot-learner's did); d_p is measured by the coach service."""
+    from schemas.common import clip_from_wire
+    from shared.io import load_clip
+    from shared.study import ADVERB_CHOICES, append, seat_rows
+
+    p, events = _study(folder)
+    if not 1 <= count <= 500:
+        _fail(f"--count must be 1 to 500, got {count}")
+    target = load_clip(folder / "target.npz")
+    done = len([r for r in seat_rows(events) if r["coach"] == coach])
+    session = f"seat-{p['study']}-{coach}"[:64]
+    with _client() as c:
+        if done == 0:
+            c.request("coach", "start", {"session": session, "target": _wire(target), "replace": True,
+                                         "policy": {"kind": "fixed", "alpha": 0.0, "adverb": None}, "check": False})
+        for k in range(done, count):
+            learner = f"seat-{coach}-{k}"[:64]
+            c.request("simulator", "learner_create", {"learner": learner, "target": _wire(target), "index": k,
+                                                      "population_seed": seed, "replace": True})
+            demo, attempt = _wire(target), None
+            for _ in range(1 + k % 4):
+                attempt = c.request("simulator", "learner_imitate", {"learner": learner, "demonstration": demo})["attempts"]
+            c.request("simulator", "delete", {"learner": learner})
+            r = c.request("coach", "attempt", {"session": session, "clips": attempt})
+            shown = _save_shown(folder, f"seat_{coach}_{k + 1}_attempt", clip_from_wire(attempt[0], target.skeleton),
+                                target.fps)
+            typer.echo(f"attempt {k + 1} of {count}: {shown}  (target: {folder / 'target.npz'})")
+            while True:
+                word = typer.prompt(f"adverb ({' / '.join(ADVERB_CHOICES)})").strip().lower()
+                if word in ADVERB_CHOICES:
+                    break
+                typer.echo(f"  one of: {', '.join(ADVERB_CHOICES)}", err=True)
+            append(folder, {"event": "seat", "coach": coach, "attempt": k + 1, "d_p": float(r["d_p"]), "adverb": word,
+                            "shown": str(shown)})
+    typer.echo(f"{coach}: {count} attempts judged")
+
+
+@study_app.command("export")
+def study_export(folder: Path = FOLDER, out: Path = typer.Option(..., help="CSV file for the trials (tidy).")):
+    """Every trial as a tidy CSV (the columns of reproduce's tidy.csv) and the seat's answers beside it."""
+    import csv
+
+    from shared.reproduce.tidy import write
+    from shared.study import seat_rows, tidy
+
+    p, events = _study(folder)
+    rows = tidy(events, p["target"])
+    write(rows, out)
+    seat = seat_rows(events)
+    if seat:
+        with out.with_name(out.stem + "_seat.csv").open("w", newline="") as f:
+            w = csv.DictWriter(f, ("coach", "attempt", "d_p", "adverb"), extrasaction="ignore")
+            w.writeheader()
+            w.writerows(seat)
+    typer.echo(f"wrote {out} ({len(rows)} trials)" + (f" and {out.stem}_seat.csv ({len(seat)} answers)" if seat else ""))
+
+
+@study_app.command("report")
+def study_report(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None, help="Markdown file (default: "
+                                                                                      "FOLDER/report.md).")):
+    """The thesis's tables from the study's trials (read like the simulated runs') and the seat's Table 5.1."""
+    from shared.reproduce.coaching import case_tables, tukey_markdown
+    from shared.study import seat_rows, seat_statistics, tidy
+
+    p, events = _study(folder)
+    rows = tidy(events, p["target"])
+    lines = [f"# Study {p['study']}: {len(p['participants'])} participant(s), cases {p['cases']}", "",
+             f"{len(rows)} trials logged. Design: {p['design']} (seed {p['seed']}).", "", *case_tables(rows)]
+    seat = seat_rows(events)
+    if seat:
+        st = seat_statistics(seat)
+        lines += ["## Coach seat (chapter 5)", "", "| adverb | answers | mean d_p | sd |", "|---|---|---|---|"]
+        for a, v in st["by_adverb"].items():
+            lines.append(f"| {a} | {len(v)} | " + (f"{sum(v) / len(v):.2f} | " if v else "- | ")
+                         + (f"{__import__('numpy').std(v, ddof=1):.2f} |" if len(v) > 1 else "- |"))
+        lines += [""] + (["**Table 5.1**:", "", *tukey_markdown(st["table_5_1"])] if st["table_5_1"] else
+                         ["Table 5.1 needs at least two answers for every adverb."])
+    path = out or folder / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    typer.echo(f"wrote {path}")

@@ -1,0 +1,203 @@
+"""Studies with people (issue 14): the protocol of thesis fig. 4.3 / Table 4.2 with real
+participants, and a coach seat for chapter 5. Bus-free: the CLI (``mirrorcoach study``) wires
+it to the coach service.
+
+A study is a folder:
+
+* ``plan.json``: the participants, each one's order of cases, the target, trials per case and
+  the seed. Orders are **counterbalanced** (a Williams balanced Latin square over the cases:
+  every case comes equally often in every position and, for an even number of cases, after
+  every other case equally often), the square's rows assigned to participants in a seeded
+  random order (:func:`plan`);
+* ``log.jsonl``: every event (the plan, each trial, each seat answer), one JSON object per
+  line, appended and ``fsync``-ed before the command returns, so a killed command loses at
+  most the line it was writing; :func:`read_log` skips a torn last line;
+* ``show/``: the motions to show participants (the target, then each trial's emphatic motion).
+
+Every trial is also kept by the coach service (one session per participant and case,
+``study-<id>-<participant>-case<c>``); a trial the coach completed whose log line was lost is
+taken back from the coach (:func:`missing_trials`).
+
+``export`` writes the tidy table of :mod:`shared.reproduce.tidy` (world ``people``), which the
+report's statistics read exactly as they read the simulated runs' ``tidy.csv``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from shared.errors import BadInput, Conflict
+
+#: the cases a study can run (thesis Table 4.2, 6.1, 6.4) and their policies
+STUDY_CASES = (1, 2, 3, 4, 5, 6, 7, 8)
+ADVERB_CHOICES = ("a little more", "more", "much more")
+
+
+def williams(n: int) -> list[list[int]]:
+    """A Williams balanced Latin square of ``n`` treatments (rows: orders of 0..n-1); for odd
+    ``n`` it and its mirror (2n rows)."""
+    first = [0]
+    lo, hi = 1, n - 1
+    for k in range(1, n):
+        first.append(lo if k % 2 else hi)
+        lo, hi = (lo + 1, hi) if k % 2 else (lo, hi - 1)
+    rows = [[(x + r) % n for x in first] for r in range(n)]
+    return rows + [row[::-1] for row in rows] if n % 2 else rows
+
+
+def plan(participants: int, cases: list[int], seed: int, trials: int = 4, emu2: dict | None = None,
+         aeu_scale: float | None = None) -> dict:
+    """The counterbalanced, seeded plan (module docstring). ``emu2`` maps participant id to
+    EMU-Model 2's alpha without / with adverb (cases 5 and 6); ``aeu_scale`` converts our
+    distances to the thesis's units for AEU-Models 1 and 2 (cases 7 and 8)."""
+    if not 1 <= participants <= 500:
+        raise BadInput(f"participants must be 1 to 500, got {participants}", field="participants")
+    if not cases or len(set(cases)) != len(cases) or any(c not in STUDY_CASES for c in cases):
+        raise BadInput(f"cases must be distinct, from {', '.join(map(str, STUDY_CASES))}; got {cases}", field="cases")
+    if not 2 <= trials <= 20:
+        raise BadInput(f"trials per case must be 2 to 20, got {trials}", field="trials")
+    ids = [f"P{i + 1:02d}" for i in range(participants)]
+    if {5, 6} & set(cases):
+        missing = [p for p in ids if p not in (emu2 or {})]
+        if missing:
+            raise BadInput(f"cases 5 and 6 need EMU-Model 2's alpha per participant (from their own alpha sweep); "
+                           f"missing for {', '.join(missing[:5])}", field="emu2")
+    if {7, 8} & set(cases) and not aeu_scale:
+        raise BadInput("cases 7 and 8 need the AEU calibration (thesis units per our distance unit, "
+                       "`reproduce` reports one)", field="aeu_scale")
+    square = williams(len(cases))
+    rng = np.random.default_rng(seed)
+    rows = [square[k % len(square)] for k in range(participants)]
+    order = rng.permutation(participants)  # which participant takes which row: seeded, random
+    return {"participants": {ids[j]: [cases[x] for x in rows[int(k)]] for j, k in zip(range(participants), order)},
+            "cases": list(cases), "trials": trials, "seed": seed, "emu2": emu2 or {}, "aeu_scale": aeu_scale,
+            "design": "Williams balanced Latin square, rows assigned by a seeded permutation"}
+
+
+def policy(p: dict, participant: str, case: int) -> dict:
+    """The coach's policy for one case (Table 4.2, 6.1, 6.4)."""
+    if case == 1:
+        return {"kind": "fixed", "alpha": 0.0, "adverb": None}
+    if case == 2:
+        return {"kind": "fixed", "alpha": 0.0, "adverb": "more like this"}
+    if case in (3, 4):
+        return {"kind": "fixed", "alpha": 2.0, "adverb": None if case == 3 else "table"}
+    if case in (5, 6):
+        alphas = p["emu2"][participant]
+        a = float(alphas[case - 5] if isinstance(alphas, (list, tuple)) else alphas)
+        return {"kind": "fixed", "alpha": a, "adverb": None if case == 5 else "table"}
+    return {"kind": "aeu1" if case == 7 else "aeu2", "alpha": 2.0, "calibration": float(p["aeu_scale"])}
+
+
+# ---------------------------------------------------------------------------- the log
+def append(folder: Path, event: dict) -> None:
+    """One event, appended and on disk before returning. A line torn by a kill is cut off
+    first (its trial is still the coach's, and :func:`missing_trials` brings it back)."""
+    line = json.dumps({**event, "time": time.time()}, separators=(",", ":")) + "\n"
+    path = Path(folder) / "log.jsonl"
+    if path.exists():
+        with open(path, "r+b") as f:
+            data = f.read()
+            if data and not data.endswith(b"\n"):
+                f.truncate(data.rfind(b"\n") + 1)
+    with open(path, "a", encoding="utf-8") as f:
+        f.write(line)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def read_log(folder: Path) -> list[dict]:
+    path = Path(folder) / "log.jsonl"
+    if not path.exists():
+        raise BadInput(f"{folder} is not a study (no log.jsonl); start one with `mirrorcoach study init`")
+    out = []
+    lines = path.read_text(encoding="utf-8").splitlines()
+    for n, line in enumerate(lines):
+        try:
+            out.append(json.loads(line))
+        except ValueError:
+            if n == len(lines) - 1:  # a line torn by a kill: the coach still has the trial
+                break
+            raise BadInput(f"{path}, line {n + 1}: not JSON (edited by hand?)") from None
+    return out
+
+
+def load(folder: Path) -> dict:
+    events = read_log(folder)
+    if not events or events[0].get("event") != "plan":
+        raise BadInput(f"{folder}/log.jsonl does not start with the study's plan")
+    return events[0]["plan"]
+
+
+def session_name(study: str, participant: str, case: int) -> str:
+    return f"study-{study}-{participant}-case{case}"[:64]
+
+
+def trials_of(events: list[dict]) -> dict[tuple[str, int], list[dict]]:
+    out: dict[tuple[str, int], list[dict]] = {}
+    for e in events:
+        if e.get("event") == "trial":
+            out.setdefault((e["participant"], e["case"]), []).append(e)
+    return out
+
+
+def next_step(p: dict, events: list[dict], participant: str | None = None) -> dict | None:
+    """The next (participant, case, trial) to run: the named participant's, or the first
+    participant with work left; None when the study (or the participant) is done."""
+    done = trials_of(events)
+    who = [participant] if participant else list(p["participants"])
+    for person in who:
+        if person not in p["participants"]:
+            raise BadInput(f"no participant {person!r} in this study ({', '.join(p['participants'])})",
+                           field="participant")
+        for case in p["participants"][person]:
+            n = len(done.get((person, case), []))
+            if n < p["trials"]:
+                return {"participant": person, "case": case, "trial": n + 1}
+    return None
+
+
+def missing_trials(events: list[dict], participant: str, case: int, coach_trials: list[dict]) -> list[dict]:
+    """Trials the coach kept whose log line was lost (a kill between the two)."""
+    have = {e["trial"] for e in trials_of(events).get((participant, case), [])}
+    return [t for t in coach_trials if t["number"] not in have]
+
+
+def trial_event(participant: str, case: int, t: dict, shown: str | None, recovered: bool = False) -> dict:
+    return {"event": "trial", "participant": participant, "case": case, "trial": int(t["number"]),
+            "d_p": float(t["d_p"]), "alpha": float(t["alpha_shown"]), "adverb": t.get("adverb"), "shown_next": shown,
+            **({"recovered_from_coach": True} if recovered else {})}
+
+
+def tidy(events: list[dict], target: str) -> list[dict]:
+    """The study's trials as :mod:`shared.reproduce.tidy` rows (world ``people``)."""
+    return [{"world": "people", "family": "", "target": target, "condition": f"case {e['case']}",
+             "unit": e["participant"], "trial": e["trial"], "d_p": e["d_p"], "alpha": e["alpha"], "adverb": e["adverb"]}
+            for e in events if e.get("event") == "trial"]
+
+
+def seat_rows(events: list[dict]) -> list[dict]:
+    return [e for e in events if e.get("event") == "seat"]
+
+
+def seat_statistics(rows: list[dict]) -> dict:
+    """Chapter 5 from the coach seat: the d_p each adverb was said for, per coach and pooled
+    (fig. 5.4, 5.5), and Table 5.1 (ANOVA and Tukey-Kramer on the pooled d_p by adverb)."""
+    from shared.reproduce.coaching import tukey_table
+
+    by = {a: [r["d_p"] for r in rows if r["adverb"] == a] for a in ADVERB_CHOICES}
+    coaches = sorted({r["coach"] for r in rows})
+    per_coach = {c: {a: [r["d_p"] for r in rows if r["coach"] == c and r["adverb"] == a] for a in ADVERB_CHOICES}
+                 for c in coaches}
+    table = tukey_table({a: v for a, v in by.items()}) if all(len(v) >= 2 for v in by.values()) else None
+    return {"by_adverb": by, "per_coach": per_coach, "table_5_1": table}
+
+
+def check_new(folder: Path) -> None:
+    if (Path(folder) / "log.jsonl").exists():
+        raise Conflict(f"{folder} already holds a study; choose another folder (a study's log is never overwritten)")
