@@ -214,3 +214,35 @@ def test_a_coaching_run_past_its_time_limit_keeps_the_trials_it_completed(tmp_pa
     finally:
         procs.stop()
     assert "Traceback" not in procs.log("coach")
+
+
+def test_listing_interrupted_spaces_while_writers_finish(tmp_path):
+    """A marker removed by a finishing writer between the listing's glob and its read is an
+    operation that finished, not an internal error (seen in `reproduce ch4`: pss/list failed
+    with FileNotFoundError while coach sessions were adding attempts)."""
+    import threading
+
+    from shared.pss.store import SpaceStore
+
+    store = SpaceStore(tmp_path / "spaces")
+    stop = threading.Event()
+
+    def writer(k):
+        n = 0
+        while not stop.is_set() and n < 20_000:
+            with store.writing(f"w{k}", "add"):
+                store._marker(f"w{k}").unlink()  # as commit() does when the write is done
+            n += 1
+
+    threads = [threading.Thread(target=writer, args=(k,)) for k in range(3)]
+    for t in threads:
+        t.start()
+    try:
+        for _ in range(3000):
+            assert all(r["space"].startswith("w") for r in store.interrupted())
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(timeout=30)
+    (tmp_path / "spaces" / "gone.pending.json").write_text("[1, 2]")  # a marker of another shape: still listed
+    assert [r["space"] for r in store.interrupted()] == ["gone"]

@@ -86,12 +86,19 @@ class SpaceStore:
             with self._lock:
                 if name in self._busy:
                     continue
-            try:
+            try:  # a marker may vanish meanwhile: its operation finished, nothing was interrupted
                 info = json.loads(m.read_text())
-            except (OSError, ValueError):
-                info = {}
-            out.append({"space": name, "operation": str(info.get("operation", "build")),
-                        "started": float(info.get("started", m.stat().st_mtime))})
+                started = float(info.get("started", m.stat().st_mtime))
+            except FileNotFoundError:
+                continue
+            except (OSError, ValueError, TypeError, AttributeError):
+                info, started = {}, None
+            if started is None:
+                try:
+                    started = m.stat().st_mtime
+                except FileNotFoundError:
+                    continue
+            out.append({"space": name, "operation": str(info.get("operation", "build")), "started": started})
         return out
 
     # ------------------------------------------------------------------ writing
