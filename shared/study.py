@@ -187,7 +187,9 @@ def seat_rows(events: list[dict]) -> list[dict]:
 
 def seat_statistics(rows: list[dict]) -> dict:
     """Chapter 5 from the coach seat: the d_p each adverb was said for, per coach and pooled
-    (fig. 5.4, 5.5), and Table 5.1 (ANOVA and Tukey-Kramer on the pooled d_p by adverb)."""
+    (fig. 5.4, 5.5), Table 5.1 (ANOVA and Tukey-Kramer on the pooled d_p by adverb) and, from
+    the demonstrations, EMU-Model 1 per coach (eq. 5.5, and eq. 5.9 corrected on d_h)."""
+    from shared.coaching.policies import fit_emu1, fit_emu1_corrected
     from shared.reproduce.coaching import tukey_table
 
     by = {a: [r["d_p"] for r in rows if r["adverb"] == a] for a in ADVERB_CHOICES}
@@ -195,7 +197,45 @@ def seat_statistics(rows: list[dict]) -> dict:
     per_coach = {c: {a: [r["d_p"] for r in rows if r["coach"] == c and r["adverb"] == a] for a in ADVERB_CHOICES}
                  for c in coaches}
     table = tukey_table({a: v for a, v in by.items()}) if all(len(v) >= 2 for v in by.values()) else None
-    return {"by_adverb": by, "per_coach": per_coach, "table_5_1": table}
+    emu1 = {}
+    for c in coaches:
+        demos = [r for r in rows if r["coach"] == c and "d_s" in r]
+        if len(demos) >= 2:
+            corrected, _ = fit_emu1_corrected([(r["x_t"], r["x_p"], r["x_s"]) for r in demos])
+            emu1[c] = {"n": len(demos), "alpha_eq5_5": fit_emu1([r["d_p"] for r in demos], [r["d_s"] for r in demos]),
+                       "alpha_eq5_9": corrected}
+    return {"by_adverb": by, "per_coach": per_coach, "table_5_1": table, "emu1": emu1}
+
+
+def seat_report(rows: list[dict], folder: Path) -> list[str]:
+    """The coach seat's section of a study report, with figs. 5.4-5.6 written beside it."""
+    from shared.reproduce.coaching import _fig, tukey_markdown
+
+    st = seat_statistics(rows)
+    lines = ["## Coach seat (chapter 5)", "", "| adverb | answers | mean d_p | sd |", "|---|---|---|---|"]
+    for a, v in st["by_adverb"].items():
+        lines.append(f"| {a} | {len(v)} | " + (f"{np.mean(v):.2f} | " if v else "- | ")
+                     + (f"{np.std(v, ddof=1):.2f} |" if len(v) > 1 else "- |"))
+    lines += ["", *(["**Table 5.1**:", "", *tukey_markdown(st["table_5_1"])] if st["table_5_1"] else
+                    ["Table 5.1 needs at least two answers for every adverb."]), ""]
+    y = {a: k for k, a in enumerate(ADVERB_CHOICES)}
+    f54 = _fig(Path(folder) / "fig5_4.png", "d_p of each attempt and the adverb said (fig. 5.4)", "d_p", "adverb",
+               {c: ([r["d_p"] for r in rows if r["coach"] == c], [y[r["adverb"]] for r in rows if r["coach"] == c],
+                    None, "o") for c in st["per_coach"]}, None)
+    f55 = _fig(Path(folder) / "fig5_5.png", "mean d_p per adverb (fig. 5.5)", "adverb (0 a little more, 1 more, "
+               "2 much more)", "d_p", {c: ([y[a] for a, v in per.items() if v], [np.mean(v) for v in per.values() if v],
+                                        None, "o-") for c, per in st["per_coach"].items()}, [0, 1, 2])
+    lines += [f"![fig. 5.4]({f54}) ![fig. 5.5]({f55})", ""]
+    demos = [r for r in rows if "d_s" in r]
+    if demos:
+        f56 = _fig(Path(folder) / "fig5_6.png", "d_s against d_p, per coach (fig. 5.6)", "d_p", "d_s",
+                   {c: ([r["d_p"] for r in demos if r["coach"] == c], [r["d_s"] for r in demos if r["coach"] == c],
+                        None, "o") for c in sorted({r["coach"] for r in demos})}, None)
+        lines += [f"![fig. 5.6]({f56})", "", "| coach | demonstrations | EMU-Model 1, eq. 5.5 | corrected, eq. 5.9 |",
+                  "|---|---|---|---|"]
+        lines += [f"| {c} | {e['n']} | {e['alpha_eq5_5']:.2f} | {e['alpha_eq5_9']:.2f} |" for c, e in st["emu1"].items()]
+        lines.append("")
+    return lines
 
 
 def check_new(folder: Path) -> None:

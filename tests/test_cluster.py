@@ -529,17 +529,20 @@ def test_a_study_with_scripted_participants_and_a_coach_seat(cluster, bundled, t
     # the coach seat: a person types adverbs (a wrong word is asked again)
     from shared.bus.client import Client  # noqa: F401  (the seat runs through the CLI only)
 
+    answers = ["more", str(mine[0]), "way more", "much more", str(tmp_path / "none.bvh"), str(mine[1]), "a little more", ""]
     r = subprocess.run([sys.executable, "-m", "shared.cli", "study", "seat", str(study), "--coach", "c1", "--count",
-                        "3"], input="more\nway more\nmuch more\na little more\n", capture_output=True, text=True,
+                        "3", "--demonstrate"], input="\n".join(answers) + "\n", capture_output=True, text=True,
                        env=env, cwd=REPO, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert "one of:" in r.stderr and "3 attempts judged" in r.stdout
+    assert "one of:" in r.stderr and "cannot read" in r.stderr and "3 attempts judged" in r.stdout
     seat = [e for e in (json.loads(x) for x in (study / "log.jsonl").read_text().splitlines()) if e["event"] == "seat"]
     assert [e["adverb"] for e in seat] == ["more", "much more", "a little more"] and all(e["d_p"] > 0 for e in seat)
+    assert [("d_s" in e) for e in seat] == [True, True, False] and seat[0]["d_s"] > 0 and len(seat[0]["x_s"]) >= 2
     r = cli(env, "study", "report", study)
     assert r.returncode == 0, r.stderr
     text = (study / "report.md").read_text()
     assert "Coach seat" in text and "Table 4.3" in text and "not enough units" in text  # 2 cases of table 4.3 only
+    assert "| c1 | 2 |" in text and all((study / f"fig5_{k}.png").stat().st_size > 5000 for k in (4, 5, 6))
     r = cli(env, "study", "attempt", study, mine[0], "--participant", "P09")
     assert r.returncode == 2 and r.stderr.startswith("error: ") and "P09" in r.stderr
 

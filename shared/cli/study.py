@@ -151,11 +151,15 @@ def study_attempt(folder: Path = FOLDER,
 @study_app.command("seat")
 def study_seat(folder: Path = FOLDER, coach: str = typer.Option(..., help="The human coach's id."),
                count: int = typer.Option(12, help="How many learner attempts to judge."),
-               seed: int = typer.Option(0, help="Seed of the simulated robot-learners whose attempts are shown.")):
+               seed: int = typer.Option(0, help="Seed of the simulated robot-learners whose attempts are shown."),
+               demonstrate: bool = typer.Option(False, "--demonstrate", help="After the adverb, ask for a clip of the "
+                                                "coach's own emphatic demonstration (d_s, fig. 5.6, EMU-Model 1).")):
     """Chapter 5's coach seat: watch a learner's attempt next to the target and type the adverb.
 
     The attempts are simulated learners' (seeded, thesis family, at 1 to 4 trials of progress,
-    so d_p varies, as the thesis's robot-learner's did); d_p is measured by the coach service."""
+    so d_p varies, as the thesis's robot-learner's did); d_p is measured by the coach service.
+    With --demonstrate the coach also records an emphatic demonstration: its distance to the
+    target is d_s and its point x_s (eq. 5.2, 5.8)."""
     from schemas.common import clip_from_wire
     from shared.io import load_clip
     from shared.study import ADVERB_CHOICES, append, seat_rows
@@ -187,9 +191,32 @@ def study_seat(folder: Path = FOLDER, coach: str = typer.Option(..., help="The h
                 if word in ADVERB_CHOICES:
                     break
                 typer.echo(f"  one of: {', '.join(ADVERB_CHOICES)}", err=True)
+            extra = _demonstration(c, session, target) if demonstrate else {}
             append(folder, {"event": "seat", "coach": coach, "attempt": k + 1, "d_p": float(r["d_p"]), "adverb": word,
-                            "shown": str(shown)})
+                            "shown": str(shown), **extra})
     typer.echo(f"{coach}: {count} attempts judged")
+
+
+def _demonstration(c, session: str, target) -> dict:
+    """The coach's emphatic demonstration of the attempt just judged: d_s and the three points
+    (x_t, x_p, x_s) in one embedding of the seat's space (eq. 5.2, 5.8); blank: none."""
+    from shared.errors import MirrorcoachError
+
+    while True:
+        answer = typer.prompt("file of your emphatic demonstration (blank: none)", default="", show_default=False).strip()
+        if not answer:
+            return {}
+        try:
+            demo = read_clip(Path(answer), skeleton=target.skeleton)
+            break
+        except (MirrorcoachError, OSError) as e:
+            typer.echo(f"  cannot read {answer}: {e}", err=True)
+    r = c.request("coach", "attempt", {"session": session, "clips": [_wire(demo)]})
+    info = c.request("pss", "info", {"space": f"coach-{session}"})
+    points = {s["name"].split("-")[0]: [float(v) for v in p] for s, p in zip(info["proto_symbols"], info["points"])}
+    n = r["trial"]
+    return {"d_s": float(r["d_p"]), "x_t": points["target"], "x_p": points[f"attempt{n - 1}"],
+            "x_s": points[f"attempt{n}"], "demonstration": answer}
 
 
 @study_app.command("export")
@@ -216,8 +243,8 @@ def study_export(folder: Path = FOLDER, out: Path = typer.Option(..., help="CSV 
 def study_report(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None, help="Markdown file (default: "
                                                                                       "FOLDER/report.md).")):
     """The thesis's tables from the study's trials (read like the simulated runs') and the seat's Table 5.1."""
-    from shared.reproduce.coaching import case_tables, tukey_markdown
-    from shared.study import seat_rows, seat_statistics, tidy
+    from shared.reproduce.coaching import case_tables
+    from shared.study import seat_report, seat_rows, tidy
 
     p, events = _study(folder)
     rows = tidy(events, p["target"])
@@ -225,13 +252,7 @@ def study_report(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None,
              f"{len(rows)} trials logged. Design: {p['design']} (seed {p['seed']}).", "", *case_tables(rows)]
     seat = seat_rows(events)
     if seat:
-        st = seat_statistics(seat)
-        lines += ["## Coach seat (chapter 5)", "", "| adverb | answers | mean d_p | sd |", "|---|---|---|---|"]
-        for a, v in st["by_adverb"].items():
-            lines.append(f"| {a} | {len(v)} | " + (f"{sum(v) / len(v):.2f} | " if v else "- | ")
-                         + (f"{__import__('numpy').std(v, ddof=1):.2f} |" if len(v) > 1 else "- |"))
-        lines += [""] + (["**Table 5.1**:", "", *tukey_markdown(st["table_5_1"])] if st["table_5_1"] else
-                         ["Table 5.1 needs at least two answers for every adverb."])
+        lines += seat_report(seat, folder)
     path = out or folder / "report.md"
     path.write_text("\n".join(lines) + "\n")
     typer.echo(f"wrote {path}")
