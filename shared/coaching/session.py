@@ -32,6 +32,7 @@ distance to the goal since the goal was set, or after ``SUBGOAL_TRIALS`` trials 
 from __future__ import annotations
 
 import time
+import uuid
 from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
@@ -220,7 +221,7 @@ def subgoal_motion(target: Clip, attempts: list[Clip], parts: list[str]) -> Clip
     from shared.agents.learner import body_part, to_phase
     from shared.coaching.parts import rotation_channels
 
-    chans = [c for c in (target.group("motion") or target.channels)]
+    chans = list(target.group("motion") or target.channels)
     mean = np.mean([to_phase(a, chans, target.n_frames) for a in attempts], axis=0)
     out = target.data.copy()
     keep = set(rotation_channels(target))
@@ -240,7 +241,7 @@ def _goal(session: Session, attempts: list[Clip], name: str, number: int, ports:
         goals = []
         for k in range(1, len(order)):
             clip = subgoal_motion(session.target, attempts, order[:k])
-            gname = f"subgoal{k}-{session.name}"[:60]
+            gname = f"subgoal{k}-{uuid.uuid4().hex[:6]}"  # fresh per try: a trial cut short is sent again
             ports.add_attempt(session.space, gname, [clip])
             goals.append({"name": gname, "parts": order[:k], "data": clip.data.tolist()})
         plan = session.subgoals = {"order": order, "goals": goals, "current": 0, "since": number, "start": None}
