@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -545,6 +546,12 @@ def test_a_study_with_scripted_participants_and_a_coach_seat(cluster, bundled, t
     assert "| c1 | 2 |" in text and all((study / f"fig5_{k}.png").stat().st_size > 5000 for k in (4, 5, 6))
     r = cli(env, "study", "attempt", study, mine[0], "--participant", "P09")
     assert r.returncode == 2 and r.stderr.startswith("error: ") and "P09" in r.stderr
+    # a new study in a folder of the same name takes none of the old study's trials from the coach
+    shutil.rmtree(study)
+    assert cli(env, "study", "init", study, "--target", target, "--participants", "2", "--cases", "1,3", "--seed",
+               "7", "--trials", "2").returncode == 0
+    step = json.loads(cli(env, "study", "next", study, "--json").stdout)
+    assert step["trial"] == 1 and step["show"].endswith("target.bvh")
 
 
 def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):

@@ -38,6 +38,21 @@ def _save_shown(folder: Path, name: str, clip, fps: float) -> Path:
     return path
 
 
+def _study_id(folder: Path) -> str:
+    """The study's id on the coach: the folder's name and a random suffix, so a new study in a
+    folder of the same name never takes an old study's sessions for its own."""
+    import re
+    import uuid
+
+    return f"{re.sub(r'[^A-Za-z0-9_]', '_', folder.resolve().name)[:16]}-{uuid.uuid4().hex[:8]}"
+
+
+def _target_shown(folder: Path) -> Path:
+    """The target as participants see it: a BVH in show/ when it has a skeleton."""
+    bvh = folder / "show" / "target.bvh"
+    return bvh if bvh.exists() else folder / "target.npz"
+
+
 @study_app.command("init")
 def study_init(folder: Path = FOLDER,
                target: Path = typer.Option(..., help="The target motion (a clip file)."),
@@ -70,7 +85,8 @@ def study_init(folder: Path = FOLDER,
     from shared.io import save_clip
 
     save_clip(clip, folder / "target.npz")
-    append(folder, {"event": "plan", "plan": {**p, "target": clip.name, "study": folder.resolve().name[:20]}})
+    _save_shown(folder, "target", clip, clip.fps)
+    append(folder, {"event": "plan", "plan": {**p, "target": clip.name, "study": _study_id(folder)}})
     typer.echo(f"study in {folder}: {participants} participant(s), cases {case_list}, {trials} trials each")
     for who, order in p["participants"].items():
         typer.echo(f"  {who}: cases {' -> '.join(map(str, order))}")
@@ -109,7 +125,7 @@ def study_next(folder: Path = FOLDER, participant: Optional[str] = typer.Option(
         return
     done = trials_of(events).get((step["participant"], step["case"]), [])
     shown = done[-1].get("shown_next") if done else None
-    step.update({"show": shown or str(folder / "target.npz"), "say": done[-1].get("adverb") if done else None})
+    step.update({"show": shown or str(_target_shown(folder)), "say": done[-1].get("adverb") if done else None})
     if as_json:
         typer.echo(json.dumps(step))
     else:
@@ -185,7 +201,7 @@ def study_seat(folder: Path = FOLDER, coach: str = typer.Option(..., help="The h
             r = c.request("coach", "attempt", {"session": session, "clips": attempt})
             shown = _save_shown(folder, f"seat_{coach}_{k + 1}_attempt", clip_from_wire(attempt[0], target.skeleton),
                                 target.fps)
-            typer.echo(f"attempt {k + 1} of {count}: {shown}  (target: {folder / 'target.npz'})")
+            typer.echo(f"attempt {k + 1} of {count}: {shown}  (target: {_target_shown(folder)})")
             while True:
                 word = typer.prompt(f"adverb ({' / '.join(ADVERB_CHOICES)})").strip().lower()
                 if word in ADVERB_CHOICES:
