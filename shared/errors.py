@@ -41,6 +41,12 @@ class Unavailable(MirrorcoachError):
     code = "unavailable"
 
 
+class Forbidden(MirrorcoachError):
+    """The cluster's access control does not let this identity's role do that (issue 16)."""
+
+    code = "forbidden"
+
+
 class ClipFormatError(BadInput):
     """A clip or skeleton file cannot be read; names the file and, where known, the line."""
 

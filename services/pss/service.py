@@ -140,4 +140,5 @@ def make_service(settings: Settings | None = None) -> Service:
         return {"space": req["space"], "deleted": True}
 
     svc.store = store
+    svc.on_promote.append(store.forget)
     return svc

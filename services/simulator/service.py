@@ -203,5 +203,6 @@ def make_service(settings: Settings | None = None) -> Service:
         return {"deleted": store.delete(req["other"], req["learner"])}
 
     svc.store = store
+    svc.on_promote.append(store.reload)
     return svc
 

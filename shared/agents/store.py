@@ -53,12 +53,15 @@ class AgentStore:
         (self.root / "others").mkdir(parents=True, exist_ok=True)
         (self.root / "learners").mkdir(parents=True, exist_ok=True)
         self.lock = threading.RLock()
-        self.others: dict[str, tuple[str, object]] = {}
-        self.learners: dict[str, SimulatedLearner] = {}
-        for p in sorted((self.root / "others").glob("*.json")):
-            self.others[p.stem] = self._load_other(p)
-        for p in sorted((self.root / "learners").glob("*.npz")):
-            self.learners[p.stem] = self._load_learner(p)
+        self.reload()
+
+    def reload(self) -> None:
+        """Read every other and learner from the files (at start, and when a standby starts to lead:
+        another instance may have changed them, shared/bus/runtime.py)."""
+        others = {p.stem: self._load_other(p) for p in sorted((self.root / "others").glob("*.json"))}
+        learners = {p.stem: self._load_learner(p) for p in sorted((self.root / "learners").glob("*.npz"))}
+        with self.lock:
+            self.others, self.learners = others, learners
 
     @staticmethod
     def _load_other(path: Path) -> tuple[str, object]:

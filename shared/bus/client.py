@@ -15,7 +15,7 @@ import time
 
 from shared.bus.config import Settings, client_config
 from shared.codec import pack, unpack
-from shared.errors import BadInput, MirrorcoachError, Unavailable
+from shared.errors import BadInput, Forbidden, MirrorcoachError, Unavailable
 
 __all__ = ["Client", "RemoteError", "Unavailable"]
 
@@ -41,6 +41,12 @@ class Client:
         try:
             self.session = zenoh.open(client_config(self.settings, wait=False, connect_timeout_s=connect_timeout_s))
         except zenoh.ZError:
+            ident = self.settings.identity
+            if ident is not None:
+                raise Unavailable(f"cannot reach the cluster's router at {self.settings.router} as {ident.name!r} "
+                                  f"(TLS): the router is down or unreachable, or it refused this identity's "
+                                  f"certificate (not from the cluster's CA, or expired)", router=self.settings.router,
+                                  identity=ident.name) from None
             raise Unavailable(f"the cluster is not running (no router at {self.settings.router}; start it with `make up`)",
                               router=self.settings.router) from None
         self._subs = []
@@ -66,6 +72,10 @@ class Client:
             raise BadInput(f"the request is {len(payload) / 2**20:.1f} MiB; services accept at most "
                            f"{self.settings.max_payload / 2**20:.0f} MiB (MIRRORCOACH_MAX_PAYLOAD)",
                            size=len(payload), limit=self.settings.max_payload)
+        ident = self.settings.identity
+        if ident is not None and ident.role == "dashboard":  # the router would drop it; say why now
+            raise Forbidden(f"identity {ident.name!r} has the dashboard role: it may only watch events, not call "
+                            f"{service}/{verb}", identity=ident.name, role=ident.role)
         t0 = time.monotonic()
         replies = self.session.get(self.settings.key(service, verb), payload=payload, timeout=timeout)
         for r in replies:
@@ -100,6 +110,17 @@ class Client:
         from shared.cluster import local_state
 
         where = {"service": service, "router": self.settings.router}
+        if self.settings.identity is not None:  # deployed: no local pid files to read; the tokens say it all
+            alive = service in self.alive(timeout=1.0)
+            if not list(self.session.info.routers_zid()):
+                return Unavailable(f"lost the link to the cluster's router at {self.settings.router} while waiting for "
+                                   f"{service}/{verb}; retry when the link is back", cause="router_down", **where)
+            if not alive:
+                return Unavailable(f"service {service} is not running on any host of the cluster (no instance holds "
+                                   f"its liveliness token)", cause="not_running", **where)
+            return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s (its host or link may "
+                               f"have failed mid-request; a standby takes over within seconds); retry",
+                               cause="timeout", timeout=timeout, **where)
         if not list(self.session.info.routers_zid()) or not self._router_listens():
             return Unavailable(f"lost the connection to the cluster's router at {self.settings.router} while waiting "
                                f"for {service} (the router stopped or was killed; `make status` shows it, the "

@@ -24,6 +24,10 @@ variable                          default                     meaning
 ``MIRRORCOACH_RECORDINGS``        ``10``                      recordings kept (the oldest are deleted)
 ``MIRRORCOACH_OBSERVER_QUEUE_MB`` ``256``                     events waiting for the observer; more are
                                                               dropped (counted in its log)
+``MIRRORCOACH_DEPLOY``            (unset)                     a deployed cluster across hosts (issue 16): this
+                                                              process's identity folder from `mirrorcoach
+                                                              deploy init` (TLS, access control, routers);
+                                                              see shared/bus/deploy.py
 ================================  ==========================  ===========================================
 
 The embedded default topology (DESIGN.md "Bus conventions"): one router-mode Zenoh session
@@ -96,9 +100,21 @@ class Settings:
     recording_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_RECORDING_MB", 64.0, float))
     recordings: int = field(default_factory=lambda: _env_num("MIRRORCOACH_RECORDINGS", 10))
     observer_queue_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_OBSERVER_QUEUE_MB", 256.0, float))
+    deploy: Path | None = field(default_factory=lambda: Path(_env("MIRRORCOACH_DEPLOY", "")) if _env(
+        "MIRRORCOACH_DEPLOY", "") else None)
+    identity: object = None  # shared.bus.deploy.Identity when deployed
 
     def __post_init__(self):
-        check_loopback(self.router)
+        if self.deploy is not None:  # several hosts: TLS and the identity's routers, never the loopback default
+            from shared.bus.deploy import load_identity
+
+            self.identity = load_identity(self.deploy)
+            if os.environ.get("MIRRORCOACH_PREFIX", "").strip() not in ("", self.identity.prefix):
+                raise BadInput(f"MIRRORCOACH_PREFIX={os.environ['MIRRORCOACH_PREFIX']} but the deployed identity's "
+                               f"prefix is {self.identity.prefix!r}; unset one")
+            self.prefix, self.router = self.identity.prefix, ", ".join(self.identity.routers)
+        else:
+            check_loopback(self.router)
         if not 1 <= self.workers <= 64:
             raise BadInput(f"MIRRORCOACH_WORKERS must be 1..64, got {self.workers}")
         if not 1 <= self.waiting <= 1000:
@@ -156,7 +172,14 @@ def _base(mode: str, s: Settings):
 
 
 def router_config(s: Settings):
-    """The router: listens on the loopback endpoint and nowhere else."""
+    """The router: listens on the loopback endpoint and nowhere else (deployed: its identity's
+    Zenoh config, TLS and access control)."""
+    if s.identity is not None:
+        from shared.bus.deploy import load_config
+
+        if s.identity.role != "router":
+            raise BadInput(f"MIRRORCOACH_DEPLOY={s.deploy} is the identity of a {s.identity.role}, not of a router")
+        return load_config(s.identity)
     c = _base("router", s)
     c.insert_json5("listen/endpoints", json.dumps([s.router]))
     return c
@@ -164,10 +187,16 @@ def router_config(s: Settings):
 
 def client_config(s: Settings, wait: bool = True, connect_timeout_s: float = 3.0):
     """A client of the router. Services wait for it forever (start order does not matter);
-    the CLI gives up after ``connect_timeout_s`` with a clear message."""
-    c = _base("client", s)
-    c.insert_json5("listen/endpoints", "[]")
-    c.insert_json5("connect/endpoints", json.dumps([s.router]))
+    the CLI gives up after ``connect_timeout_s`` with a clear message. Deployed: the identity's
+    Zenoh config (TLS with its own certificate, every router of the cluster)."""
+    if s.identity is not None:
+        from shared.bus.deploy import load_config
+
+        c = load_config(s.identity)
+    else:
+        c = _base("client", s)
+        c.insert_json5("listen/endpoints", "[]")
+        c.insert_json5("connect/endpoints", json.dumps([s.router]))
     c.insert_json5("connect/timeout_ms", "-1" if wait else str(int(connect_timeout_s * 1000)))
     c.insert_json5("connect/exit_on_failure", "false" if wait else "true")
     return c

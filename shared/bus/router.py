@@ -1,12 +1,83 @@
 """``python -m shared.bus.router``: the embedded Zenoh router (a router-mode session on the
-loopback endpoint; no zenohd binary is needed). Runs until SIGTERM or SIGINT."""
+loopback endpoint; no zenohd binary is needed). Runs until SIGTERM or SIGINT.
+
+Deployed (``MIRRORCOACH_DEPLOY`` names a router identity, issue 16) it listens with TLS and
+mutual authentication and enforces the cluster's access control; every refusal is logged, one
+line each (:class:`RefusalLog`): a message the access control denied (who, what, on which key)
+and a TLS handshake that failed (no certificate, another CA, a wrong name).
+"""
 
 from __future__ import annotations
 
 import logging
+import os
+import re
 import signal
 import sys
 import threading
+
+log = logging.getLogger("mirrorcoach.router")
+
+#: Zenoh's own log filter on a deployed router: its access-control decisions (trace is the only
+#: level at which Zenoh logs a denial) and TLS accept errors; RefusalLog keeps the refusals only
+ZENOH_LOG = "warn,zenoh::net::routing::interceptor::access_control=trace,zenoh_link_tls=debug"
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+_DENIED = re.compile(r"CertCommonName\((?P<cn>[^)]*)\).* is unauthorized to (?P<what>.+?) \((?P<flow>ingress|egress)\) "
+                     r"on (?P<key>\S+)")
+_THREAD = re.compile(r"ThreadId\(\d+\)")
+_CACHING = re.compile(r"caching permissions for `(?P<key>[^`]*)`")
+_TLS_FAIL = re.compile(r"(?i)alert|handshake|certificate|invalid|unknown|error|fail")
+_HINT = re.compile(r"\s*Hint: increase the system open file limit\.?")  # Zenoh's hint on every TLS error
+
+
+class RefusalLog:
+    """Reads what Zenoh's Rust logger writes (to stdout, fd 1, here through a pipe) and keeps, on
+    stderr: warnings and errors,
+    each access-control refusal as ``refused: <common name> may not <what> (<flow>) on <key>``,
+    and failed TLS handshakes as ``refused a TLS connection: ...``. The rest (Zenoh's trace of
+    every *allowed* decision) is dropped, so the log stays small."""
+
+    def __init__(self):
+        self.out = os.fdopen(os.dup(2), "w", buffering=1)
+        r, w = os.pipe()
+        os.dup2(w, 1)
+        os.close(w)
+        self._r = r
+        self._seen: dict[tuple, int] = {}
+        self._caching: dict[str, str] = {}  # thread -> the key whose permissions it is caching
+        threading.Thread(target=self._pump, name="refusal-log", daemon=True).start()
+
+    def _pump(self) -> None:
+        with os.fdopen(self._r, "r", errors="replace") as f:
+            for raw in f:
+                line = _ANSI.sub("", raw).rstrip()
+                self.keep(line)
+
+    def keep(self, line: str) -> None:
+        thread = _THREAD.search(line)
+        thread = thread.group(0) if thread else ""
+        c = _CACHING.search(line)
+        if c:  # this thread then evaluates every kind of message on that key once: not decisions
+            self._caching[thread] = c["key"]
+            return
+        if " is authorized to " in line:  # allowed: nothing to log (a caching block goes on)
+            return
+        m = _DENIED.search(line)
+        if m and m["key"] == self._caching.get(thread) and "cached result" not in line:
+            return
+        self._caching.pop(thread, None)
+        if m:
+            k = (m["cn"], m["what"], m["flow"], m["key"])
+            n = self._seen[k] = self._seen.get(k, 0) + 1
+            if n <= 20 or n % 1000 == 0:  # a flood of one refusal cannot fill the disk
+                self.out.write(f"{line[:27]} router REFUSED {m['cn'] or '?'} may not {m['what']} ({m['flow']}) on "
+                               f"{m['key']}" + (f" ({n} times)" if n > 20 else "") + "\n")
+            return
+        if "zenoh_link_tls" in line and "Accepted TLS connection" not in line and _TLS_FAIL.search(line):
+            what = _HINT.sub("", line.split("zenoh_link_tls::unicast:", 1)[-1]).strip()
+            self.out.write(f"{line[:27]} router REFUSED a TLS connection: {what}\n")
+        elif " WARN " in line or " ERROR " in line:
+            self.out.write(line + "\n")
 
 
 def main() -> int:
@@ -18,21 +89,29 @@ def main() -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s router %(levelname)s %(message)s")
     try:
         settings = Settings()
-        session = zenoh.open(router_config(settings))
+        config = router_config(settings)
     except MirrorcoachError as e:
         print(f"error: {e.message}", file=sys.stderr)
         return 2
+    if settings.identity is not None:
+        RefusalLog()
+        zenoh.init_log_from_env_or(ZENOH_LOG)
+    try:
+        session = zenoh.open(config)
     except zenoh.ZError as e:
+        if settings.identity is not None:
+            log.error("cannot listen on %s: %s", settings.router, e)
         print(f"error: cannot listen on {settings.router}: {e}", file=sys.stderr)
         return 2
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    logging.info("router listening on %s", settings.router)
+    where = ", ".join(settings.identity.listen) + " (TLS, access control)" if settings.identity else settings.router
+    log.info("router listening on %s", where)
     while not stop.wait(0.5):
         pass
     session.close()
-    logging.info("router stopped")
+    log.info("router stopped")
     return 0
 
 

@@ -18,6 +18,17 @@ A :class:`Service` answers the verbs of its contract (``schemas/<service>.py``) 
    ``internal`` (logged with its traceback, never shown to the caller);
 4. the query is always finalised (``with query``), so a caller never waits for a timeout.
 
+Deployed across hosts (``MIRRORCOACH_DEPLOY``, issue 16), several instances of a service may run
+on different hosts: exactly one **leads** (declares the queryable and the tokens
+``<prefix>/alive/<service>`` and ``<prefix>/leader/<service>/<identity>``), the others stand by
+and take over when no leader token is left, which the router drops when the leader's process
+dies or its link is silent for the lease (3 s). A leader that loses its router steps down at
+once; of two leaders (a healed partition) the one with the smaller name stays. Leadership is
+sticky: an instance that comes back stands by. State lives on storage both hosts mount
+(``MIRRORCOACH_HOME``): a write is an atomic rename completed before the reply, so whatever a
+caller was told is done is on the shared disk when the standby takes over; ``on_promote`` hooks
+drop what an instance kept in memory from an earlier term.
+
 The service declares the liveliness token ``<prefix>/alive/<service>``, publishes events on
 ``<prefix>/events/<service>/<topic>`` (congestion control BLOCK: events are not dropped) and a
 ``request`` event per answered request (verb, milliseconds, code) for the observer. SIGTERM or
@@ -73,6 +84,13 @@ class Service:
         self.settings = settings or Settings()
         self.handlers: dict[str, Callable[[dict], dict]] = {}
         self.on_stop: list[Callable[[], None]] = []
+        self.on_promote: list[Callable[[], None]] = []  # deployed: before this instance starts to lead
+        self.leading = False
+        self._leader_token = None
+        ident = self.settings.identity
+        if ident is not None and ident.role != name:
+            raise BadInput(f"MIRRORCOACH_DEPLOY={self.settings.deploy} is the identity of {ident.name!r}, a "
+                           f"{ident.role}; service {name} needs one of its own (`mirrorcoach deploy init`)")
         self.workers = workers or self.settings.workers
         self.stop_grace_s = stop_grace_s
         self._stop = threading.Event()
@@ -124,10 +142,63 @@ class Service:
         for topic in list(self.events) + ["request"]:
             self._publishers[topic] = self._session.declare_publisher(
                 self.settings.key("events", self.name, topic), congestion_control=zenoh.CongestionControl.BLOCK)
-        self._queryable = self._session.declare_queryable(self.settings.key(self.name, "*"), self._on_query)
-        self._token = self._session.liveliness().declare_token(self.settings.key("alive", self.name))
+        if self.settings.identity is None:
+            self._queryable = self._session.declare_queryable(self.settings.key(self.name, "*"), self._on_query)
+            self._token = self._session.liveliness().declare_token(self.settings.key("alive", self.name))
+            self.leading = True
+        else:
+            threading.Thread(target=self._leadership, name=f"{self.name}-leadership", daemon=True).start()
         log.info("service %s up on %s (prefix %s)", self.name, self.settings.router, self.settings.prefix)
         return self
+
+    # ------------------------------------------------------------------ leadership (deployed)
+    def _leaders(self) -> list[str]:
+        out = []
+        for r in self._session.liveliness().get(self.settings.key("leader", self.name, "*"), timeout=1.0):
+            if r.ok is not None:
+                out.append(str(r.ok.key_expr).rsplit("/", 1)[-1])
+        return out
+
+    def _leadership(self, period_s: float = 0.5) -> None:
+        """Lead or stand by (module docstring), checked every ``period_s`` until stopped."""
+        me = self.settings.identity.name
+        while not self._stop.wait(period_s):
+            try:
+                connected = bool(list(self._session.info.routers_zid()))
+                if self.leading:
+                    if not connected:
+                        self._step_down("lost the link to the router")
+                    elif any(n < me for n in self._leaders() if n != me):
+                        self._step_down("another instance leads (a healed partition); the smaller name stays")
+                elif connected and not self._leaders():
+                    self._lead()
+            except Exception:  # a closing session: the loop ends with the stop event
+                if not self._stop.is_set():
+                    log.exception("leadership check failed")
+
+    def _lead(self) -> None:
+        if self._stop.is_set():
+            return
+        for hook in self.on_promote:
+            hook()
+        me = self.settings.identity.name
+        self._leader_token = self._session.liveliness().declare_token(self.settings.key("leader", self.name, me))
+        self._queryable = self._session.declare_queryable(self.settings.key(self.name, "*"), self._on_query)
+        self._token = self._session.liveliness().declare_token(self.settings.key("alive", self.name))
+        self.leading = True
+        log.warning("service %s: %s leads (answers requests)", self.name, me)
+
+    def _step_down(self, why: str) -> None:
+        self.leading = False
+        for attr in ("_queryable", "_token", "_leader_token"):
+            obj = getattr(self, attr)
+            setattr(self, attr, None)
+            if obj is not None:
+                try:
+                    obj.undeclare()
+                except Exception:  # the session may already be cut off
+                    pass
+        log.warning("service %s: %s stands by (%s)", self.name, self.settings.identity.name, why)
 
     def run(self) -> int:
         """Start, serve until SIGTERM/SIGINT, stop. Returns the exit code."""
@@ -162,8 +233,10 @@ class Service:
             if self._client is not None:
                 self._client.close()
                 self._client = None
-        if self._token is not None:
-            self._token.undeclare()
+        for attr in ("_token", "_leader_token"):
+            if getattr(self, attr) is not None:
+                getattr(self, attr).undeclare()
+                setattr(self, attr, None)
         for p in self._publishers.values():
             p.undeclare()
         self._publishers.clear()

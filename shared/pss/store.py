@@ -52,6 +52,12 @@ class SpaceStore:
             if m.stat().st_size == 0:  # (a full disk): written before any work, so no operation began
                 m.unlink(missing_ok=True)
 
+    def forget(self) -> None:
+        """Drop the spaces kept in memory: the files are the truth (a standby that starts to lead,
+        shared/bus/runtime.py)."""
+        with self._lock:
+            self._cache.clear()
+
     # ------------------------------------------------------------------ paths
     def path(self, name: str) -> Path:
         return self.root / f"{check_name(name)}.npz"
