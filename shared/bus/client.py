@@ -116,8 +116,9 @@ class Client:
                 return Unavailable(f"lost the link to the cluster's router at {self.settings.router} while waiting for "
                                    f"{service}/{verb}; retry when the link is back", cause="router_down", **where)
             if not alive:
-                return Unavailable(f"service {service} is not running on any host of the cluster (no instance holds "
-                                   f"its liveliness token)", cause="not_running", **where)
+                return Unavailable(f"service {service} is not reachable: no instance on any host holds its liveliness "
+                                   f"token (not running, or its host is down or cut off); retry when it is back",
+                                   cause="not_running", **where)
             return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s (its host or link may "
                                f"have failed mid-request; a standby takes over within seconds); retry",
                                cause="timeout", timeout=timeout, **where)

@@ -1,0 +1,370 @@
+"""Issue 16: a cluster across hosts, secured. Real routers and services with TLS and Zenoh's
+access control; first on loopback, then on three "hosts" in network namespaces this test makes
+(``ip netns``, veth, a bridge, 10.213.0.0/24), torn down at the end."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import stat
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+SERVICES = ("pss", "simulator", "coach", "dialogue", "estimator")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def run(args, env=None, timeout=120, ns: str | None = None, input=None):
+    cmd = [sys.executable, "-m", "shared.cli", *map(str, args)]
+    if ns:
+        cmd = ["ip", "netns", "exec", ns, *cmd]
+    return subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=REPO, timeout=timeout, input=input)
+
+
+def env_for(deploy: Path, home: Path, **extra) -> dict:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MIRRORCOACH_")}
+    env.update({"MIRRORCOACH_DEPLOY": str(deploy), "MIRRORCOACH_HOME": str(home), "MIRRORCOACH_TIMEOUT": "20"})
+    env.update(extra)
+    return env
+
+
+class Procs:
+    """Processes of a deployed cluster (each in its namespace, if any), stopped at the end."""
+
+    def __init__(self, logs: Path):
+        self.logs = logs
+        logs.mkdir(parents=True, exist_ok=True)
+        self.procs: dict[str, subprocess.Popen] = {}
+
+    def start(self, name: str, module: str, env: dict, ns: str | None = None) -> None:
+        cmd = [sys.executable, "-m", module]
+        if ns:
+            cmd = ["ip", "netns", "exec", ns, *cmd]
+        log = open(self.logs / f"{name}.log", "w")
+        self.procs[name] = subprocess.Popen(cmd, env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=log,
+                                            start_new_session=True)
+
+    def log(self, name: str) -> str:
+        return (self.logs / f"{name}.log").read_text()
+
+    def kill(self, name: str, sig=signal.SIGKILL) -> None:
+        p = self.procs.pop(name)
+        os.killpg(p.pid, sig)
+        p.wait(timeout=30)
+
+    def stop(self) -> None:
+        for name in list(self.procs):
+            p = self.procs.pop(name)
+            try:
+                os.killpg(p.pid, signal.SIGTERM)
+                p.wait(timeout=20)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                try:
+                    os.killpg(p.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+
+
+def wait_alive(env: dict, services, ns: str | None = None, within: float = 60.0) -> None:
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:  # bounded
+        r = run(["status"], env=env, ns=ns, timeout=60)
+        alive = {ln.split()[0] for ln in r.stdout.splitlines() if len(ln.split()) > 1 and ln.split()[1] == "alive"}
+        if set(services) <= alive:
+            return
+        time.sleep(0.5)
+    raise AssertionError(f"not alive within {within} s: {set(services) - alive}\n{r.stdout}{r.stderr}")
+
+
+def wait_for(cond, within: float, what: str, step: float = 0.5):
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:  # bounded
+        out = cond()
+        if out:
+            return out
+        time.sleep(step)
+    raise AssertionError(f"{what}: not within {within} s")
+
+
+def clips(hdm05: Path, label: str, n: int) -> list[Path]:
+    return sorted((hdm05 / "amc" / label).glob("*.amc"))[:n]
+
+
+# ---------------------------------------------------------------------------------------- deploy init
+def test_deploy_init_makes_a_ca_and_one_identity_per_process(tmp_path):
+    from cryptography import x509
+    from cryptography.hazmat.primitives.asymmetric import ec
+
+    out = tmp_path / "d"
+    r = run(["deploy", "init", out, "--router", "hub=10.0.0.1", "--identity", "pss-a:pss", "--identity", "pss-b:pss",
+             "--identity", "cli", "--identity", "dashboard"])
+    assert r.returncode == 0, r.stderr
+    ca = x509.load_pem_x509_certificate((out / "ca" / "ca.pem").read_bytes())
+    names = {}
+    for name in ("hub", "pss-a", "pss-b", "cli", "dashboard"):
+        folder = out / name
+        assert stat.S_IMODE((folder / "key.pem").stat().st_mode) == 0o600
+        cert = x509.load_pem_x509_certificate((folder / "cert.pem").read_bytes())
+        ca.public_key().verify(cert.signature, cert.tbs_certificate_bytes, ec.ECDSA(cert.signature_hash_algorithm))
+        names[name] = cert.subject.rfc4514_string()
+        meta = json.loads((folder / "identity.json").read_text())
+        assert meta["routers"] == ["tls/10.0.0.1:7447"] and meta["name"] == name
+    assert names["pss-b"] == "CN=pss-b" and stat.S_IMODE((out / "ca" / "ca.key").stat().st_mode) == 0o600
+    hub = x509.load_pem_x509_certificate((out / "hub" / "cert.pem").read_bytes())
+    sans = hub.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert "10.0.0.1" in {str(ip) for ip in sans.get_values_for_type(x509.IPAddress)}
+    acl = json.loads((out / "hub" / "zenoh.json5").read_text())["access_control"]
+    assert acl["default_permission"] == "deny"
+    subjects = {s["id"]: s["cert_common_names"] for s in acl["subjects"]}
+    assert subjects["pss"] == ["pss-a", "pss-b"] and subjects["dashboard"] == ["dashboard"]
+    rules = {r["id"]: r for r in acl["rules"]}
+    dash = [rules[i] for p in acl["policies"] if p["subjects"] == ["dashboard"] for i in p["rules"]]
+    assert not any(set(r["messages"]) & {"query", "declare_queryable"} for r in dash)
+    assert not any("put" in r["messages"] and "ingress" in r["flows"] for r in dash)
+    cli_rules = [rules[i] for p in acl["policies"] if p["subjects"] == ["cli"] for i in p["rules"]]
+    assert not any("declare_queryable" in r["messages"] or ("put" in r["messages"] and "ingress" in r["flows"])
+                   for r in cli_rules)
+    assert "tcp" not in json.dumps(json.loads((out / "cli" / "zenoh.json5").read_text())["transport"]["link"])
+    # never overwrites keys; bad input is one line
+    r = run(["deploy", "init", out, "--router", "hub=10.0.0.1"])
+    assert r.returncode == 2 and r.stderr.startswith("error: ") and "already exist" in r.stderr
+    r = run(["deploy", "init", tmp_path / "e", "--router", "10.0.0.1"])
+    assert r.returncode == 2 and "NAME=ADDRESS" in r.stderr
+    r = run(["deploy", "init", tmp_path / "e", "--router", "hub=10.0.0.1", "--identity", "x:root"])
+    assert r.returncode == 2 and "role must be one of" in r.stderr
+    # an identity folder with a part missing: a clear error, no traceback
+    (out / "cli" / "key.pem").unlink()
+    r = run(["space", "list"], env=env_for(out / "cli", tmp_path / "home"))
+    assert r.returncode == 2 and "key.pem is missing" in r.stderr and "Traceback" not in r.stderr
+
+
+# ---------------------------------------------------------------------------------------- loopback
+@pytest.fixture
+def secured(tmp_path, hdm05):
+    """A deployed cluster on loopback (TLS on 127.0.0.1): router, pss, simulator, coach."""
+    port = free_port()
+    out = tmp_path / "d"
+    r = run(["deploy", "init", out, "--router", f"router=127.0.0.1:{port}", "--identity", "pss", "--identity",
+             "simulator", "--identity", "coach", "--identity", "cli", "--identity", "dashboard"])
+    assert r.returncode == 0, r.stderr
+    home = tmp_path / "home"
+    procs = Procs(tmp_path / "logs")
+    try:
+        procs.start("router", "shared.bus.router", env_for(out / "router", home))
+        for s in ("pss", "simulator", "coach"):
+            procs.start(s, f"services.{s}", env_for(out / s, home))
+        wait_alive(env_for(out / "cli", home), ("pss", "simulator", "coach"))
+        yield out, home, procs, port
+    finally:
+        procs.stop()
+
+
+def _raw_session(folder: Path, drop_cert: bool = False):
+    """A Zenoh session with an identity's config (optionally without its certificate)."""
+    import zenoh
+
+    from shared.bus.deploy import load_config, load_identity
+
+    cfg = load_config(load_identity(folder))
+    if drop_cert:
+        cfg.insert_json5("transport/link/tls/connect_private_key", "null")
+        cfg.insert_json5("transport/link/tls/connect_certificate", "null")
+    cfg.insert_json5("connect/timeout_ms", "3000")
+    cfg.insert_json5("connect/exit_on_failure", "true")
+    return zenoh.open(cfg)
+
+
+def test_the_secured_cluster_serves_its_roles_and_refuses_the_rest(secured, tmp_path, hdm05):
+    import zenoh
+
+    out, home, procs, port = secured
+    cli_env = env_for(out / "cli", home)
+    squats, throws = clips(hdm05, "squat1Reps", 3), clips(hdm05, "throwBasketball", 3)
+    r = run(["space", "build", "s", *squats, *throws], env=cli_env)
+    assert r.returncode == 0, r.stderr
+    r = run(["space", "recognize", "s", clips(hdm05, "squat1Reps", 4)[-1], "--json"], env=cli_env)
+    assert r.returncode == 0 and json.loads(r.stdout)["label"] == "squat1Reps", r.stderr
+
+    # no certificate: the TLS handshake fails (mutual authentication), and the router says so
+    with pytest.raises(zenoh.ZError):
+        _raw_session(out / "cli", drop_cert=True)
+    # a certificate from another CA: refused the same way; the CLI says why in one line
+    other = tmp_path / "other"
+    assert run(["deploy", "init", other, "--router", f"router=127.0.0.1:{port}", "--identity", "cli"]).returncode == 0
+    r = run(["space", "list"], env=env_for(other / "cli", home))
+    assert r.returncode == 2 and "refused this identity's certificate" in r.stderr, r.stderr
+    wait_for(lambda: procs.log("router").count("REFUSED a TLS connection") >= 2, 10, "the router logs both refusals")
+
+    # the dashboard role: may not call coach/start, nor serve mc/pss/**, nor publish events
+    dash = _raw_session(out / "dashboard")
+    try:
+        replies = list(dash.get("mc/coach/start", payload=b"\x80", timeout=3.0))
+        assert not any(x.ok is not None for x in replies)
+        fake = dash.declare_queryable("mc/pss/*", lambda q: q.reply(q.key_expr, b"not the pss service"))
+        dash.put("mc/events/coach/trial", b"fake")
+        time.sleep(1.0)
+        for _ in range(3):  # recognition still answered by the real pss only
+            r = run(["space", "recognize", "s", squats[0], "--json"], env=cli_env)
+            assert r.returncode == 0 and json.loads(r.stdout)["label"] == "squat1Reps", r.stderr
+        fake.undeclare()
+    finally:
+        dash.close()
+    # the CLI role may query, not serve
+    c = _raw_session(out / "cli")
+    try:
+        c.declare_queryable("mc/coach/*", lambda q: q.reply(q.key_expr, b"impostor"))
+        time.sleep(1.0)
+        r = run(["coach", "list"], env=cli_env)
+        assert r.returncode == 0 and "impostor" not in r.stdout, r.stderr
+    finally:
+        c.close()
+    # through the CLI, the dashboard identity is told at once why it may not
+    r = run(["coach", "list"], env=env_for(out / "dashboard", home))
+    assert r.returncode == 2 and "dashboard role" in r.stderr
+    log = wait_for(lambda: (lambda t: t if "on mc/pss/*" in t and "mc/events/coach/trial" in t else None)(
+        procs.log("router")), 10, "refusals in the router's log")
+    assert "REFUSED dashboard may not Query (ingress) on mc/coach/start" in log
+    assert "REFUSED dashboard may not Declare Queryable (ingress) on mc/pss/*" in log
+    assert "REFUSED dashboard may not Put (ingress) on mc/events/coach/trial" in log
+    assert "REFUSED cli may not Declare Queryable (ingress) on mc/coach/*" in log
+    # the roles the demo uses were never refused anything
+    assert not any(f"REFUSED {n} " in log for n in ("pss", "simulator", "coach"))
+
+
+# ---------------------------------------------------------------------------------------- namespaces
+NET = "10.213.0"
+HOSTS = {"mcr": 1, "mca": 2, "mcb": 3, "mcc": 4}  # router; pss + simulator; coach + dialogue + estimator; a client
+
+
+def _sh(*args, check=True):
+    return subprocess.run(list(args), capture_output=True, text=True, timeout=30, check=check)
+
+
+@contextmanager
+def namespaces():
+    """Four "hosts" on a bridge in the router's namespace, private addresses; always torn down."""
+    if os.geteuid() != 0 or shutil.which("ip") is None:
+        pytest.skip("network namespaces need root and iproute2 (`ip`)")
+    made = []
+    try:
+        for ns in HOSTS:
+            r = _sh("ip", "netns", "add", ns, check=False)
+            if r.returncode != 0:
+                pytest.skip(f"cannot create a network namespace here: {r.stderr.strip()}")
+            made.append(ns)
+        _sh("ip", "-n", "mcr", "link", "add", "br0", "type", "bridge")
+        _sh("ip", "-n", "mcr", "addr", "add", f"{NET}.1/24", "dev", "br0")
+        _sh("ip", "-n", "mcr", "link", "set", "br0", "up")
+        for ns, n in HOSTS.items():
+            _sh("ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up")
+            if ns == "mcr":
+                continue
+            _sh("ip", "link", "add", f"{ns}-in", "netns", ns, "type", "veth", "peer", "name", f"{ns}-br", "netns", "mcr")
+            _sh("ip", "-n", ns, "addr", "add", f"{NET}.{n}/24", "dev", f"{ns}-in")
+            _sh("ip", "-n", ns, "link", "set", f"{ns}-in", "up")
+            _sh("ip", "-n", "mcr", "link", "set", f"{ns}-br", "master", "br0")
+            _sh("ip", "-n", "mcr", "link", "set", f"{ns}-br", "up")
+        yield
+    finally:
+        for ns in made:
+            _sh("ip", "netns", "pids", ns, check=False)
+            for pid in _sh("ip", "netns", "pids", ns, check=False).stdout.split():
+                try:
+                    os.kill(int(pid), signal.SIGKILL)
+                except (ProcessLookupError, ValueError):
+                    pass
+            _sh("ip", "netns", "del", ns, check=False)
+
+
+def link(ns: str, up: bool) -> None:
+    """Cut (or restore) a host's link: its port on the router's bridge."""
+    _sh("ip", "-n", "mcr", "link", "set", f"{ns}-br", "up" if up else "down")
+
+
+def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):
+    """The demo's steps across three hosts over TLS; a host's link cut mid-request; a second pss
+    on another host takes over; the first comes back as a standby."""
+    out = tmp_path / "d"
+    with namespaces():
+        r = run(["deploy", "init", out, "--router", f"router={NET}.1", "--identity", "pss-a:pss", "--identity",
+                 "pss-b:pss", "--identity", "simulator", "--identity", "coach", "--identity", "dialogue",
+                 "--identity", "estimator", "--identity", "cli"])
+        assert r.returncode == 0, r.stderr
+        home = tmp_path / "shared-volume"  # both pss hosts mount it (here: the same folder)
+        procs = Procs(tmp_path / "logs")
+        cli_env = env_for(out / "cli", home, MIRRORCOACH_TIMEOUT="15")
+        try:
+            procs.start("router", "shared.bus.router", env_for(out / "router", home), ns="mcr")
+            procs.start("pss-a", "services.pss", env_for(out / "pss-a", home), ns="mca")
+            procs.start("simulator", "services.simulator", env_for(out / "simulator", home), ns="mca")
+            for s in ("coach", "dialogue", "estimator"):
+                procs.start(s, f"services.{s}", env_for(out / s, home), ns="mcb")
+            wait_alive(cli_env, SERVICES, ns="mcc", within=90)
+            wait_for(lambda: "pss-a leads" in procs.log("pss-a"), 30, "pss-a leads")
+            procs.start("pss-b", "services.pss", env_for(out / "pss-b", home), ns="mcb")  # the standby
+            # ---- the demo's steps, across the hosts
+            squats, throws = clips(hdm05, "squat1Reps", 3), clips(hdm05, "throwBasketball", 3)
+            r = run(["space", "build", "s", *squats, *throws], env=cli_env, ns="mcc")
+            assert r.returncode == 0, r.stderr
+            probe = clips(hdm05, "squat1Reps", 4)[-1]
+            r = run(["space", "recognize", "s", probe, "--json"], env=cli_env, ns="mcc")
+            assert r.returncode == 0 and json.loads(r.stdout)["label"] == "squat1Reps", r.stderr
+            r = run(["coach", "run", "--learner", "l1", "--target", squats[0], "--trials", "2", "--json"], env=cli_env,
+                    ns="mcc")
+            assert r.returncode == 0, r.stderr
+            trials = json.loads(r.stdout)["trials"]
+            assert len(trials) == 2 and all(t["d_p"] > 0 for t in trials)
+            assert run(["other", "create", "o1"], env=cli_env, ns="mcc").returncode == 0
+            assert run(["estimator", "start", "e1", "o1", "--probes", "1"], env=cli_env, ns="mcc").returncode == 0
+            r = run(["estimator", "converse", "e1", "--sets", "1"], env=cli_env, ns="mcc", timeout=300)
+            assert r.returncode == 0 and "1 set(s)" in r.stdout, r.stderr
+            assert "pss-b leads" not in procs.log("pss-b")  # it stood by all along
+            # ---- cut host A's link in the middle of a request (a question to a person other, on the
+            # simulator of host A, waiting for an answer): the caller gets `unavailable` within its timeout
+            assert run(["other", "create", "p1", "--person"], env=cli_env, ns="mcc").returncode == 0
+            t0 = time.monotonic()
+            ask = subprocess.Popen(["ip", "netns", "exec", "mcc", sys.executable, "-m", "shared.cli", "other", "ask", "p1",
+                                    str(squats[0]), "--timeout", "20"], env=cli_env, cwd=REPO, stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True)
+            time.sleep(3.0)  # the question is out, waiting for a person
+            link("mca", up=False)
+            t_cut = time.monotonic()
+            _, err = ask.communicate(timeout=90)
+            waited = time.monotonic() - t0
+            assert ask.returncode == 2 and err.startswith("error: ") and "Traceback" not in err, err
+            assert "simulator is not reachable" in err or "did not answer" in err, err
+            assert waited < 20 + 30 + 5, (waited, err)  # the question's limit + the CLI's margin
+            # ---- recognition goes on from the other pss (on host B), on the space written before the cut
+            def recognised():
+                r = run(["space", "recognize", "s", probe, "--json"], env=cli_env, ns="mcc", timeout=60)
+                return r.returncode == 0 and json.loads(r.stdout)["label"] == "squat1Reps"
+
+            wait_for(recognised, 30, "recognition from the standby")
+            takeover = time.monotonic() - t_cut
+            assert "pss-b leads" in procs.log("pss-b")
+            # ---- the link returns: host A works again (its simulator answers), pss-a stands by
+            link("mca", up=True)
+            wait_for(lambda: run(["learner", "create", "l2", squats[0]], env=cli_env, ns="mcc",
+                                 timeout=60).returncode == 0, 60, "the simulator on host A after the link returns")
+            wait_for(lambda: "pss-a stands by" in procs.log("pss-a"), 30, "pss-a stands by after the partition")
+            assert recognised()
+            # a completed write survives the failover: the space built before the cut is whole
+            r = run(["space", "show", "s", "--json"], env=cli_env, ns="mcc")
+            assert r.returncode == 0 and len(json.loads(r.stdout)["proto_symbols"]) == 6, r.stdout + r.stderr
+            print(f"question cut off after {waited:.1f} s: {err.strip()}; recognition back {takeover:.1f} s after the cut")
+        finally:
+            procs.stop()
