@@ -255,6 +255,12 @@ def status(settings: Settings | None = None) -> list[dict]:
             alive = c.alive(timeout=1.0)
     except Unavailable:
         pass
+    if s.identity is not None:  # deployed: processes live on other hosts; the bus says who is alive
+        rows = [{"name": "router", "pid": None, "alive": router_up}]
+        for p in plan:
+            if p.name != "router":
+                rows.append({"name": p.name, "pid": None, "alive": p.name in alive})
+        return rows
     rows = [{"name": "supervisor", "pid": read_pid(s.run_dir / "supervisor.pid"), "alive": supervisor_running(s)}]
     for p in plan:
         up = router_up if p.name == "router" else p.name in alive
@@ -316,6 +322,10 @@ def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> in
     from shared.bus.client import Client, Unavailable
 
     s = settings or Settings()
+    if s.identity is not None:
+        echo(f"error: MIRRORCOACH_DEPLOY is set ({s.deploy}): a deployed cluster runs each process on its host "
+             f"(deploy/README.md: systemd units or compose); `up` starts the loopback cluster only")
+        return 2
     plan = load_plan()
     private_home(s)
     proc = None

@@ -146,6 +146,9 @@ def test_deploy_init_makes_a_ca_and_one_identity_per_process(tmp_path):
     assert r.returncode == 2 and "NAME=ADDRESS" in r.stderr
     r = run(["deploy", "init", tmp_path / "e", "--router", "hub=10.0.0.1", "--identity", "x:root"])
     assert r.returncode == 2 and "role must be one of" in r.stderr
+    # `up` is the loopback cluster's; a deployed host runs its own processes
+    r = run(["up"], env=env_for(out / "cli", tmp_path / "home"))
+    assert r.returncode == 2 and "loopback cluster only" in r.stdout + r.stderr
     # an identity folder with a part missing: a clear error, no traceback
     (out / "cli" / "key.pem").unlink()
     r = run(["space", "list"], env=env_for(out / "cli", tmp_path / "home"))
@@ -368,3 +371,17 @@ def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):
             print(f"question cut off after {waited:.1f} s: {err.strip()}; recognition back {takeover:.1f} s after the cut")
         finally:
             procs.stop()
+
+
+def test_the_systemd_unit_is_valid_for_systemd():
+    """deploy/systemd/mirrorcoach@.service, checked by systemd's own verifier (the only complaint
+    allowed: the install path /opt/mirrorcoach does not exist on this machine)."""
+    if shutil.which("systemd-analyze") is None:
+        pytest.skip("systemd-analyze is not installed")
+    unit = REPO / "deploy" / "systemd" / "mirrorcoach@.service"
+    r = subprocess.run(["systemd-analyze", "verify", "--man=no", str(unit)], capture_output=True, text=True, timeout=60)
+    complaints = [ln for ln in (r.stdout + r.stderr).splitlines()
+                  if ln.strip() and "/opt/mirrorcoach/.venv/bin/python is not executable" not in ln]
+    assert complaints == [], complaints
+    text = unit.read_text()
+    assert "EnvironmentFile=/etc/mirrorcoach/%i.env" in text and "${MIRRORCOACH_MODULE}" in text

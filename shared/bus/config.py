@@ -179,7 +179,9 @@ def router_config(s: Settings):
 
         if s.identity.role != "router":
             raise BadInput(f"MIRRORCOACH_DEPLOY={s.deploy} is the identity of a {s.identity.role}, not of a router")
-        return load_config(s.identity)
+        c = load_config(s.identity)
+        c.insert_json5("transport/link/rx/max_message_size", str(max_message_size(s)))
+        return c
     c = _base("router", s)
     c.insert_json5("listen/endpoints", json.dumps([s.router]))
     return c
@@ -193,6 +195,7 @@ def client_config(s: Settings, wait: bool = True, connect_timeout_s: float = 3.0
         from shared.bus.deploy import load_config
 
         c = load_config(s.identity)
+        c.insert_json5("transport/link/rx/max_message_size", str(max_message_size(s)))
     else:
         c = _base("client", s)
         c.insert_json5("listen/endpoints", "[]")
