@@ -15,6 +15,8 @@ Starts the local cluster if it is not running (``mirrorcoach up``: router + serv
 5. runs a short estimator conversation with a simulated other (chapter 3);
 
 says what it did, and stops the cluster again if it started it (``--keep-running`` leaves it up).
+With ``MIRRORCOACH_DEPLOY`` set (a cluster across hosts, issue 16) it runs the same steps on that
+cluster as that identity and starts or stops nothing.
 """
 
 from __future__ import annotations
@@ -128,7 +130,9 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     settings = Settings()
     started = False
-    if not running(settings):
+    if settings.identity is not None:  # a deployed cluster (MIRRORCOACH_DEPLOY): its hosts run it; use it as it is
+        print(f"on the deployed cluster at {settings.router} as {settings.identity.name!r} (TLS)")
+    elif not running(settings):
         if up(settings) != 0:
             return 1
         started = True
