@@ -236,7 +236,7 @@ def main(argv=None) -> int:
         print(_line(res["saturation"]), flush=True)
     growth = res["memory"]["growth"]
     met = all(g < 0.10 for g in growth.values())
-    md = [f"# The cluster under load (issue 16)", "",
+    md = ["# The cluster under load (issue 16)", "",
           f"`python -m bench.load` ({mode}; {os.cpu_count()} cores). Each client is its own Zenoh session; every "
           f"request has a timeout; a saturated service answers `unavailable` at once (bounded queue).", "",
           "| load | clients | seconds | answered | throughput | p50 | p95 | p99 | errors |",

@@ -420,6 +420,39 @@ def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):
             procs.stop()
 
 
+def test_two_instances_started_together_end_with_one_leader(tmp_path):
+    """Two pss instances started at the same moment may both see no leader and both lead; the
+    rule then keeps the smaller name, and exactly one leader stays."""
+    port = free_port()
+    out = tmp_path / "d"
+    assert run(["deploy", "init", out, "--router", f"router=127.0.0.1:{port}", "--identity", "pss-x:pss",
+                "--identity", "pss-y:pss", "--identity", "cli"]).returncode == 0
+    home = tmp_path / "home"
+    procs = Procs(tmp_path / "logs")
+    try:
+        procs.start("router", "shared.bus.router", env_for(out / "router", home))
+        time.sleep(1.0)
+        procs.start("pss-y", "services.pss", env_for(out / "pss-y", home))
+        procs.start("pss-x", "services.pss", env_for(out / "pss-x", home))
+        c = _raw_session(out / "cli")
+        try:
+            def leaders():
+                return sorted(str(r.ok.key_expr).rsplit("/", 1)[-1] for r in c.liveliness().get("mc/leader/pss/*",
+                                                                                                timeout=1.0) if r.ok)
+
+            wait_for(lambda: len(leaders()) == 1, 30, "exactly one leader")
+            first = leaders()
+            time.sleep(3.0)
+            assert leaders() == first  # and it stays so
+            both = "pss-x leads" in procs.log("pss-x") and "pss-y leads" in procs.log("pss-y")
+            if both:  # they raced: the smaller name stayed, the other stood by saying why
+                assert first == ["pss-x"] and "smaller name stays" in procs.log("pss-y")
+        finally:
+            c.close()
+    finally:
+        procs.stop()
+
+
 def test_the_systemd_unit_is_valid_for_systemd():
     """deploy/systemd/mirrorcoach@.service, checked by systemd's own verifier (the only complaint
     allowed: the install path /opt/mirrorcoach does not exist on this machine)."""
