@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from shared.evaluation import open_set, report_markdown, verdicts
+from shared.evaluation import open_set, report_markdown, separation, verdicts
 from shared.pss.space import performer
 
 
@@ -36,6 +36,13 @@ def test_open_set_counts_every_clip_for_every_method(bundled_clips):
         for method in ("pss", "pss_distance", "pss_model") + (("minirocket",) if rocket is not None else ()):
             out, inn = row[method]["out"], row[method]["in"]
             assert out[1] == held and inn[1] == len(test) - held and 0 <= out[0] <= out[1] and 0 <= inn[0] <= inn[1]
+        # every clip's score is kept, and the counts are its scores above 1
+        assert row["novel"] == [c.label == row["held_out"] for c in test]
+        for method, scores in row["scores"].items():
+            assert len(scores) == len(test)
+            assert sum(s > 1.0 for s, n in zip(scores, row["novel"]) if n) == row[method]["out"][0]
+            assert sum(s > 1.0 for s, n in zip(scores, row["novel"]) if not n) == row[method]["in"][0]
+        assert row["scores"]["pss"] == [max(d, m) for d, m in zip(row["scores"]["pss_distance"], row["scores"]["pss_model"])]
         # "none of these" when either test says so: the union rejects at least what each rejects
         for key in ("out", "in"):
             assert row["pss"][key][0] >= max(row["pss_distance"][key][0], row["pss_model"][key][0])
@@ -61,3 +68,34 @@ def test_the_open_set_verdict_is_computed(out_rejected, in_rejected, word):
     text = report_markdown(res)
     line = next(x for x in text.splitlines() if x.startswith("Goal: at least 90 %"))
     assert line.endswith(f"**{word}**.")
+
+
+def _with_scores(res: dict, inside: list[float], outside: list[float]) -> dict:
+    """One split's row carries these novelty scores (the other split's row none of its own)."""
+    for k, w in enumerate(("p", "q")):
+        row = res["open_set"][w]["rows"][0]
+        row["novel"] = [False] * len(inside) + [True] * len(outside) if k == 0 else []
+        row["scores"] = {m: (inside + outside if k == 0 else []) for m in ("pss", "pss_distance", "pss_model")}
+    return res
+
+
+def test_separation_is_the_auc_and_the_best_threshold_on_the_test_clips():
+    inside = [0.1 * i for i in range(100)]  # 0 .. 9.9
+    res = _with_scores(_result(5, 4), inside, [9.55, 9.65, 20.0, 0.5])
+    auc, upper = separation(res, "pss")
+    # at most 5 of 100 in-class above the threshold: it is 9.4, and 3 of 4 out-of-class lie above it
+    assert upper == pytest.approx(0.75)
+    # each out-of-class clip above how many in-class clips (a tie counts half): 96, 97, 100, 5.5
+    assert auc == pytest.approx((96 + 97 + 100 + 5.5) / 400)
+    res["verdicts"] = verdicts(res)
+    text = report_markdown(res)
+    assert "what misses is the level of the thresholds" not in text  # 75 % < 90 %
+    assert "a common correction of the calibrated level cannot meet the goal" in text
+    res = _with_scores(_result(5, 4), inside, [10.0 + i for i in range(9)] + [0.0])
+    res["verdicts"] = verdicts(res)
+    assert separation(res, "pss")[1] == pytest.approx(0.9)
+    assert "what misses is the level of the thresholds calibrated from the training performers alone" in report_markdown(res)
+    res = _with_scores(_result(9, 5), inside, [10.0] * 10)
+    res["verdicts"] = verdicts(res)
+    assert "Where the goal is missed" not in report_markdown(res)
+    assert separation(_result(9, 5), "pss") is None  # results written before the scores were kept
