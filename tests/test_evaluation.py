@@ -68,6 +68,11 @@ def test_the_open_set_verdict_is_computed(out_rejected, in_rejected, word):
     text = report_markdown(res)
     line = next(x for x in text.splitlines() if x.startswith("Goal: at least 90 %"))
     assert line.endswith(f"**{word}**.")
+    # and per split: here the other split rejects every in-class clip, which pooling halves
+    res["open_set"]["q"]["rows"][0]["pss"]["in"] = [100, 100]
+    text = report_markdown(res)
+    assert f"| p | {10 * out_rejected:.1f} % | {float(in_rejected):.1f} % |" in text.splitlines()
+    assert "| q | " + f"{10 * out_rejected:.1f} % | 100.0 % |" in text.splitlines()
 
 
 def _with_scores(res: dict, inside: list[float], outside: list[float]) -> dict:
