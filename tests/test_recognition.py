@@ -137,6 +137,30 @@ def test_open_set_rule_as_documented():
     assert between.label is None and between.novelty == pytest.approx(1.0 / 1.2 / 0.5)
 
 
+def test_the_distance_test_scales_each_class_by_its_own_spread_across_performers():
+    """A class whose performers differ much (a) tolerates a farther motion than one whose
+    performers agree (b): the nearest class's distance is divided by that class's median
+    cross-performer distance before the threshold (normalised conformal scores)."""
+    rng = np.random.default_rng(3)
+    where = {("a", "p"): 0.0, ("a", "q"): 2.0, ("b", "p"): 100.0, ("b", "q"): 100.5}
+    x, labels, perf = [], [], []
+    for (c, who), centre in where.items():
+        x += list(centre + rng.uniform(-0.01, 0.01, 30))
+        labels += [c] * 30
+        perf += [who] * 30
+    x = np.array(x)
+    cal = calibrate(np.abs(x[:, None] - x[None]), labels, perf)
+    assert cal.class_scales == pytest.approx([2.0, 0.5], abs=0.03)
+    assert cal.threshold == pytest.approx(1.0, abs=0.03)
+    near_a = decide(np.abs(3.5 - x), labels, cal)  # 1.5 beyond a's farther performer: 0.75 of a's spread
+    near_b = decide(np.abs(102.0 - x), labels, cal)  # 1.5 beyond b's: three times b's spread
+    assert near_a.label == "a" and near_a.distance_novelty == pytest.approx(0.75, abs=0.03)
+    assert near_b.label is None and near_b.nearest_label == "b" and near_b.distance_novelty == pytest.approx(3.0, abs=0.1)
+    # a calibration written before the class scales keeps its raw threshold
+    old = Calibration(cal.classes, cal.temperature, 1.0, cal.ratio_threshold, cal.n_calibration, cal.scheme)
+    assert decide(np.abs(3.5 - x), labels, old).label is None
+
+
 # ---------------------------------------------------------------------------- files of 0.1
 def test_a_space_file_of_format_1_still_loads_generates_and_recognises(bundled, tmp_path):
     space = ProtoSymbolSpace.load(FORMAT1)
