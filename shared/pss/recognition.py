@@ -30,8 +30,9 @@ On top of the nearest proto-symbol:
   performers differ much tolerates a farther newcomer than one whose performers agree.
   Measured on HDM05 with every class held out (``reports/recognition/report.md``): per test
   performer, known clips rejected 0.2 / 13.4 / 0.8 % and unknown ones 85.5 / 100 / 75.4 %
-  with one scale for all classes; 1.6 / 7.5 / 5.2 % and 87.1 / 93.8 / 88.5 % with the class
-  scales (chosen after seeing these splits). *Not clearly nearer*: the ratio of the two
+  with one scale for all classes; 1.5 / 6.3 / 5.1 % and 85.5 / 93.8 / 88.5 % with the class
+  scales (chosen after seeing these splits; each calibration score is divided by its class's
+  scale computed without it, as a new motion's scale never contains the motion itself). *Not clearly nearer*: the ratio of the two
   class distances above the same quantile of the calibration's own-class /
   nearest-other-class ratios. Both
   bounds are split-conformal (:func:`conformal_threshold`): a space with fewer than
@@ -163,7 +164,8 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     if not rows:  # one proto-symbol per class: nothing to calibrate against
         scale = float(np.median(d[np.triu_indices(len(d), 1)])) if len(d) > 1 else 1.0
         return Calibration(classes, max(scale, 1e-6), np.inf, np.inf, 0, scheme)
-    class_scales = _class_scales(np.array(nearest_same), np.array(truth), len(classes))
+    near_a, truth_a = np.array(nearest_same), np.array(truth)
+    class_scales = _class_scales(near_a, truth_a, len(classes))
     dc_all = np.array(rows)
     y = np.array(truth)
 
@@ -176,7 +178,11 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
 
     scale = float(np.median(nearest_same)) or 1.0
     res = minimize_scalar(nll, bounds=(np.log(scale) - 8, np.log(scale) + 8), method="bounded")
-    threshold = conformal_threshold(np.array(nearest_same) / class_scales[np.array(truth)], known_quantile)
+    # each calibration score divided by its class's scale without itself, as a new motion's is
+    # divided by a scale it had no part in
+    own = np.array([_class_scales(np.delete(near_a, j), np.delete(truth_a, j), len(classes))[truth_a[j]]
+                    for j in range(len(near_a))])
+    threshold = conformal_threshold(near_a / own, known_quantile)
     ratio_threshold = conformal_threshold(ratios, known_quantile) if ratios else np.inf
     return Calibration(classes, float(np.exp(res.x)), threshold, ratio_threshold, len(rows), scheme,
                        [float(v) for v in class_scales])
@@ -184,8 +190,9 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
 
 def _class_scales(nearest_same: np.ndarray, truth: np.ndarray, n_classes: int) -> np.ndarray:
     """Per class, the median of its calibration proto-symbols' nearest same-class distances
-    (across performers); the median over all of them for a class without any."""
-    overall = float(np.median(nearest_same))
+    (across performers); the median over all of them for a class without any (1 when there
+    are none at all)."""
+    overall = float(np.median(nearest_same)) if len(nearest_same) else 1.0
     out = np.array([float(np.median(nearest_same[truth == k])) if (truth == k).any() else overall
                     for k in range(n_classes)])
     return np.maximum(out, 1e-12)
