@@ -161,6 +161,29 @@ def test_the_distance_test_scales_each_class_by_its_own_spread_across_performers
     assert decide(np.abs(3.5 - x), labels, old).label is None
 
 
+def test_a_space_file_written_before_the_class_spreads_keeps_its_raw_threshold(dev_space, dev_split, tmp_path):
+    clip = dev_split[1][0]
+    assert dev_space.calibration.class_scales and "one spread" not in dev_space.info()["open_set"]
+    with np.load(dev_space.save(tmp_path / "s.npz"), allow_pickle=False) as z:
+        arrays = {k: np.array(z[k]) for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    del header["calibration"]["class_scales"]
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "old.npz", **arrays)
+    old = ProtoSymbolSpace.load(tmp_path / "old.npz")
+    assert old.calibration.class_scales is None and "one spread for all classes" in old.info()["open_set"]
+    from shared.pss.recognition import class_distances
+
+    r = old.recognize(clip)
+    c = old.calibration
+    first, second = np.sort(class_distances(np.asarray(r.recognition_distances), np.asarray(old.labels), c.classes))[:2]
+    raw = max(first / c.threshold, first / second / c.ratio_threshold)  # the rule as written: no class scale
+    assert r.decision.distance_novelty == pytest.approx(raw)
+    k = c.classes.index(r.nearest_label)
+    scaled = max(first / dev_space.calibration.class_scales[k] / c.threshold, first / second / c.ratio_threshold)
+    assert abs(scaled - raw) > 1e-6  # (the new rule would have said something else)
+
+
 # ---------------------------------------------------------------------------- files of 0.1
 def test_a_space_file_of_format_1_still_loads_generates_and_recognises(bundled, tmp_path):
     space = ProtoSymbolSpace.load(FORMAT1)

@@ -637,6 +637,8 @@ class ProtoSymbolSpace:
                             else "nearest proto-symbol on the angle channels (format 1: rebuild the space from its "
                                  "clips for position-based recognition)" if self.format != FORMAT
                             else "nearest proto-symbol on the motion channels (no skeleton)"),
-            "open_set": "none of these: the distance rule" + (" (a file written before the novelty model)"
-                                                              if self._novelty is False else " or the novelty model"),
+            "open_set": "none of these: the distance rule" + (
+                " (one spread for all classes: a file written before the class spreads)"
+                if self.calibration.n_calibration and not self.calibration.class_scales else "") + (
+                " (a file written before the novelty model)" if self._novelty is False else " or the novelty model"),
         }
