@@ -217,42 +217,35 @@ def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.n
         keep = np.array([c.label != held for c in train])
         tr = [c for c, kp in zip(train, keep) if kp]
         space = ProtoSymbolSpace.build(tr)
-        row = {"held_out": held, **{m: {"out": [0, 0], "in": [0, 0]} for m in ("pss", "pss_distance", "pss_model")},
-               "novel": [c.label == held for c in test], "scores": {}}
+        row = {"held_out": held, "novel": [c.label == held for c in test], "scores": {}}
         for c in test:
             r = space.recognize(c)
-            key = "out" if c.label == held else "in"
-            alone = {"pss": r.decision.novelty,  # and each of the decision's two tests alone
-                     "pss_distance": r.decision.distance_novelty, "pss_model": r.decision.model_novelty}
-            for m, score in alone.items():
-                row[m][key][0] += int(score > 1.0)
-                row[m][key][1] += 1
-                row["scores"].setdefault(m, []).append(float(score))
+            _tally(row, "pss", c.label == held, r.decision.novelty)  # and each of the decision's two tests alone
+            _tally(row, "pss_distance", c.label == held, r.decision.distance_novelty)
+            _tally(row, "pss_model", c.label == held, r.decision.model_novelty)
         if dtw is not None:
             d_tr, d_te = dtw
             labels = [c.label for c in tr]
             cal = calibrate(d_tr[np.ix_(keep, keep)], labels, [performer(c) for c in tr])
-            row["dtw"] = {"out": [0, 0], "in": [0, 0]}
             for c, di in zip(test, d_te[:, keep]):
-                key = "out" if c.label == held else "in"
-                score = decide(di, labels, cal).novelty
-                row["dtw"][key][0] += int(score > 1.0)
-                row["dtw"][key][1] += 1
-                row["scores"].setdefault("dtw", []).append(float(score))
+                _tally(row, "dtw", c.label == held, decide(di, labels, cal).novelty)
         if minirocket is not None:
             f_tr, f_te = minirocket
             model = NoveltyModel.fit(f_tr[keep], [c.label for c in tr], [performer(c) for c in tr])
-            row["minirocket"] = {"out": [0, 0], "in": [0, 0]}
             for c, f in zip(test, f_te):
-                key = "out" if c.label == held else "in"
-                score = model.novelty(f)
-                row["minirocket"][key][0] += int(score > 1.0)
-                row["minirocket"][key][1] += 1
-                row["scores"].setdefault("minirocket", []).append(float(score))
+                _tally(row, "minirocket", c.label == held, model.novelty(f))
         rows.append(row)
         if progress:
             progress(k + 1, len(classes))
     return {"rows": rows}
+
+
+def _tally(row: dict, method: str, novel: bool, score: float) -> None:
+    """One test clip's verdict under ``method``: counted (rejected when the score is above 1) and kept."""
+    counts = row.setdefault(method, {"out": [0, 0], "in": [0, 0]})["out" if novel else "in"]
+    counts[0] += int(score > 1.0)
+    counts[1] += 1
+    row["scores"].setdefault(method, []).append(float(score))
 
 
 # ---------------------------------------------------------------------------- the report

@@ -182,6 +182,12 @@ def test_a_space_file_written_before_the_class_spreads_keeps_its_raw_threshold(d
     k = c.classes.index(r.nearest_label)
     scaled = max(first / dev_space.calibration.class_scales[k] / c.threshold, first / second / c.ratio_threshold)
     assert abs(scaled - raw) > 1e-6  # (the new rule would have said something else)
+    # a damaged calibration (class spreads that do not match its classes, an unknown field): a clear error
+    for bad in ({**header["calibration"], "class_scales": [1.0]}, {**header["calibration"], "colour": 1}):
+        arrays["header"] = np.array(json.dumps({**header, "calibration": bad}))
+        np.savez(tmp_path / "bad.npz", **arrays)
+        with pytest.raises(BadInput, match="calibration is unreadable"):
+            ProtoSymbolSpace.load(tmp_path / "bad.npz")
 
 
 # ---------------------------------------------------------------------------- files of 0.1

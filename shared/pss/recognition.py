@@ -32,10 +32,9 @@ On top of the nearest proto-symbol:
   performer, known clips rejected 0.2 / 13.4 / 0.8 % and unknown ones 85.5 / 100 / 75.4 %
   with one scale for all classes; 1.5 / 6.3 / 5.1 % and 85.5 / 93.8 / 88.5 % with the class
   scales (chosen after seeing these splits; each calibration score is divided by its class's
-  scale computed without it, as a new motion's scale never contains the motion itself). *Not clearly nearer*: the ratio of the two
-  class distances above the same quantile of the calibration's own-class /
-  nearest-other-class ratios. Both
-  bounds are split-conformal (:func:`conformal_threshold`): a space with fewer than
+  scale computed without it, as a new motion's scale never contains the motion itself).
+  *Not clearly nearer*: the ratio of the two class distances above the same quantile of the
+  calibration's own-class / nearest-other-class ratios. Both bounds are split-conformal (:func:`conformal_threshold`): a space with fewer than
   ``1 / (1 - known_quantile) - 1`` calibration proto-symbols (49 at the default 0.98) never
   rejects, because its own motions cannot say how far a new performer may be. An
   unknown motion tends to fall between known classes; the ratio caught more of them than
@@ -164,10 +163,9 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     if not rows:  # one proto-symbol per class: nothing to calibrate against
         scale = float(np.median(d[np.triu_indices(len(d), 1)])) if len(d) > 1 else 1.0
         return Calibration(classes, max(scale, 1e-6), np.inf, np.inf, 0, scheme)
-    near_a, truth_a = np.array(nearest_same), np.array(truth)
-    class_scales = _class_scales(near_a, truth_a, len(classes))
     dc_all = np.array(rows)
     y = np.array(truth)
+    near = np.array(nearest_same)
 
     def nll(log_t):
         t = np.exp(log_t)
@@ -176,26 +174,27 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
         lse = np.log(np.exp(z).sum(axis=1))
         return float(np.mean(lse - z[np.arange(len(y)), y]))
 
-    scale = float(np.median(nearest_same)) or 1.0
+    scale = float(np.median(near)) or 1.0
     res = minimize_scalar(nll, bounds=(np.log(scale) - 8, np.log(scale) + 8), method="bounded")
-    # each calibration score divided by its class's scale without itself, as a new motion's is
-    # divided by a scale it had no part in
-    own = np.array([_class_scales(np.delete(near_a, j), np.delete(truth_a, j), len(classes))[truth_a[j]]
-                    for j in range(len(near_a))])
-    threshold = conformal_threshold(near_a / own, known_quantile)
+    # each calibration score divided by its class's spread without itself, as a new motion's is
+    # divided by a spread it had no part in
+    own = np.array([_class_spread(near, y, y[j], skip=j) for j in range(len(near))])
+    threshold = conformal_threshold(near / own, known_quantile)
     ratio_threshold = conformal_threshold(ratios, known_quantile) if ratios else np.inf
     return Calibration(classes, float(np.exp(res.x)), threshold, ratio_threshold, len(rows), scheme,
-                       [float(v) for v in class_scales])
+                       [_class_spread(near, y, k) for k in range(len(classes))])
 
 
-def _class_scales(nearest_same: np.ndarray, truth: np.ndarray, n_classes: int) -> np.ndarray:
-    """Per class, the median of its calibration proto-symbols' nearest same-class distances
-    (across performers); the median over all of them for a class without any (1 when there
-    are none at all)."""
-    overall = float(np.median(nearest_same)) if len(nearest_same) else 1.0
-    out = np.array([float(np.median(nearest_same[truth == k])) if (truth == k).any() else overall
-                    for k in range(n_classes)])
-    return np.maximum(out, 1e-12)
+def _class_spread(nearest_same: np.ndarray, truth: np.ndarray, k: int, skip: int | None = None) -> float:
+    """Class ``k``'s spread: the median of its calibration proto-symbols' nearest same-class
+    distances across performers (without calibration row ``skip``); the median over every row
+    (but ``skip``) for a class without any, 1 when there is none at all."""
+    keep = np.ones(len(nearest_same), bool)
+    if skip is not None:
+        keep[skip] = False
+    mine = keep & (truth == k)
+    pool = nearest_same[mine] if mine.any() else nearest_same[keep]
+    return max(float(np.median(pool)), 1e-12) if len(pool) else 1.0
 
 
 @dataclass

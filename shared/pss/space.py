@@ -606,7 +606,14 @@ class ProtoSymbolSpace:
         if header.get("calibration"):
             from shared.pss.recognition import Calibration
 
-            space._calibration = Calibration(**header["calibration"])
+            try:
+                cal = Calibration(**header["calibration"])
+                if cal.class_scales is not None and len(cal.class_scales) != len(cal.classes):
+                    raise ValueError(f"{len(cal.class_scales)} class spreads for {len(cal.classes)} classes")
+            except (TypeError, ValueError) as e:
+                raise BadInput(f"{path}: its recognition calibration is unreadable ({e}); build the space again "
+                               "from its clips") from None
+            space._calibration = cal
         if header.get("novelty") and novelty:
             from shared.pss.recognition import NoveltyModel
 
