@@ -168,6 +168,8 @@ def test_a_space_file_written_before_the_class_spreads_keeps_its_raw_threshold(d
         arrays = {k: np.array(z[k]) for k in z.files}
     header = json.loads(str(arrays["header"]))
     del header["calibration"]["class_scales"]
+    del header["discriminant"]  # (nor the discriminant ratio: its ratio test is on eq. 2.4 distances)
+    arrays = {k: v for k, v in arrays.items() if not k.startswith("discriminant_")}
     arrays["header"] = np.array(json.dumps(header))
     np.savez(tmp_path / "old.npz", **arrays)
     old = ProtoSymbolSpace.load(tmp_path / "old.npz")
@@ -296,8 +298,9 @@ def test_the_novelty_model_is_saved_with_the_space_and_older_files_keep_their_ru
     assert [back.recognize(c).novelty for c in clips] == pytest.approx([r.novelty for r in before])
     # a file written before the model: its open set is the distance rule it was written with
     with np.load(tmp_path / "n.npz", allow_pickle=False) as z:
-        arrays = {k: np.array(z[k]) for k in z.files if not k.startswith("novelty_")}
+        arrays = {k: np.array(z[k]) for k in z.files if not k.startswith(("novelty_", "discriminant_"))}
     header = json.loads(str(arrays["header"]))
+    header.pop("discriminant")  # written before the novelty model, so before the discriminant ratio too
     broken = {**header, "novelty": {"classes": ["x"]}}  # a novelty header without its threshold: a clear error
     with np.load(tmp_path / "n.npz", allow_pickle=False) as z:
         np.savez(tmp_path / "broken.npz", **{**{k: np.array(z[k]) for k in z.files},
@@ -312,3 +315,93 @@ def test_the_novelty_model_is_saved_with_the_space_and_older_files_keep_their_ru
     for c in clips:
         r = old.recognize(c)
         assert r.novelty == pytest.approx(decide(r.recognition_distances, old.labels, old.calibration).novelty)
+
+
+# ---------------------------------------------------------------------------- the discriminant ratio (open set)
+def test_the_discriminant_ratio_is_scikit_learns_shrinkage_lda(dev_space):
+    """The projection solved in the proto-symbols' span gives the class-mean distance ratios of
+    scikit-learn's LDA with the same shrunk covariance (the reference; on a slice of the real
+    features so that scikit-learn's full eigenproblem stays quick)."""
+    from sklearn.covariance import ShrunkCovariance
+    from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+    from sklearn.preprocessing import StandardScaler
+
+    from shared.pss.recognition import DiscriminantRatio, _mean_ratios
+
+    x = dev_space._symbol_features()[:, ::8]
+    y = np.array(dev_space.labels)
+    m = DiscriminantRatio.fit(x, y, dev_space.performers)
+    assert 0 < m.shrinkage < 1 and m.projection.shape == (x.shape[1], len(set(y)) - 1)
+    scaler = StandardScaler().fit(x)
+    lda = LinearDiscriminantAnalysis(solver="eigen", covariance_estimator=ShrunkCovariance(shrinkage=m.shrinkage))
+    z = lda.fit(scaler.transform(x), y).transform(scaler.transform(x))
+    centres = np.stack([z[y == c].mean(axis=0) for c in m.classes])
+    assert np.allclose(m.ratios(x), _mean_ratios(z, centres), rtol=1e-4, atol=1e-6)
+
+
+def test_discriminant_ratio_as_documented():
+    from shared.pss.recognition import DiscriminantRatio
+
+    rng = np.random.default_rng(1)
+    x, labels, perf, sample = _synthetic_classes(rng, n=20)
+    m = DiscriminantRatio.fit(x, labels, perf)
+    assert m.scheme == "across performers" and len(m.scores) == len(x) and 0 < m.threshold < 1
+    assert m.threshold == pytest.approx(conformal_threshold(m.scores, m.quantile))
+    # a known class from an unseen performer stays known; a class never learnt, between two
+    # known ones, is "none of these"
+    known = np.array([m.novelty(v) for c in range(3) for v in sample(c, 2, 30)])
+    unknown = np.array([m.novelty(v) for v in sample(3, 2, 30)])
+    assert (known > 1).mean() <= 0.1 and (unknown > 1).mean() >= 0.9
+    # one performer: a five-fold cross-fit; one class: nothing to tell apart; too few scores: never rejects
+    solo = [i for i, p in enumerate(perf) if p == "p0"]
+    m1 = DiscriminantRatio.fit(x[solo], [labels[i] for i in solo], None)
+    assert m1.scheme == "5-fold cross-fit" and len(m1.scores) == len(solo) and np.isfinite(m1.threshold)
+    assert DiscriminantRatio.fit(x[:20], labels[:20], perf[:20]) is None
+    few = DiscriminantRatio.fit(x[::4], labels[::4], perf[::4])  # 15 calibration scores for a 98 % bound
+    assert few.threshold == np.inf and few.novelty(sample(3, 2, 1)[0]) == 0.0
+    # decide: with a discriminant ratio, the ratio test is its, not eq. 2.4's
+    c = Calibration(["c0", "c1", "c2"], 1.0, threshold=np.inf, ratio_threshold=0.5, n_calibration=100,
+                    scheme="across performers")
+    d = np.array([1.0, 1.2, 5.0])  # eq. 2.4 says: not clearly nearer c0 than c1
+    assert decide(d, ["c0", "c1", "c2"], c).label is None
+    inside = decide(d, ["c0", "c1", "c2"], c, None, sample(0, 2, 1)[0], m)
+    assert inside.label == "c0" and inside.distance_novelty == 0.0 and 0 < inside.ratio_novelty < 1
+    between = decide(d, ["c0", "c1", "c2"], c, None, sample(3, 2, 1)[0], m)
+    assert between.label is None and between.ratio_novelty > 1 and between.novelty == between.ratio_novelty
+
+
+def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_their_rule(dev_space, dev_split, tmp_path):
+    m = dev_space.discriminant
+    assert m is not None and m.scheme == "across performers" and m.classes == sorted(set(dev_space.labels))
+    assert "the discriminant ratio" in dev_space.info()["open_set"]
+    clips = dev_split[1][:6]
+    before = [dev_space.recognize(c) for c in clips]
+    assert all(r.decision.ratio_novelty > 0 for r in before)
+    back = ProtoSymbolSpace.load(dev_space.save(tmp_path / "d.npz"))
+    assert np.array_equal(back.discriminant.projection, m.projection) and back.discriminant.threshold == m.threshold
+    assert [back.recognize(c).novelty for c in clips] == pytest.approx([r.novelty for r in before])
+    with np.load(tmp_path / "d.npz", allow_pickle=False) as z:
+        arrays = {k: np.array(z[k]) for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    # damaged: a projection that does not fit its classes, a header without its threshold
+    for name, bad_arrays, bad_header in (
+            ("projection", {**arrays, "discriminant_projection": m.projection[:, :2]}, header),
+            ("header", arrays, {**header, "discriminant": {"classes": m.classes}})):
+        np.savez(tmp_path / "bad.npz", **{**bad_arrays, "header": np.array(json.dumps(bad_header))})
+        with pytest.raises(BadInput, match="discriminant ratio is unreadable"):
+            ProtoSymbolSpace.load(tmp_path / "bad.npz")
+    # a file written before it: its ratio test stays on eq. 2.4 distances, and space info says so
+    header.pop("discriminant")
+    old_arrays = {k: v for k, v in arrays.items() if not k.startswith("discriminant_")}
+    np.savez(tmp_path / "old.npz", **{**old_arrays, "header": np.array(json.dumps(header))})
+    old = ProtoSymbolSpace.load(tmp_path / "old.npz")
+    assert old.discriminant is None and "ratio on eq. 2.4 distances" in old.info()["open_set"]
+    from shared.pss.recognition import hmm_features
+
+    idx = old.features.group_indices(old.recognition_groups)
+    for c in clips:
+        r = old.recognize(c)
+        h = r.hmm.marginal(idx)
+        want = decide(r.recognition_distances, old.labels, old.calibration, old.novelty_model,
+                      hmm_features(h.means, h.covars))
+        assert r.decision.ratio_novelty == 0.0 and r.novelty == pytest.approx(want.novelty)

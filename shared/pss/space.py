@@ -131,6 +131,7 @@ class ProtoSymbolSpace:
         self._group_models: dict[tuple, list[LeftToRightHMM] | ModelBank] = {}
         self._calibration = None
         self._novelty = None  # fitted on first use; False: a file written before it (the distance rule)
+        self._discriminant = None  # likewise; False: a file written before it (the eq. 2.4 ratio)
         self._recognition_matrix = None
         self._recognition_weights = None  # computed on first use, or read from the file
 
@@ -361,13 +362,32 @@ class ProtoSymbolSpace:
         on the proto-symbols' recognition-group HMMs; ``None`` for a file written before it (its
         open set stays the distance rule it was written with) or a space of one class."""
         if self._novelty is None:
-            from shared.pss.recognition import NoveltyModel, hmm_features
+            from shared.pss.recognition import NoveltyModel
 
-            ms = self.models_on(self.recognition_groups)
             perf = self.performers
-            self._novelty = NoveltyModel.fit(hmm_features(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms])),
-                                             self.labels, perf if all(perf) else None) or False
+            self._novelty = NoveltyModel.fit(self._symbol_features(), self.labels, perf if all(perf) else None) or False
         return self._novelty or None
+
+    @property
+    def discriminant(self):
+        """The open set's ratio test in a discriminant space
+        (:class:`shared.pss.recognition.DiscriminantRatio`), fitted on the same features as the
+        novelty model; ``None`` for a file written before it (its ratio test stays on eq. 2.4
+        distances) or a space of one class."""
+        if self._discriminant is None:
+            from shared.pss.recognition import DiscriminantRatio
+
+            perf = self.performers
+            self._discriminant = DiscriminantRatio.fit(self._symbol_features(), self.labels,
+                                                       perf if all(perf) else None) or False
+        return self._discriminant or None
+
+    def _symbol_features(self) -> np.ndarray:
+        """The proto-symbols' recognition-group HMMs as vectors (:func:`shared.pss.recognition.hmm_features`)."""
+        from shared.pss.recognition import hmm_features
+
+        ms = self.models_on(self.recognition_groups)
+        return hmm_features(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms]))
 
     def recognize(self, clip_or_clips, top: int = 5) -> Recognition:
         """``x = F_recog(M)`` (eq. 2.6): abstract the new clip (or the repetitions of one
@@ -403,9 +423,9 @@ class ProtoSymbolSpace:
                                confidence=float("nan"))
         from shared.pss.recognition import hmm_features
 
-        model = self.novelty_model
+        model, disc = self.novelty_model, self.discriminant
         d = decide(fr, self.labels, self.calibration, model,
-                   None if model is None or hr is None else hmm_features(hr.means, hr.covars))
+                   None if (model is None and disc is None) or hr is None else hmm_features(hr.means, hr.covars), disc)
         return Recognition(x, f, nearest, d.label, self.symbols[in_space].label, stress, hmm,
                            nearest_label=d.nearest_label, confidence=d.confidence, novelty=d.novelty,
                            recognition_distances=fr, decision=d)
@@ -554,6 +574,7 @@ class ProtoSymbolSpace:
             # recognises without refitting it (and without importing scipy.optimize)
             "calibration": dataclasses.asdict(self.calibration),
             "novelty": None if self.novelty_model is None else self.novelty_model.header(),
+            "discriminant": None if self.discriminant is None else self.discriminant.header(),
         }
         arrays = {
             "means": np.stack([s.hmm.means for s in self.symbols]),
@@ -565,8 +586,9 @@ class ProtoSymbolSpace:
         }
         if self.recognition_weights is not None:
             arrays["recognition_weights"] = self.recognition_weights
-        if self.novelty_model is not None:
-            arrays.update(self.novelty_model.arrays())
+        for model in (self.novelty_model, self.discriminant):
+            if model is not None:
+                arrays.update(model.arrays())
         atomic_write(path, lambda f: np.savez(f, **arrays))
         return path
 
@@ -578,7 +600,9 @@ class ProtoSymbolSpace:
                 header = json.loads(str(z["header"]))
                 arrays = {k: np.array(z[k]) for k in ("means", "covars", "stay", "distances", "points")}
                 weights = np.array(z["recognition_weights"]) if "recognition_weights" in z.files else None
-                novelty = {k: np.array(z[k]) for k in z.files if k.startswith("novelty_")}
+                # the open set's fitted tests, each its header entry and arrays named after it
+                tests = {key: {k: np.array(z[k]) for k in z.files if k.startswith(f"{key}_")}
+                         for key in ("novelty", "discriminant")}
         except FileNotFoundError:
             raise NotFound(f"no space file {path}") from None
         except (OSError, KeyError, ValueError) as e:
@@ -614,16 +638,18 @@ class ProtoSymbolSpace:
                 raise BadInput(f"{path}: its recognition calibration is unreadable ({e}); build the space again "
                                "from its clips") from None
             space._calibration = cal
-        if header.get("novelty") and novelty:
-            from shared.pss.recognition import NoveltyModel
+        from shared.pss.recognition import DiscriminantRatio, NoveltyModel
 
-            try:
-                space._novelty = NoveltyModel.from_file(header["novelty"], novelty)
-            except (KeyError, TypeError, ValueError) as e:
-                raise BadInput(f"{path}: its novelty model is unreadable ({type(e).__name__}: {e}); build the space "
-                               "again from its clips") from None
-        elif header.get("calibration"):  # written before the novelty model: its open set as written
-            space._novelty = False
+        for key, kind, what in (("novelty", NoveltyModel, "novelty model"),
+                                ("discriminant", DiscriminantRatio, "discriminant ratio")):
+            if header.get(key) and tests[key]:
+                try:
+                    setattr(space, f"_{key}", kind.from_file(header[key], tests[key]))
+                except (KeyError, TypeError, ValueError) as e:
+                    raise BadInput(f"{path}: its {what} is unreadable ({type(e).__name__}: {e}); build the space "
+                                   "again from its clips") from None
+            elif header.get("calibration"):  # written before this test: its open set as written (without
+                setattr(space, f"_{key}", False)  # the model; the ratio on eq. 2.4 distances)
         return space
 
     # ------------------------------------------------------------------ summary
@@ -647,5 +673,7 @@ class ProtoSymbolSpace:
             "open_set": "none of these: the distance rule" + (
                 " (one spread for all classes: a file written before the class spreads)"
                 if self.calibration.n_calibration and not self.calibration.class_scales else "") + (
+                " with the ratio on eq. 2.4 distances (a file written before the discriminant ratio)"
+                if self._discriminant is False else ", the discriminant ratio") + (
                 " (a file written before the novelty model)" if self._novelty is False else " or the novelty model"),
         }
