@@ -371,6 +371,9 @@ def test_discriminant_ratio_as_documented():
 
 
 def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_their_rule(dev_space, dev_split, tmp_path):
+    one = ProtoSymbolSpace.build([c for c in dev_split[0] if c.label == "squat1Reps"][:4])
+    assert one.discriminant is None and one.novelty_model is None
+    assert one.info()["open_set"] == "none of these: the distance rule alone (one class: no other class to be nearer to)"
     m = dev_space.discriminant
     assert m is not None and m.scheme == "across performers" and m.classes == sorted(set(dev_space.labels))
     assert "the discriminant ratio" in dev_space.info()["open_set"]

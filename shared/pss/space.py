@@ -672,8 +672,9 @@ class ProtoSymbolSpace:
                             else "nearest proto-symbol on the motion channels (no skeleton)"),
             "open_set": "none of these: the distance rule" + (
                 " (one spread for all classes: a file written before the class spreads)"
-                if self.calibration.n_calibration and not self.calibration.class_scales else "") + (
+                if self.calibration.n_calibration and not self.calibration.class_scales else "") + ((
                 " with the ratio on eq. 2.4 distances (a file written before the discriminant ratio)"
                 if self._discriminant is False else ", the discriminant ratio") + (
-                " (a file written before the novelty model)" if self._novelty is False else " or the novelty model"),
+                " (a file written before the novelty model)" if self._novelty is False else " or the novelty model")
+                if len(set(self.labels)) > 1 else " alone (one class: no other class to be nearer to)"),
         }
