@@ -246,3 +246,45 @@ def test_listing_interrupted_spaces_while_writers_finish(tmp_path):
             t.join(timeout=30)
     (tmp_path / "spaces" / "gone.pending.json").write_text("[1, 2]")  # a marker of another shape: still listed
     assert [r["space"] for r in store.interrupted()] == ["gone"]
+
+
+def test_a_service_stopping_while_a_worker_still_publishes_ends_cleanly(tmp_path):
+    """A request past the stop grace may still publish events while ``stop()`` undeclares the
+    publishers: the service stops without an error and the late events are dropped."""
+    import threading
+    import time
+
+    from shared.bus.runtime import Service
+    from tests.conftest import Processes, settings_of
+
+    env = cluster_env(tmp_path / "home")
+    procs = Processes(env)
+    procs.start("router", "shared.bus.router")
+    try:
+        for _ in range(5):
+            svc = Service("probe", {}, settings=settings_of(env), stop_grace_s=0.0).start()
+            errors, sent, go = [], [0], threading.Event()
+
+            def late_worker():
+                go.set()
+                try:
+                    for _ in range(200_000):  # bounded: far more than the stop takes
+                        svc.publish("request", {"verb": "x", "ms": 1.0})
+                        sent[0] += 1
+                        if svc._session is None:
+                            break
+                except Exception as e:  # noqa: BLE001 - what the test looks for
+                    errors.append(e)
+
+            t = threading.Thread(target=late_worker)
+            t.start()
+            go.wait(5)
+            deadline = time.monotonic() + 10
+            while sent[0] < 100 and not errors and time.monotonic() < deadline:
+                time.sleep(0.001)
+            assert sent[0] >= 100 and not errors, errors  # it was publishing when the stop came
+            svc.stop()
+            t.join(30)
+            assert not t.is_alive() and not errors, errors
+    finally:
+        procs.stop()

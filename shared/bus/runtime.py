@@ -106,6 +106,10 @@ class Service:
         self._inflight_lock = threading.Lock()
         self._client = None
         self._client_lock = threading.Lock()
+        # a worker may still publish while stop() undeclares the publishers (a request past the
+        # stop grace): Zenoh's Python objects refuse being used from two threads at once
+        # ("RuntimeError: Already borrowed"), so both take this lock
+        self._publish_lock = threading.Lock()
 
     def client(self):
         """A client of the cluster for calling other services (opened on first use, closed on stop)."""
@@ -237,9 +241,10 @@ class Service:
             if getattr(self, attr) is not None:
                 getattr(self, attr).undeclare()
                 setattr(self, attr, None)
-        for p in self._publishers.values():
-            p.undeclare()
-        self._publishers.clear()
+        with self._publish_lock:
+            for p in self._publishers.values():
+                p.undeclare()
+            self._publishers.clear()  # a late publish() finds none and drops its event
         if self._session is not None:
             self._session.close()
             self._session = None
@@ -249,9 +254,11 @@ class Service:
     def publish(self, topic: str, message: dict) -> None:
         """Publish an event declared in the contract (validated first)."""
         body = self.events[topic].validate(message) if topic in self.events else message
-        pub = self._publishers.get(topic)
-        if pub is not None:
-            pub.put(pack({"v": self.events[topic].version if topic in self.events else 1, **body}))
+        payload = pack({"v": self.events[topic].version if topic in self.events else 1, **body})
+        with self._publish_lock:
+            pub = self._publishers.get(topic)
+            if pub is not None:
+                pub.put(payload)
 
     # ------------------------------------------------------------------ requests
     def _on_query(self, query) -> None:
