@@ -111,9 +111,10 @@ def main(argv=None) -> int:
     res["recognition_stages"] = _stages(space, [c for c in clips if "_dg_" in c.name])
     print("recognition stages (ms per clip, 61 dg clips): "
           + ", ".join(f"{k} {v:.2f}" for k, v in res["recognition_stages"].items()))
-    res["space200"] = {"clips": len(db), "build_s": build_s, "decision_s": decision_s, "stress1": space.embedding.stress1, "recognize": rec,
-                       "probe_frames_120fps": probe.n_frames}
-    print(f"200-clip space: build {build_s:.1f} s (its decision {decision_s:.1f} s); recognition {rec['median_ms']:.1f} ms median, {rec['p95_ms']:.1f} ms p95")
+    res["space200"] = {"clips": len(db), "build_s": build_s, "decision_s": decision_s,
+                       "stress1": space.embedding.stress1, "recognize": rec, "probe_frames_120fps": probe.n_frames}
+    print(f"200-clip space: build {build_s:.1f} s (its decision {decision_s:.1f} s); "
+          f"recognition {rec['median_ms']:.1f} ms median, {rec['p95_ms']:.1f} ms p95")
 
     # ---- growth
     growth = {"clips": [], "frames": [], "channels": []}

@@ -33,7 +33,7 @@ def test_open_set_counts_every_clip_for_every_method(bundled_clips):
     assert [r["held_out"] for r in res["rows"]] == classes
     for row in res["rows"]:
         held = sum(c.label == row["held_out"] for c in test)
-        for method in ("pss", "pss_distance", "pss_model") + (("minirocket",) if rocket is not None else ()):
+        for method in ("pss", "pss_distance", "pss_ratio", "pss_model") + (("minirocket",) if rocket is not None else ()):
             out, inn = row[method]["out"], row[method]["in"]
             assert out[1] == held and inn[1] == len(test) - held and 0 <= out[0] <= out[1] and 0 <= inn[0] <= inn[1]
         # every clip's score is kept, and the counts are its scores above 1
@@ -42,11 +42,13 @@ def test_open_set_counts_every_clip_for_every_method(bundled_clips):
             assert len(scores) == len(test)
             assert sum(s > 1.0 for s, n in zip(scores, row["novel"]) if n) == row[method]["out"][0]
             assert sum(s > 1.0 for s, n in zip(scores, row["novel"]) if not n) == row[method]["in"][0]
-        assert row["scores"]["pss"] == [max(d, m) for d, m in zip(row["scores"]["pss_distance"], row["scores"]["pss_model"])]
-        # "none of these" when either test says so: the union rejects at least what each rejects
+        assert row["scores"]["pss"] == [max(d, r, m) for d, r, m in zip(
+            row["scores"]["pss_distance"], row["scores"]["pss_ratio"], row["scores"]["pss_model"])]
+        # "none of these" when any test says so: the union rejects at least what each rejects
+        tests = ("pss_distance", "pss_ratio", "pss_model")
         for key in ("out", "in"):
-            assert row["pss"][key][0] >= max(row["pss_distance"][key][0], row["pss_model"][key][0])
-            assert row["pss"][key][0] <= row["pss_distance"][key][0] + row["pss_model"][key][0]
+            assert row["pss"][key][0] >= max(row[m][key][0] for m in tests)
+            assert row["pss"][key][0] <= sum(row[m][key][0] for m in tests)
 
 
 def _result(out_rejected: int, in_rejected: int) -> dict:

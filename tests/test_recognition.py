@@ -386,10 +386,13 @@ def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_the
     with np.load(tmp_path / "d.npz", allow_pickle=False) as z:
         arrays = {k: np.array(z[k]) for k in z.files}
     header = json.loads(str(arrays["header"]))
-    # damaged: a projection that does not fit its classes, a header without its threshold
+    # damaged: a projection that does not fit its classes, a header without its threshold, a
+    # model of fewer features than the space's motions have
+    fewer = {f"discriminant_{k}": getattr(m, k)[:100] for k in ("mean", "scale", "projection")}
     for name, bad_arrays, bad_header in (
             ("projection", {**arrays, "discriminant_projection": m.projection[:, :2]}, header),
-            ("header", arrays, {**header, "discriminant": {"classes": m.classes}})):
+            ("header", arrays, {**header, "discriminant": {"classes": m.classes}}),
+            ("features", {**arrays, **fewer}, header)):
         np.savez(tmp_path / "bad.npz", **{**bad_arrays, "header": np.array(json.dumps(bad_header))})
         with pytest.raises(BadInput, match="discriminant ratio is unreadable"):
             ProtoSymbolSpace.load(tmp_path / "bad.npz")

@@ -56,6 +56,7 @@ the space.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -244,9 +245,9 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
 
 
 # ---------------------------------------------------------------------------- the discriminant ratio
-def _shrunk_lda(x: np.ndarray, y: np.ndarray):
-    """Shrinkage LDA on standardised features: ``(mean, scale, projection, class means in the
-    projection, shrinkage)``, or ``None`` when the features do not vary or there is one class.
+def _shrunk_lda(x: np.ndarray, y: np.ndarray) -> "DiscriminantRatio | None":
+    """Shrinkage LDA on standardised features, as a :class:`DiscriminantRatio` not yet calibrated
+    (it never rejects), or ``None`` when the features do not vary or there is one class.
 
     The model of scikit-learn's ``LinearDiscriminantAnalysis(solver="eigen",
     covariance_estimator=ShrunkCovariance(a))``, the reference it is tested against
@@ -283,7 +284,7 @@ def _shrunk_lda(x: np.ndarray, y: np.ndarray):
     between = (1 - a) * (zr.T @ zr - wr.T @ wr) / n + a * (trace_t - trace_w) / p * eye
     _, vecs = eigh(between, sigma)
     projection = basis @ vecs[:, ::-1][:, : len(classes) - 1]
-    return mean, scale, projection, centres @ projection, a
+    return DiscriminantRatio(classes, mean, scale, projection, centres @ projection, a, np.inf, [], 1.0, "")
 
 
 @dataclass
@@ -349,14 +350,10 @@ class DiscriminantRatio:
             rest = groups != g
             part = _shrunk_lda(x[rest], y[rest])
             mine = (groups == g) & np.isin(y, y[rest])
-            if part is None or not mine.any():
-                continue
-            mean, scale, proj, centres, _ = part
-            scores += list(_mean_ratios((x[mine] - mean) / scale @ proj, centres))
+            if part is not None and mine.any():
+                scores += [float(v) for v in part.ratios(x[mine])]
         threshold = conformal_threshold(scores, quantile) if scores else np.inf
-        mean, scale, proj, centres, a = full
-        return cls(sorted(set(y.tolist())), mean, scale, proj, centres, a, float(threshold),
-                   [float(v) for v in scores], quantile, scheme)
+        return dataclasses.replace(full, threshold=float(threshold), scores=scores, quantile=quantile, scheme=scheme)
 
     # ------------------------------------------------------------------ files
     def header(self) -> dict:

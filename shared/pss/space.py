@@ -638,13 +638,18 @@ class ProtoSymbolSpace:
                 raise BadInput(f"{path}: its recognition calibration is unreadable ({e}); build the space again "
                                "from its clips") from None
             space._calibration = cal
-        from shared.pss.recognition import DiscriminantRatio, NoveltyModel
+        from shared.pss.recognition import DiscriminantRatio, NoveltyModel, hmm_features
 
+        n = len(space.features.group_indices(space.recognition_groups))
+        n_features = len(hmm_features(np.zeros((params.n_states, n)), np.ones((params.n_states, n))))
         for key, kind, what in (("novelty", NoveltyModel, "novelty model"),
                                 ("discriminant", DiscriminantRatio, "discriminant ratio")):
             if header.get(key) and tests[key]:
                 try:
-                    setattr(space, f"_{key}", kind.from_file(header[key], tests[key]))
+                    model = kind.from_file(header[key], tests[key])
+                    if len(model.mean) != n_features:  # it would fail on the first recognition
+                        raise ValueError(f"it reads {len(model.mean)} features, the space's motions have {n_features}")
+                    setattr(space, f"_{key}", model)
                 except (KeyError, TypeError, ValueError) as e:
                     raise BadInput(f"{path}: its {what} is unreadable ({type(e).__name__}: {e}); build the space "
                                    "again from its clips") from None
