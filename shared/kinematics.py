@@ -116,3 +116,42 @@ def local_rotations(ang, axes, intrinsic, pre):
         for t in range(n):
             _joint_local(ang[t, j], axes[j], intrinsic[j], pre[j], pre_t, m, r, tmp, out[t, j])
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _wrap180(x):
+    return (x + 180.0) % 360.0 - 180.0
+
+
+@numba.njit(cache=True, nogil=True)
+def continuous_tait_bryan(ang, start):
+    """The rotations of Tait-Bryan angles ``ang`` (T, 3) in degrees on the branch nearest the
+    previous frame: each frame takes whichever of ``(a, b, c)`` and its twin
+    ``(a + 180, 180 - b, c + 180)`` (the same rotation), each angle moved by whole turns, lies
+    nearest the frame before; the first frame is compared with ``start``. The rotations are
+    unchanged; only their Euler triple is chosen (see :func:`shared.skeleton.continuous_euler`)."""
+    n = ang.shape[0]
+    out = np.empty((n, 3))
+    prev = start.copy()
+    cand = np.empty((2, 3))
+    for t in range(n):
+        cand[0, 0] = ang[t, 0]
+        cand[0, 1] = ang[t, 1]
+        cand[0, 2] = ang[t, 2]
+        cand[1, 0] = ang[t, 0] + 180.0
+        cand[1, 1] = 180.0 - ang[t, 1]
+        cand[1, 2] = ang[t, 2] + 180.0
+        best = 0
+        best_d = 1e300
+        for k in range(2):
+            d = 0.0
+            for a in range(3):
+                w = _wrap180(cand[k, a] - prev[a])
+                d += w * w
+            if d < best_d:
+                best_d = d
+                best = k
+        for a in range(3):
+            out[t, a] = prev[a] + _wrap180(cand[best, a] - prev[a])
+            prev[a] = out[t, a]
+    return out

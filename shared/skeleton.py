@@ -216,6 +216,22 @@ class Skeleton:
         }
         return cache[key]
 
+    def continuous_angles(self, data: np.ndarray, channels: list[str], keep_first: bool = False) -> np.ndarray:
+        """``data`` with every joint's rotation channels made continuous over time
+        (:func:`continuous_euler`; the same rotations, so forward kinematics is unchanged).
+        ``keep_first`` keeps the first frame's numbers as they are (a file read as written);
+        otherwise the first frame is the answer nearest the rest pose."""
+        out = np.array(data, dtype=float)
+        col = {c: i for i, c in enumerate(channels)}
+        for j in self.joints:
+            seq = "".join(a for a in j.euler.lower() if f"{j.name}.r{a}" in col)
+            if not seq:
+                continue
+            cols = [col[f"{j.name}.r{a}"] for a in seq]
+            order = j.euler if len(seq) == 3 else seq
+            out[:, cols] = continuous_euler(out[:, cols], order, out[0, cols] if keep_first else None)
+        return out
+
     def root_matrices(self, data: np.ndarray, channels: list[str]) -> np.ndarray:
         """The root's rotation matrices (T, 3, 3) ``C M C^T`` (no scipy import): the same map
         as :meth:`global_root_rotation`."""
@@ -280,6 +296,29 @@ class Skeleton:
 
     def __eq__(self, other) -> bool:  # dataclass eq would compare arrays element-wise
         return isinstance(other, Skeleton) and self.to_json() == other.to_json()
+
+
+def continuous_euler(angles_deg, seq: str, start=None) -> np.ndarray:
+    """One joint's Euler angles (T, k) in degrees, continuous over time, the same rotations.
+
+    Re-expressing a rotation as Euler angles has two answers for a Tait-Bryan sequence (``(a,
+    b, c)`` and its twin ``(a + 180, 180 - b, c + 180)``) and each angle is defined modulo 360;
+    a file or a conversion that picks the principal branch frame by frame jumps where a joint
+    passes 90 degrees in its middle angle or 180 in another (a humerus lifted overhead). Here
+    every frame takes the answer nearest the frame before (the first frame: nearest ``start``,
+    default the rest pose, all zeros), so velocities, torques and centre of gravity see the
+    motion and never a change of branch. With fewer than three channels, or a sequence that
+    repeats an axis, each angle is only unwrapped (its other answers are other rotations)."""
+    a = np.asarray(angles_deg, dtype=float)
+    if a.ndim != 2 or a.shape[0] == 0:
+        return a.copy()
+    s = np.zeros(a.shape[1]) if start is None else np.asarray(start, dtype=float)
+    if a.shape[1] == 3 and len(set(seq.lower())) == 3:
+        from shared.kinematics import continuous_tait_bryan
+
+        return continuous_tait_bryan(np.ascontiguousarray(a), np.ascontiguousarray(s))
+    first = s + (a[0] - s + 180.0) % 360.0 - 180.0
+    return np.rad2deg(np.unwrap(np.deg2rad(np.vstack([first, a[1:]])), axis=0))
 
 
 def euler_matrix(seq: str, angles_deg) -> np.ndarray:

@@ -22,7 +22,7 @@ ROT_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # Y-u
 
 @pytest.fixture(scope="module")
 def plain(bundled, tmp_path_factory):
-    """The squat as a plain Y-up centimetre BVH (mirrorcoach's own writer), read back."""
+    """The squat as a plain Y-up BVH (mirrorcoach's own writer: metres), read back."""
     path = tmp_path_factory.mktemp("conv") / "squat.bvh"
     save_clip(load_clip(bundled / SQUAT).resample(30), path)
     return load_clip(path)
@@ -111,7 +111,7 @@ def _same_motion(a, b, tol_m=2e-4):
 
 @pytest.mark.parametrize("unit", ["m", "in", "cmu", "mm"])
 def test_a_bvh_in_other_length_units_is_the_same_body(plain, tmp_path, unit):
-    sk, data, chans = _variant(plain, scale=0.01 / UNITS[unit])
+    sk, data, chans = _variant(plain, scale=plain.skeleton.unit_m / UNITS[unit])
     _write_raw(tmp_path / "u.bvh", sk, data, chans, plain.fps)
     back = load_clip(tmp_path / "u.bvh")
     assert back.read_as["units"].startswith(unit) and "from the body" in back.read_as["units"]
@@ -122,7 +122,7 @@ def test_a_bvh_in_other_length_units_is_the_same_body(plain, tmp_path, unit):
 
 
 def test_a_body_of_no_human_height_is_refused_with_the_files_name(plain, tmp_path):
-    sk, data, chans = _variant(plain, scale=0.02)  # a 3.4 cm "person" in any unit but m (then 3.4 m)
+    sk, data, chans = _variant(plain, scale=2.0 * plain.skeleton.unit_m)  # a 3.4 cm "person" in any unit but m
     _write_raw(tmp_path / "giant.bvh", sk, data, chans, plain.fps)
     with pytest.raises(ClipFormatError, match=r"giant\.bvh.*no human height.*--units"):
         load_clip(tmp_path / "giant.bvh")
@@ -178,7 +178,8 @@ def test_position_channels_on_every_joint(plain, tmp_path, form):
 
 @pytest.mark.parametrize("form", ["replace", "add"])
 def test_root_offset_with_root_channels_read_as_the_first_frame_tells(plain, tmp_path, form):
-    sk, data, chans = _variant(plain, root_offset=[0.0, 95.0, 0.0], add_form=form == "add")
+    sk, data, chans = _variant(plain, root_offset=[0.0, 0.95 / plain.skeleton.unit_m, 0.0],
+                               add_form=form == "add")
     _write_raw(tmp_path / "root.bvh", sk, data, chans, plain.fps)
     back = load_clip(tmp_path / "root.bvh")
     assert back.read_as["translations"] == [form]
@@ -212,7 +213,7 @@ def test_the_same_motion_is_recognised_alike_whatever_file_carried_it(bundled, t
     clips = [load_clip(f) for f in find_clips([bundled / "amc"]) if "_dg_" not in f.name]
     space = ProtoSymbolSpace.build(clips)
     amc = load_clip(bundled / SQUAT)
-    save_clip(amc, tmp_path / "s.bvh")  # ZXY angles of the folded rotation, centimetres, joints depth first
+    save_clip(amc, tmp_path / "s.bvh")  # ZXY angles of the folded rotation, metres, joints depth first
     save_clip(amc, tmp_path / "s.npz")
     bvh, npz = load_clip(tmp_path / "s.bvh"), load_clip(tmp_path / "s.npz")
     assert bvh.channels != amc.channels and bvh.skeleton.unit_m != amc.skeleton.unit_m
@@ -382,7 +383,7 @@ def test_a_six_channel_body_slides_its_bones_in_mujoco_as_in_our_kinematics(plai
     clip = load_clip(tmp_path / "six.bvh")
     moved = clip.data.copy()
     k = clip.channels.index("ltibia.ty")
-    moved[:, k] += 5.0 * np.sin(np.linspace(0, np.pi, clip.n_frames))  # the shank slides up to 5 cm
+    moved[:, k] += 0.05 / clip.skeleton.unit_m * np.sin(np.linspace(0, np.pi, clip.n_frames))  # up to 5 cm
     clip = clip.with_data(moved)
     body = human_body(clip.skeleton)
     assert "ltibia.ty" in body.channels and body.describe()["mass"] == pytest.approx(70.0, abs=0.05)
@@ -424,10 +425,11 @@ def _same_proto_symbol(space, a, b):
 def test_every_convention_gives_the_same_body_mass_and_proto_symbol(plain, mixed_space, tmp_path, variant):
     from shared.bodies.human import human_body
 
-    kw = {"m": dict(scale=0.01), "in": dict(scale=0.01 / 0.0254), "cmu": dict(scale=0.01 / UNITS["cmu"]),
+    u = plain.skeleton.unit_m
+    kw = {"m": dict(scale=u), "in": dict(scale=u / 0.0254), "cmu": dict(scale=u / UNITS["cmu"]),
           "z-up": dict(turn=ROT_Z_UP), "six-replace": dict(every_joint_moves=True),
           "six-add": dict(every_joint_moves=True, add_form=True),
-          "root-offset-add": dict(root_offset=[0.0, 95.0, 0.0], add_form=True)}[variant]
+          "root-offset-add": dict(root_offset=[0.0, 0.95 / u, 0.0], add_form=True)}[variant]
     sk, data, chans = _variant(plain, **kw)
     _write_raw(tmp_path / "v.bvh", sk, data, chans, plain.fps)
     clip = load_clip(tmp_path / "v.bvh")

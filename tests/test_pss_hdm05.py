@@ -11,11 +11,16 @@ from shared.pss.space import ProtoSymbolSpace
 
 
 def _angle_rmse_deg(a, b, channels):
-    """Joint-angle RMSE in degrees after time normalisation, wrap-aware."""
-    x, y = a.select(channels), b.select(channels)
-    t = np.linspace(0, 1, len(x))
-    y = np.column_stack([np.interp(t, np.linspace(0, 1, len(y)), y[:, k]) for k in range(y.shape[1])])
-    d = (x - y + 180.0) % 360.0 - 180.0
+    """Joint-rotation RMSE in degrees after time normalisation: the angle of each joint's
+    rotation from one clip to the other (any Euler branch of the same rotation is 0 apart)."""
+    t = np.linspace(0, 1, a.n_frames)
+    y = np.column_stack([np.interp(t, np.linspace(0, 1, b.n_frames), b.column(c)) for c in channels])
+    joints = sorted({c.rsplit(".", 1)[0] for c in channels})
+    idx = [a.skeleton.index(j) for j in joints]
+    la = a.skeleton.local_matrices(a.select(channels), channels)[:, idx]
+    lb = a.skeleton.local_matrices(y, channels)[:, idx]
+    cos = (np.einsum("tjab,tjab->tj", la, lb) - 1.0) / 2.0
+    d = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     return float(np.sqrt(np.mean(d * d)))
 
 

@@ -113,6 +113,15 @@ def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
         raise BadInput(f"a motion needs at least 5 frames to differentiate, got {n}")
     w = smooth_window(clip.fps, n)
     q = np.tile(m.qpos0, (n, 1))
+    # Euler angles continuous before anything is smoothed or differentiated: a wrap of 360 degrees or
+    # a change of Euler branch is no motion (a file crossing +-180 gave hip torques of 47,000 N m, issue 28)
+    if body.skeleton is not None and hasattr(body.skeleton, "continuous_angles"):
+        clip = clip.with_data(body.skeleton.continuous_angles(clip.data, clip.channels, keep_first=True))
+    else:
+        rot = [i for i, c in enumerate(clip.channels) if c.rsplit(".", 1)[-1] in ("rx", "ry", "rz")]
+        data = clip.data.copy()
+        data[:, rot] = np.rad2deg(np.unwrap(np.deg2rad(data[:, rot]), axis=0))
+        clip = clip.with_data(data)
     driven = [d for d in body.dofs if d.channel in clip.channels]
     if driven:  # one filter call for every channel: the edge fits are shared
         angles = savgol_filter(clip.select([d.channel for d in driven]), w, 3, axis=0, mode="interp")

@@ -51,9 +51,11 @@ _BONE_NAMED = {
     "foot": "foot", "ankle": "foot", "toe": "foot", "toes": "foot", "toebase": "foot", "ball": "foot",
     "hipjoint": "hipjoint",
 }
-_BONE_PREFIXES = (("spine", "spine"), ("chest", "spine"), ("neck", "neck"), ("hand", "hand"), ("finger", "hand"),
-                  ("thumb", "hand"), ("index", "hand"), ("middle", "hand"), ("ring", "hand"), ("pinky", "hand"),
-                  ("toe", "foot"), ("foot", "foot"))
+_BONE_PREFIXES = (("spine", "spine"), ("chest", "spine"), ("neck", "neck"), ("head", "head"), ("toe", "foot"),
+                  ("foot", "foot"), ("hand", "hand"), ("finger", "hand"), ("thumb", "hand"), ("index", "hand"),
+                  ("middle", "hand"), ("ring", "hand"), ("pinky", "hand"))
+#: words that name a finger only below a hand (``MiddleSpineJoint`` is a spine, issue 28)
+_FINGER_WORDS = {"finger", "thumb", "index", "middle", "ring", "pinky"}
 # joint-named schemes (CMU BVH): the bone that starts at the joint
 _JOINT_NAMED = {"hip": "thigh", "knee": "shank", "ankle": "foot", "shoulder": "upper_arm", "elbow": "forearm",
                 "wrist": "hand", "collar": "clavicle"}
@@ -87,6 +89,8 @@ def name_parts(bone: str) -> tuple[str, str]:
             side, n = m.group(1), n[1:]
     n = re.sub(r"[^a-z0-9]+", "", n)
     n = re.sub(r"(end|twist\d*|roll|nub|site)$", "", n)
+    if n.endswith("joint") and n not in ("joint", "hipjoint"):  # MiddleSpineJoint, LeftKneeJoint: the bone's word
+        n = n[:-len("joint")]
     return side, n
 
 
@@ -94,6 +98,11 @@ def map_segments(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
     """Every bone's (segment, side) and the bones no scheme names. A bone no scheme names
     belongs to its parent's segment (fingers to the hand, toes to the foot)."""
     parts = {j.name: name_parts(j.name) for j in sk.joints}
+    to_head: set[int] = set()  # the joints from the root to the first joint named head (topology)
+    head = next((i for i, j in enumerate(sk.joints) if "head" in parts[j.name][1]), None)
+    while head is not None and head >= 0:
+        to_head.add(head)
+        head = sk.joints[head].parent
     words = {w for _, w in parts.values()}
     joint_named = "knee" in words or "elbow" in words  # CMU BVH and the like name bones after joints
     out: dict[str, tuple[str, str]] = {}
@@ -109,13 +118,16 @@ def map_segments(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
                 seg = _BONE_NAMED[cand]
             if seg:
                 break
-        if seg is None:
-            seg = next((s for p, s in _BONE_PREFIXES if base.startswith(p)), None)
+        if seg is None:  # a word inside the name; finger words only below a hand
+            below_hand = i > 0 and out[sk.joints[j.parent].name][0] in ("hand", "forearm")
+            seg = next((s for p, s in _BONE_PREFIXES if p in base and (p not in _FINGER_WORDS or below_hand)), None)
         if i == 0:
             seg = "pelvis"
-        if seg is None:
-            unmapped.append(j.name)
+        if seg is None:  # reported (Body.unmapped); by topology: on the way to the head it is the trunk,
+            unmapped.append(j.name)  # elsewhere it continues its parent's segment
             seg, side = out[sk.joints[j.parent].name]
+            if i in to_head and seg == "pelvis":
+                seg = "spine"
         out[j.name] = (seg, side if seg in _SIDED else "")
     return out, unmapped
 
@@ -140,6 +152,30 @@ def segment_masses(seg_of: dict[str, tuple[str, str]], mass: float) -> tuple[dic
     return out, missing
 
 
+def stature(sk: Skeleton) -> float:
+    """The body's standing height in metres from its bone lengths alone, whatever its rest pose
+    (a game studio's skeleton rests with its bones along X): the longest way from a foot (a
+    joint named foot or ankle) up to the root, plus the way from the root up to the head and
+    its end site. The skeleton's rest-pose height when it names no head or feet."""
+    from shared.io.conventions import FOOT_RE, HEAD_RE
+
+    def up_to_root(i):
+        total = 0.0
+        while i > 0:
+            total += float(np.linalg.norm(sk.joints[i].offset))
+            i = sk.joints[i].parent
+        return total
+
+    feet = [i for i, j in enumerate(sk.joints) if FOOT_RE.search(j.name) and not FOOT_RE.search(
+        sk.joints[j.parent].name if j.parent >= 0 else "")]
+    heads = [i for i, j in enumerate(sk.joints) if HEAD_RE.search(j.name)]
+    if not feet or not heads:
+        return sk.rest_height()
+    h = heads[0]
+    top = up_to_root(h) + (0.0 if sk.joints[h].end is None or sk.children(h) else float(np.linalg.norm(sk.joints[h].end)))
+    return (max(up_to_root(f) for f in feet) + top) * sk.unit_m
+
+
 def _hinge_order(seq: str, dofs: list[str]) -> list[str]:
     """Rotation channels ('x', 'y', 'z') in the order MuJoCo must apply the hinges."""
     axes = [a for a in seq.lower() if f"r{a}" in dofs]
@@ -162,9 +198,9 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
     sk = skeleton
     from shared.io.conventions import HUMAN_HEIGHT_M
 
-    height = sk.rest_height()
+    height = stature(sk)
     if not HUMAN_HEIGHT_M[0] <= height <= HUMAN_HEIGHT_M[1]:
-        raise BadInput(f"skeleton {sk.name!r} is {height:.3g} m tall in its rest pose: not a person "
+        raise BadInput(f"skeleton {sk.name!r} is {height:.3g} m tall (its bones from foot to head): not a person "
                        f"({HUMAN_HEIGHT_M[0]:g}-{HUMAN_HEIGHT_M[1]:g} m); is its length unit right? (--units)")
     unit = sk.unit_m
     spec = mujoco.MjSpec()

@@ -11,7 +11,7 @@ from typing import Optional
 
 import typer
 
-from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
+from shared.cli.app import READING, SKELETON_HELP, _fail, app, read_clip
 from shared.cli.cluster import _client, _jsonable, _wire
 
 sim_app = typer.Typer(help="MuJoCo bodies on the simulator service (needs `make up`).", no_args_is_help=True)
@@ -26,11 +26,12 @@ def _body_request(body: str) -> dict:
     """A robot's name, or a skeleton file (ASF/BVH) to build a human body from."""
     p = Path(body)
     if p.suffix.lower() in (".asf", ".bvh"):
-        from shared.io import read_asf, read_bvh
+        from shared.io import load_skeleton
 
         if not p.is_file():
             _fail(f"{body}: no such skeleton file")
-        sk = read_asf(p) if p.suffix.lower() == ".asf" else read_bvh(p).skeleton
+        # read as the motion files are: the root options --units, --up and --translations apply here too
+        sk = load_skeleton(p, units=READING["units"]) if p.suffix.lower() == ".asf" else read_clip(p).skeleton
         return {"skeleton": sk.to_json()}
     return {"body": body}
 

@@ -21,6 +21,9 @@ from shared.errors import ClipFormatError
 from shared.skeleton import Joint, Skeleton, euler_matrix
 
 INCH_M = 0.0254
+#: degrees per unit of the ASF ``:units angle`` words (gradians: 400 to the turn)
+ANGLE_UNITS = {"deg": 1.0, "degree": 1.0, "degrees": 1.0, "rad": 180.0 / math.pi, "radian": 180.0 / math.pi,
+               "radians": 180.0 / math.pi, "grad": 0.9, "gradian": 0.9, "gradians": 0.9}
 _DOF_MAP = {"rx": "rx", "ry": "ry", "rz": "rz", "tx": "tx", "ty": "ty", "tz": "tz", "l": None}
 
 
@@ -52,7 +55,7 @@ def read_asf(path, units: str | None = None) -> Skeleton:
     lines = _lines(path)
     section = None
     length_unit = 1.0
-    angle_deg = True
+    angle_scale = 1.0  # degrees per file unit of angle
     root = {"order": ["tx", "ty", "tz", "rx", "ry", "rz"], "axis": "xyz", "position": [0, 0, 0], "orientation": [0, 0, 0]}
     bones: dict[str, dict] = {}
     bone_order: list[str] = []
@@ -73,8 +76,14 @@ def read_asf(path, units: str | None = None) -> Skeleton:
         if section == "units":
             if key == "length":
                 length_unit = _floats(path, lineno, parts[1:], 1)[0]
+                if length_unit <= 0:
+                    raise ClipFormatError(path, f":units length {parts[1]}: the length unit must be positive", lineno)
             elif key == "angle":
-                angle_deg = parts[1].lower().startswith("deg")
+                word = parts[1].lower() if len(parts) > 1 else ""
+                if word not in ANGLE_UNITS:
+                    raise ClipFormatError(path, f":units angle {word or '(none)'}: unknown angle unit (use one of "
+                                                f"{', '.join(sorted(ANGLE_UNITS))})", lineno)
+                angle_scale = ANGLE_UNITS[word]
         elif section == "root":
             if key == "order":
                 order = [p.lower() for p in parts[1:]]
@@ -149,7 +158,7 @@ def read_asf(path, units: str | None = None) -> Skeleton:
     missing = [b for b in bone_order if b not in order]
     if missing:
         raise ClipFormatError(path, f"bones not connected to the root: {missing[:3]}")
-    scale = 1.0 if angle_deg else 180.0 / np.pi
+    scale = angle_scale
 
     def bone_vec(name):
         if name == "root":
@@ -182,6 +191,7 @@ def read_asf(path, units: str | None = None) -> Skeleton:
 
     sk = Skeleton(name=path.stem, joints=joints, unit_m=1.0, up_axis=1, source_format="asf")
     sk.unit_m = cv.choose_unit(path, cv.rest_extent(sk, 1), units, declared_m=INCH_M / length_unit)
+    sk.__dict__["amc_angle_scale"] = angle_scale  # the AMC's angles are in the ASF's unit (read_amc)
     return sk
 
 
@@ -217,9 +227,14 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
     starts: list[tuple[int, int]] = []  # (first token, line number) of every bone line, for errors
     n_frames = 0
     expected_frame = None
+    declared = None
     for lineno, line in enumerate(lines, 1):
         parts = line.split()
-        if not parts or parts[0][0] in "#:":
+        if not parts or parts[0][0] == "#":
+            continue
+        if parts[0][0] == ":":
+            if parts[0].lower() in (":radians", ":degrees"):
+                declared = parts[0][1:].lower()
             continue
         if len(parts) == 1 and parts[0].isdigit():
             n = int(parts[0])
@@ -254,6 +269,11 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
     data = np.zeros(n_frames * nch)
     data[np.array(where, dtype=np.int64)] = values
     data = data.reshape(n_frames, nch)
+    # angles in the unit the AMC declares (:RADIANS / :DEGREES), else its ASF's; lengths stay file units
+    scale = {"radians": 180.0 / math.pi, "degrees": 1.0}.get(declared, skeleton.__dict__.get("amc_angle_scale", 1.0))
+    if scale != 1.0:
+        rot = [i for i, c in enumerate(channels) if c.rsplit(".", 1)[1] in ("rx", "ry", "rz")]
+        data[:, rot] *= scale
     cls = label if label is not None else path.parent.name
     return Clip(data=data, channels=channels, fps=fps, skeleton=skeleton, groups={"motion": list(channels)},
                 name=path.stem, label=cls, source=str(path))

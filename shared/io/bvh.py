@@ -6,11 +6,14 @@ specifies). The file's length unit, up axis and what its position channels mean 
 the body (:mod:`shared.io.conventions`) unless given: ``units`` (cm, m, mm, in, cmu), ``up``
 (y, z) and ``translations`` (add, replace, auto).
 
-Writing a clip whose skeleton came from BVH writes its own channels unchanged (so a read -
-write - read round trip gives the same numbers to the printed precision). Writing a clip on an
+Writing a clip whose skeleton came from BVH writes its own channels unchanged, its lengths in
+metres (so a read - write - read round trip gives the same numbers to the printed precision).
+Every BVH mirrorcoach writes is in metres: Blender, which reads a BVH number as one of its
+units (a metre), imports it at a person's size with its default scale of 1; a tool that takes
+BVH as centimetres needs a scale of 100 on import. Writing a clip on an
 ASF skeleton folds each bone's ``axis`` pre-rotation into its local rotation
 (``L = C M C^T``), writes ``Zrotation Xrotation Yrotation`` for every joint (angles unwrapped
-over time, so they stay continuous) and converts lengths to centimetres; forward kinematics of
+over time, on the branch nearest the frame before) and converts lengths to metres; forward kinematics of
 the written file gives the same joint positions as the ASF/AMC original.
 """
 
@@ -22,14 +25,14 @@ import numpy as np
 
 from shared.clip import Clip
 from shared.errors import ClipFormatError
-from shared.skeleton import MAX_JOINTS, Joint, Skeleton
+from shared.skeleton import MAX_JOINTS, Joint, Skeleton, continuous_euler
 
 _BVH_TO_DOF = {
     "xposition": "tx", "yposition": "ty", "zposition": "tz",
     "xrotation": "rx", "yrotation": "ry", "zrotation": "rz",
 }
 _DOF_TO_BVH = {"tx": "Xposition", "ty": "Yposition", "tz": "Zposition", "rx": "Xrotation", "ry": "Yrotation", "rz": "Zrotation"}
-BVH_UNIT_M = 0.01
+BVH_UNIT_M = 1.0  # metres: what Blender reads (module docstring)
 DECIMALS = 6
 
 
@@ -103,6 +106,8 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
                 n = int(tk.next())
             except ValueError:
                 raise ClipFormatError(path, "CHANNELS needs a count", ln) from None
+            if not 0 <= n <= 6:
+                raise ClipFormatError(path, f"CHANNELS {n}: a joint has 0 to 6 channels", ln)
             for _ in range(n):
                 ln = tk.line()
                 c = tk.next()
@@ -110,6 +115,9 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
                     raise ClipFormatError(path, f"unknown channel {c!r}", ln)
                 dofs.append(_BVH_TO_DOF[c.lower()])
         seq = "".join(d[1].upper() for d in dofs if d.startswith("r"))
+        if len(set(seq)) != len(seq):
+            raise ClipFormatError(path, f"joint {name!r} names a rotation channel twice", ln if dofs else tk.line())
+        seq += "".join(a for a in "XYZ" if a not in seq)  # CHANNELS 0-2 rotations: the others stay at 0
         j = Joint(name=name, parent=parent, offset=offset, dofs=dofs, euler=seq)
         idx = len(joints)
         joints.append(j)
@@ -173,8 +181,11 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
         raise ClipFormatError(path, f"'Frames: {n_frames}' but {len(rows)} frame lines")
     if not rows:
         raise ClipFormatError(path, "no frames")
-    sk, data, read_as = _conventions(path, Skeleton(name=path.stem, joints=joints, unit_m=1.0, up_axis=1,
-                                                    source_format="bvh"), np.vstack(rows), channels, units, up, translations)
+    if len(set(j.name for j in joints)) != len(joints):
+        raise ClipFormatError(path, "two joints share a name")
+    sk, data, channels, read_as = _conventions(path, Skeleton(name=path.stem, joints=joints, unit_m=1.0, up_axis=1,
+                                                              source_format="bvh"), np.vstack(rows), channels,
+                                               units, up, translations)
     fps = 1.0 / frame_time
     if abs(fps - round(fps)) < 1e-3 * fps:  # "0.008333" means 120 fps, not 120.0048
         fps = float(round(fps))
@@ -183,48 +194,72 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
 
 
 def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], units, up, translations):
-    """Translation channels to the add form, the body to Y up, the unit chosen (see
-    :mod:`shared.io.conventions`); returns the skeleton, the data and what was decided."""
+    """The body's root found, translation channels to the add form, the body to Y up, the unit
+    chosen and the angles continuous (see :mod:`shared.io.conventions`); returns the skeleton,
+    the data, the channels and what was decided."""
     from shared.io import conventions as cv
 
     cv.check_reading(path, units, up, translations)
+    sk, data, channels, rest, folded = cv.fold_static_root(sk, data, channels, path)
     col = {c: i for i, c in enumerate(channels)}
-    size = float(np.ptp(cv.rest_points(sk), axis=0).max())
+    size = max(float(np.ptp(cv.rest_points(sk), axis=0).max()), 1e-9)
     modes = {}
     for j in sk.joints:
         t = [col.get(f"{j.name}.t{a}") for a in "xyz"]
         if all(k is not None for k in t):
-            modes[j.name] = cv.translation_mode(j, data[0, t], size, translations)
-            if modes[j.name] == "replace":
-                data[:, t] -= j.offset
+            if j.parent >= 0:  # the root waits for the up axis and the unit: its floor decides
+                modes[j.name] = translations if translations in ("add", "replace") else \
+                    cv.joint_translation_mode(data[:, t], rest[j.name], size)
+                if modes[j.name] == "replace":
+                    data[:, t] -= rest[j.name]
         elif any(k is not None for k in t) and translations != "add" and np.any(j.offset):
             raise ClipFormatError(path, f"joint {j.name!r} has only some of its position channels and an offset; "
                                         "say how they combine (--translations add|replace)")
-    axis = {"y": 1, "z": 2}[up] if up else cv.detect_up(sk, path)
+    axis = {"y": 1, "z": 2}[up] if up else cv.detect_up(sk, data, channels, path)
+    root_rest = rest[sk.root.name]
     if axis == 2:
         sk, data = cv.turn_z_up_to_y_up(sk, data, channels)
-    sk.unit_m = cv.choose_unit(path, cv.rest_extent(sk, 1), units)
+        root_rest = cv.Z_TO_Y @ root_rest
+    height = cv.standing_height(sk, data, channels, 1)
+    if up and not units and not cv.human_height(height):  # told the up axis of a body lying down: its length
+        height = max(cv.standing_height(sk, data, channels, a) for a in range(3))
+    sk.unit_m = cv.choose_unit(path, height, units)
+    root = sk.root
+    t = [col.get(f"{root.name}.t{a}") for a in "xyz"]
+    if all(k is not None for k in t):
+        modes[root.name] = translations if translations in ("add", "replace") else \
+            cv.root_translation_mode(sk, data, channels, root_rest, 1)
+        if modes[root.name] == "replace":
+            data[:, t] -= root_rest
+    data = sk.continuous_angles(data, channels, keep_first=True)
     unit = next(k for k, v in cv.UNITS.items() if v == sk.unit_m)
     read_as = {"units": unit + ("" if units else " (from the body's height)"),
-               "up": ("z, turned to y" if axis == 2 else "y") + ("" if up else " (from the feet)"),
-               "translations": sorted(set(modes.values())) or ["none"]}
-    return sk, data, read_as
+               "up": ("z, turned to y" if axis == 2 else "y") + ("" if up else " (from the motion)"),
+               "translations": sorted(set(modes.values())) or ["none"],
+               "root": root.name + (f" (the static node{'s' if len(folded) > 1 else ''} {', '.join(folded)} "
+                                    "above it folded in)" if folded else "")}
+    return sk, data, channels, read_as
 
 
 def to_bvh_form(clip: Clip) -> tuple[Skeleton, np.ndarray, list[str]]:
-    """The clip's skeleton and motion in BVH form: C folded into ZXY rotations, centimetres."""
+    """The clip's skeleton and motion in BVH form: C folded into ZXY rotations, metres."""
     sk = clip.skeleton
     if sk is None:
         raise ClipFormatError(clip.source or clip.name, "a BVH file needs a skeleton; this clip has none")
     plain = all(np.array_equal(j.pre, np.eye(3)) for j in sk.joints)
     if sk.source_format == "bvh" and plain:
         chans = sk.channels()
+        scale = sk.unit_m / BVH_UNIT_M
         data = np.column_stack([clip.column(c) if c in clip.channels else np.zeros(clip.n_frames) for c in chans])
         for i, c in enumerate(chans):  # position channels as Blender reads them: the whole local position
             name, dof = c.rsplit(".", 1)
             if dof in ("tx", "ty", "tz"):
-                data[:, i] += sk.joints[sk.index(name)].offset["xyz".index(dof[1])]
-        return sk, data, chans
+                data[:, i] = (data[:, i] + sk.joints[sk.index(name)].offset["xyz".index(dof[1])]) * scale
+        if scale == 1.0:
+            return sk, data, chans
+        joints = [Joint(j.name, j.parent, j.offset * scale, list(j.dofs), j.euler, j.pre,
+                        None if j.end is None else j.end * scale, dict(j.limits)) for j in sk.joints]
+        return Skeleton(sk.name, joints, BVH_UNIT_M, sk.up_axis, "bvh"), data, chans
     scale = sk.unit_m / BVH_UNIT_M
     values = {c: clip.data[:, i] for i, c in enumerate(clip.channels)}
     local = sk.local_rotations(values, clip.n_frames)
@@ -237,8 +272,7 @@ def to_bvh_form(clip: Clip) -> tuple[Skeleton, np.ndarray, list[str]]:
         if moves:  # Blender's reading: the channels are the whole local position
             for k, d in enumerate(("tx", "ty", "tz")):
                 cols.append((values.get(f"{j.name}.{d}", np.zeros(clip.n_frames)) + j.offset[k]) * scale)
-        eul = np.unwrap(np.deg2rad(rot.as_euler("ZXY", degrees=True)), axis=0)
-        cols.extend(np.rad2deg(eul).T)
+        cols.extend(continuous_euler(rot.as_euler("ZXY", degrees=True), "ZXY").T)  # one branch over the take
         joints.append(nj)
         chans.extend(f"{j.name}.{d}" for d in dofs)
     out = Skeleton(name=sk.name, joints=joints, unit_m=BVH_UNIT_M, up_axis=sk.up_axis, source_format="bvh")
@@ -251,8 +285,8 @@ def write_bvh(clip: Clip, path) -> None:
     sk, data, chans = to_bvh_form(clip)
     out = ["HIERARCHY"]
 
-    def fmt(v):
-        return " ".join(f"{x:.{DECIMALS}f}" for x in v)
+    def fmt(v):  # rounded first, so that a tiny negative number never prints as "-0.000000"
+        return " ".join(f"{x:.{DECIMALS}f}" for x in np.round(np.asarray(v, dtype=float), DECIMALS) + 0.0)
 
     def emit(i: int, depth: int):
         j = sk.joints[i]

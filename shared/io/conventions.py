@@ -1,23 +1,42 @@
-"""What a motion file means: its length unit, its up axis and what its translation channels
-add to (issue 12). Readers call these after parsing, so every clip inside mirrorcoach is a
-Y-up body in known units whose translation channels add to the joint offsets.
+"""What a motion file means: its length unit, its up axis, which joint is the body's root and
+what its translation channels add to (issues 12 and 28). Readers call these after parsing, so
+every clip inside mirrorcoach is a Y-up body in known units, rooted at the pelvis, whose
+translation channels add to the joint offsets. Everything is read off the *motion* (the posed
+frames), per file, because a rest pose says little: game studios' skeletons rest with every
+bone along its local X axis, and their root is a static node on the floor.
 
+* **The body's root.** A file root that never moves (every channel constant over the take, or
+  none) and has a single child is a floor or scene node, not the body: it is folded into its
+  child (its constant transform composed into the child's offset, translations and, if it is
+  turned, the child's rotations), so the pelvis is the root every later step and the simulator
+  see. ``read_as["root"]`` says what was folded.
+* **Translation channels against OFFSET, per joint.** Blender reads a joint's position channels
+  as its whole local position (the offset is their rest value); other files add them to the
+  offset. For a joint below the root the reading that keeps the skeleton consistent wins: the
+  channels stay near the offset (replace) or near zero (add); when they move, the reading whose
+  bone length stays more constant over the take. For the root the floor decides: the reading
+  that puts the body's lowest point over the take nearer the height 0 of the file's floor (and
+  the body nearer the origin), i.e. the hips at a person's height above the floor.
+  ``translations=`` overrides both. Inside mirrorcoach the channels always add to the offset
+  (a "replace" joint is stored as the difference), and the BVH writer writes Blender's form.
+* **Up axis.** BVH says nothing; Blender exports Z-up. In the posed frames the head lies above
+  the feet (joints named head, and foot, ankle or toe): the axis and sign of that direction is
+  up. A Z-up body is turned to Y-up by rotating every offset, every translation channel and
+  (through the joints' ``pre`` rotation, ``L' = R0 L R0^T``) every local rotation by ``R0`` =
+  -90 deg about x; the channels' angles are kept. A body without such names falls back to its
+  rest pose. ``up=`` overrides.
 * **Length unit.** A file states no unit (BVH) or one that is often wrong (ASF ``:units
-  length``). A person is 1.0-2.2 m tall in the rest pose, and the usual units map that onto
-  disjoint ranges of file units (cm 100-220, in 39-87, CMU 17.7-39, m 1.0-2.2), so the body's
-  height picks the unit. A body of no human height in any of them is refused with a clear
+  length``). A person stands 1.0-2.2 m tall, and the usual units map that onto disjoint ranges
+  of file units (cm 100-220, in 39-87, CMU 17.7-39, m 1.0-2.2), so the body's height picks the
+  unit: for BVH its standing height over the take (head to lowest point, 90th percentile of the
+  frames), for ASF its rest pose. A body of no human height in any unit is refused with a clear
   error (a 5 m "human" must not reach the simulator); ``units=`` overrides.
-* **Up axis.** BVH says nothing; Blender exports Z-up. The feet (joints named foot, ankle or
-  toe) lie below the root along the up axis in the rest pose. A Z-up body is turned to Y-up
-  by rotating every offset, every translation channel and (through the joints' ``pre``
-  rotation, ``L' = R0 L R0^T``) every local rotation by ``R0`` = -90 deg about x; the channels'
-  angles are kept. ``up=`` overrides.
-* **Translation channels against OFFSET.** Blender reads a joint's position channels as its
-  whole local position (the offset is their rest value); some files add them to the offset.
-  Where the first frame tells (channels near the offset: replace; near zero: add) that is
-  followed, otherwise Blender's reading; ``translations=`` overrides. Inside mirrorcoach the
-  channels always add to the offset (a "replace" file is stored as the difference), and the
-  BVH writer writes Blender's form.
+* **Euler angles** are made continuous over the take (:func:`shared.skeleton.continuous_euler`:
+  the same rotations, each frame on the branch nearest the frame before), so nothing
+  downstream differentiates a jump of 360 degrees or a change of branch.
+
+Every option is one of ``mirrorcoach``'s root options, so every command that reads clips takes
+them: ``mirrorcoach --up z --units cm space build ...``.
 """
 
 from __future__ import annotations
@@ -61,6 +80,11 @@ def check_reading(path, units: str | None, up: str | None, translations: str | N
         raise ClipFormatError(path, f"translations must be add, replace or auto, got {translations!r}")
 
 
+def human_height(height_units: float) -> bool:
+    """Whether a height in file units is a person's in some unit of :data:`UNITS`."""
+    return any(HUMAN_HEIGHT_M[0] <= height_units * m <= HUMAN_HEIGHT_M[1] for m in UNITS.values())
+
+
 def choose_unit(path, height_units: float, units: str | None, declared_m: float | None = None) -> float:
     """Metres per file unit: ``units`` if given, else the declared unit if it makes a human
     height, else the one unit that does; a clear error when none does."""
@@ -75,22 +99,149 @@ def choose_unit(path, height_units: float, units: str | None, declared_m: float 
     if len(fits) == 1:
         return fits[0][1]
     said = "" if declared_m is None else f" ({height_units * declared_m:.3g} m in the unit the file declares)"
-    raise ClipFormatError(path, f"the body is {height_units:.4g} units tall in its rest pose{said}: no human height "
-                                f"({lo:g}-{hi:g} m) in {', '.join(UNITS)}; give the unit (--units) if this is a person")
+    raise ClipFormatError(path, f"the body is {height_units:.4g} units tall{said}: no human height "
+                                f"({lo:g}-{hi:g} m) in {', '.join(UNITS)}; if this is a person, give the unit (--units, a "
+                                "root option: mirrorcoach --units cm COMMAND ...)")
 
 
-def detect_up(skeleton, path=None) -> int:
-    """1 (Y up) or 2 (Z up) from where the feet are in the rest pose (Y if no feet are named)."""
-    feet = [i for i, j in enumerate(skeleton.joints) if FOOT_RE.search(j.name)]
-    if not feet:
+HEAD_RE = re.compile(r"head", re.IGNORECASE)
+#: frames of a take the conventions are read on (evenly spread; forward kinematics of a few suffices)
+POSED_FRAMES = 120
+UP_HINT = "read it with --up y|z (a root option: mirrorcoach --up z COMMAND ...)"
+
+
+def _posed(sk, data: np.ndarray, channels: list[str]) -> np.ndarray:
+    """Joint and end-site positions relative to the root (T', J + E, 3) in file units, on at
+    most :data:`POSED_FRAMES` frames of the take (the root's own translation does not enter)."""
+    idx = np.unique(np.linspace(0, len(data) - 1, min(len(data), POSED_FRAMES)).round().astype(int))
+    p = sk.forward_kinematics(data[idx], channels) / sk.unit_m
+    return p - p[:, :1]
+
+
+def _named(sk, pattern) -> list[int]:
+    """Rows of :func:`_posed` (joints, then end sites of leaves) whose joint's name matches."""
+    parents = {j.parent for j in sk.joints}
+    rows = [i for i, j in enumerate(sk.joints) if pattern.search(j.name)]
+    ends = [i for i, j in enumerate(sk.joints) if j.end is not None and i not in parents]
+    rows += [len(sk.joints) + k for k, i in enumerate(ends) if pattern.search(sk.joints[i].name)]
+    return rows
+
+
+def detect_up(sk, data: np.ndarray, channels: list[str], path=None) -> int:
+    """1 (Y up) or 2 (Z up): the axis along which the head lies above the feet in the posed
+    frames (module docstring); the rest pose's feet below the root when no head or feet are
+    named; Y when nothing is named at all."""
+    feet, head = _named(sk, FOOT_RE), _named(sk, HEAD_RE)
+    if feet and head:
+        p = _posed(sk, data, channels)
+        v = (p[:, head].mean(axis=1) - p[:, feet].mean(axis=1)).mean(axis=0)
+        where = "the head is not above the feet along y or z in the motion"
+    elif feet:
+        v = -(rest_points(sk, ends=False)[[f for f in feet if f < len(sk.joints)]].mean(axis=0) - rest_points(sk)[0])
+        where = "the feet are not below the root along y or z in the rest pose"
+    else:
         return 1
-    p = rest_points(skeleton, ends=False)
-    down = p[feet].mean(axis=0) - p[0]
-    axis = int(np.argmax(np.abs(down)))
-    if down[axis] >= 0 or axis == 0:
-        raise ClipFormatError(path or skeleton.name, "cannot tell the up axis: the feet are not below the root "
-                                                     "along y or z in the rest pose; give --up y|z")
+    axis = int(np.argmax(np.abs(v)))
+    if v[axis] <= 0 or axis == 0:
+        sign = "-" if v[axis] < 0 else "+"
+        raise ClipFormatError(path or sk.name, f"cannot tell the up axis: {where} (it points along {sign}"
+                                               f"{'xyz'[axis]}); {UP_HINT}")
     return axis
+
+
+def standing_height(sk, data: np.ndarray, channels: list[str], up_axis: int = 1) -> float:
+    """The body's standing height over the take in file units: from its lowest point to its
+    head (or its highest point when no joint is named head), 90th percentile of the frames."""
+    p = _posed(sk, data, channels)[..., up_axis]
+    head = _named(sk, HEAD_RE)
+    top = p[:, head].max(axis=1) if head else p.max(axis=1)
+    return float(np.percentile(top - p.min(axis=1), 90))
+
+
+def fold_static_root(sk, data: np.ndarray, channels: list[str], path=None):
+    """A file root that never moves and has one child, folded into the child (module
+    docstring). Returns (skeleton, data, channels, the replace-offsets of translated joints,
+    the names folded)."""
+    from shared.skeleton import Joint, Skeleton
+
+    rest = {j.name: np.asarray(j.offset, float) for j in sk.joints}  # what "replace" channels stand in for
+    folded: list[str] = []
+    size = max(float(np.ptp(rest_points(sk), axis=0).max()), 1e-9)
+    while len(sk.joints) > 1:
+        root, kids = sk.joints[0], sk.children(0)
+        cols = [channels.index(f"{root.name}.{d}") for d in root.dofs]
+        if len(kids) != 1 or (cols and np.ptp(data[:, cols], axis=0).max() > 1e-6 * size):
+            break
+        child = sk.joints[kids[0]]
+        col = {c: i for i, c in enumerate(channels)}
+        t0 = np.array([data[0, col[f"{root.name}.t{a}"]] if f"{root.name}.t{a}" in col else 0.0 for a in "xyz"])
+        p0 = t0 if np.linalg.norm(t0 - root.offset) < np.linalg.norm(t0) else root.offset + t0
+        r0 = sk.local_matrices(data[:1], channels, slice(0, 1))[0, 0]
+        turned = not np.allclose(r0, np.eye(3), atol=1e-9)
+        rot = [f"{child.name}.r{a}" for a in child.euler.lower()]
+        if turned and not all(c in col for c in rot):
+            break  # a turned scene node over a joint that cannot turn freely: kept as it is
+        data = np.array(data, dtype=float)
+        tcols = [col.get(f"{child.name}.t{a}") for a in "xyz"]
+        if all(c is not None for c in tcols):
+            data[:, tcols] = data[:, tcols] @ r0.T
+        if turned:
+            from scipy.spatial.transform import Rotation
+
+            local = sk.local_matrices(data, channels)[:, kids[0]]
+            m = np.asarray(child.pre).T @ (r0 @ local) @ np.asarray(child.pre)
+            ang = np.rad2deg(Rotation.from_matrix(m).as_euler(child.euler))
+            from shared.skeleton import continuous_euler
+
+            data[:, [col[c] for c in rot]] = continuous_euler(ang, child.euler)
+        rest[child.name] = r0 @ rest[child.name]
+        keep = [i for i, c in enumerate(channels) if not c.startswith(f"{root.name}.")]
+        joints = []
+        for j in sk.joints[1:]:
+            if j is child:
+                joints.append(Joint(j.name, -1, p0 + r0 @ j.offset, list(j.dofs), j.euler, j.pre, j.end, dict(j.limits)))
+            else:
+                joints.append(Joint(j.name, j.parent - 1, j.offset, list(j.dofs), j.euler, j.pre, j.end, dict(j.limits)))
+        folded.append(root.name)
+        sk = Skeleton(sk.name, joints, sk.unit_m, sk.up_axis, sk.source_format)
+        data, channels = data[:, keep], [channels[i] for i in keep]
+    return sk, data, channels, rest, folded
+
+
+def joint_translation_mode(t: np.ndarray, rest: np.ndarray, size: float) -> str:
+    """``"add"`` or ``"replace"`` for one non-root joint's position channels ``t`` (T, 3)
+    against its offset ``rest``: near the offset over the take, replace; near zero, add; else
+    the reading whose bone length varies less (module docstring)."""
+    scale = float(np.linalg.norm(rest))
+    if scale < 1e-6 * max(size, 1e-9):
+        return "replace"  # no offset: both readings agree
+    near_rest = float(np.median(np.linalg.norm(t - rest, axis=1)))
+    near_zero = float(np.median(np.linalg.norm(t, axis=1)))
+    if min(near_rest, near_zero) < 0.05 * scale:
+        return "replace" if near_rest <= near_zero else "add"
+    spread_replace = float(np.std(np.linalg.norm(t, axis=1)))
+    spread_add = float(np.std(np.linalg.norm(t + rest, axis=1)))
+    return "add" if spread_add < 0.5 * spread_replace else "replace"
+
+
+def root_translation_mode(sk, data: np.ndarray, channels: list[str], rest: np.ndarray, up_axis: int) -> str:
+    """``"add"`` or ``"replace"`` for the root's position channels: the reading that puts the
+    body's lowest point over the take nearer the file's floor (height 0) and the body nearer
+    the origin (module docstring). Ties (a root offset of zero) read as Blender does."""
+    r = sk.root
+    size = max(float(np.ptp(rest_points(sk), axis=0).max()), 1e-9)
+    if float(np.linalg.norm(rest)) < 1e-6 * size:
+        return "replace"
+    t = data[:, [channels.index(f"{r.name}.t{a}") for a in "xyz"]]
+    idx = np.unique(np.linspace(0, len(data) - 1, min(len(data), POSED_FRAMES)).round().astype(int))
+    low = _posed(sk, data, channels)[..., up_axis].min(axis=1)
+    plane = [a for a in range(3) if a != up_axis]
+
+    def score(root_pos):
+        floor = float(np.min(root_pos[idx, up_axis] + low))
+        return abs(floor) + 0.25 * float(np.linalg.norm(root_pos[:, plane].mean(axis=0)))
+
+    return "add" if score(r.offset + t) < score(r.offset + t - rest) else "replace"
 
 
 def turn_z_up_to_y_up(skeleton, data: np.ndarray, channels: list[str]):
@@ -112,16 +263,3 @@ def turn_z_up_to_y_up(skeleton, data: np.ndarray, channels: list[str]):
     return Skeleton(skeleton.name, joints, skeleton.unit_m, 1, skeleton.source_format), data
 
 
-def translation_mode(joint, first: np.ndarray, height_units: float, mode: str | None) -> str:
-    """``"add"`` or ``"replace"`` for one joint's position channels (see module docstring)."""
-    if mode in ("add", "replace"):
-        return mode
-    off = np.asarray(joint.offset, float)
-    scale = max(float(np.linalg.norm(off)), 1e-9)
-    if scale < 1e-6 * max(height_units, 1e-9):
-        return "replace"  # no offset: both readings agree
-    if np.linalg.norm(first - off) < 0.5 * scale:
-        return "replace"
-    if np.linalg.norm(first) < 0.5 * scale:
-        return "add"
-    return "replace"  # the data does not tell: Blender's reading

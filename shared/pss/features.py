@@ -4,12 +4,21 @@ HDM05 angles run continuously past 360 degrees and differ between actors by whol
 raw angles make poor HMM outputs (DESIGN.md: 1-NN DTW 44 % on raw angles, 64 % on sin/cos).
 The representation here is turn-invariant and invertible:
 
-* every joint rotation channel ``theta`` -> ``(sin theta, cos theta)``, read in
-  the space's own convention: a clip whose skeleton composes a joint's rotation otherwise (a
-  BVH written from an AMC clip: ZXY angles of the folded rotation) has that joint's rotation
-  re-expressed as the reference skeleton's Euler angles (scipy's principal branch, or its
-  twin where only the twin keeps a channel the joint lacks at 0), so the same motion gives the
-  same numbers whatever file carried it;
+* every joint that turns about three axes -> its rotation, not its Euler angles: the first two
+  columns of its local rotation ``M = C^T L C`` in the space skeleton's joint frame (``L`` the
+  rotation in the world-aligned rest frame, ``C`` the space's axis pre-rotation; 6 values, the
+  continuous 6-D representation of Zhou et al., CVPR 2019). One rotation has two Euler triples
+  (and each angle is defined modulo 360), and files and tools pick either: on sin/cos of the
+  angles the same HDM05 squat as AMC and as the BVH written from it lay 258 apart, a different
+  take 36.5 (issue 28). On ``L`` they are the same numbers, whatever the Euler order, axis
+  convention or branch of the file; so are the HMM distances (eq. 2.4) the coach's ``d_p``
+  and the estimator decide on;
+* every other rotation channel ``theta`` (joints turning about one or two axes, whose Euler
+  angles are unique modulo 360) -> ``(sin theta, cos theta)``, read in the space's own
+  convention: a clip whose skeleton composes the joint's rotation otherwise (a BVH written
+  from an AMC clip: ZXY angles of the folded rotation) has that rotation re-expressed as the
+  reference skeleton's Euler angles (the branch that keeps the channels the joint lacks at 0);
+  spaces saved before the rotations (issue 28) read every angle this way (``rotations="sincos"``);
 * the root's orientation without its heading: the root's swing (its rotation with the twist
   about the vertical removed) as the unit vector it turns the vertical into (3 values);
 * the root's height in metres;
@@ -32,7 +41,9 @@ alike and near poses far; DESIGN.md), so a space of clips with a skeleton also m
 One HMM models all groups (its states align on every channel); :meth:`feature_indices`
 says which outputs belong to which group.
 
-:meth:`MotionFeatures.decode` inverts the map: angles by ``atan2`` then unwrapped over time,
+:meth:`MotionFeatures.decode` inverts the map: rotations by Gram-Schmidt on the two columns,
+then the skeleton's Euler angles on the branch nearest the frame before
+(:func:`shared.skeleton.continuous_euler`); angles by ``atan2`` then unwrapped over time;
 heading and floor position integrated from the yaw rate and the velocity (starting at 0).
 """
 
@@ -121,10 +132,13 @@ class MotionFeatures:
         Sensor channels modelled together with the motion (``O = [M; S]``), may be empty.
     sensor_mean, sensor_scale : arrays
         Standardisation of the sensor channels (fitted by :meth:`fit`).
+    rotations : {"6d", "sincos"}
+        How three-axis joints enter: their rotation (``"6d"``, every new space) or sin/cos of
+        their Euler angles (``"sincos"``, spaces saved before issue 28).
     """
 
     def __init__(self, skeleton: Skeleton | None, motion_channels: list[str], sensor_channels: list[str] | None = None,
-                 sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None):
+                 sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None, rotations: str = "6d"):
         self.skeleton = skeleton
         self.motion_channels = list(motion_channels)
         self.sensor_channels = list(sensor_channels or [])
@@ -132,6 +146,16 @@ class MotionFeatures:
         self.root = root
         self.angle_channels = [c for c in self.motion_channels
                                if c.split(".")[-1] in ("rx", "ry", "rz") and c.rsplit(".", 1)[0] != root]
+        if rotations not in ("6d", "sincos"):
+            raise BadInput(f"rotations must be '6d' or 'sincos', got {rotations!r}")
+        self.rotations = rotations
+        per_joint: dict[str, list[str]] = {}
+        for c in self.angle_channels:
+            per_joint.setdefault(c.rsplit(".", 1)[0], []).append(c)
+        #: joints whose rotation (not its Euler angles) is modelled
+        self.rot_joints = [j for j, chs in per_joint.items() if len(chs) == 3] if (
+            rotations != "sincos" and skeleton is not None) else []
+        self.sincos_channels = [c for c in self.angle_channels if c.rsplit(".", 1)[0] not in self.rot_joints]
         self.plain_channels = [c for c in self.motion_channels
                                if c not in self.angle_channels and c.rsplit(".", 1)[0] != root]
         rdofs = set(skeleton.root.dofs) if skeleton is not None else set()
@@ -140,8 +164,8 @@ class MotionFeatures:
         n_s = len(self.sensor_channels)
         self.sensor_mean = np.zeros(n_s) if sensor_mean is None else np.asarray(sensor_mean, float)
         self.sensor_scale = np.ones(n_s) if sensor_scale is None else np.asarray(sensor_scale, float)
-        names = []
-        for c in self.angle_channels:
+        names = [f"rot({j}).{r}{k}" for j in self.rot_joints for k in (0, 1) for r in "xyz"]
+        for c in self.sincos_channels:
             names += [f"sin({c})", f"cos({c})"]
         names += list(self.plain_channels)
         if self.root_rot:
@@ -256,16 +280,16 @@ class MotionFeatures:
         return None
 
     def _angles(self, clip: Clip, body: Skeleton | None) -> np.ndarray:
-        """The angle channels (T, n) in degrees, in the space's convention (module docstring);
-        ``body`` is :meth:`_foreign`'s answer for the clip."""
+        """The sin/cos angle channels (T, n) in degrees, in the space's convention (module
+        docstring); ``body`` is :meth:`_foreign`'s answer for the clip."""
         if body is None:
-            return clip.select(self.angle_channels)
+            return clip.select(self.sincos_channels)
         from scipy.spatial.transform import Rotation
 
         local = body.local_matrices(clip.data, clip.channels)
-        out = np.zeros((clip.n_frames, len(self.angle_channels)))
-        col = {c: i for i, c in enumerate(self.angle_channels)}
-        for name in dict.fromkeys(c.rsplit(".", 1)[0] for c in self.angle_channels):
+        out = np.zeros((clip.n_frames, len(self.sincos_channels)))
+        col = {c: i for i, c in enumerate(self.sincos_channels)}
+        for name in dict.fromkeys(c.rsplit(".", 1)[0] for c in self.sincos_channels):
             ref = self.skeleton.joints[self.skeleton.index(name)]
             m = ref.pre.T @ local[:, body.index(name)] @ ref.pre
             seq = ref.euler
@@ -319,7 +343,9 @@ class MotionFeatures:
         if missing:
             raise BadInput(f"clip {clip.name!r} lacks {len(missing)} channels of this space, e.g. {missing[:3]}")
         cols = []
-        if self.angle_channels:
+        if self.rot_joints:
+            cols.append(self._rotations(clip))
+        if self.sincos_channels:
             a = np.deg2rad(self._angles(clip, foreign))
             cols.append(np.stack([np.sin(a), np.cos(a)], axis=2).reshape(len(a), -1))
         if self.plain_channels:
@@ -338,6 +364,43 @@ class MotionFeatures:
         if not np.all(np.isfinite(x)):
             raise BadInput(f"clip {clip.name!r} contains NaN or Inf")
         return x
+
+    def _rotations(self, clip: Clip) -> np.ndarray:
+        """The three-axis joints' rotations (T, 6 R): the first two columns of each one's local
+        rotation in the space skeleton's joint frame, ``M = C^T L C`` with ``L`` the clip's
+        rotation in the world-aligned rest frame (module docstring)."""
+        body = self.body(clip)
+        local = body.local_matrices(clip.data, clip.channels)[:, [body.index(j) for j in self.rot_joints]]
+        pre = self._rot_pre()
+        m = np.einsum("jba,tjbc,jcd->tjad", pre, local, pre)  # C^T L C: the space's own joint frame
+        return np.ascontiguousarray(m[..., :2].transpose(0, 1, 3, 2)).reshape(clip.n_frames, -1)
+
+    def _rot_pre(self) -> np.ndarray:
+        """The space skeleton's axis pre-rotations ``C`` (R, 3, 3) of the three-axis joints."""
+        if "_pre" not in self.__dict__:
+            self.__dict__["_pre"] = np.array([self.skeleton.joints[self.skeleton.index(j)].pre
+                                              for j in self.rot_joints], dtype=float).reshape(-1, 3, 3)
+        return self.__dict__["_pre"]
+
+    def _decode_rotations(self, x: np.ndarray, values: dict) -> None:
+        """Euler channels of the three-axis joints from their 6-D rotations (T, 6 R): Gram-Schmidt
+        gives ``M``, and ``M`` the skeleton's Euler angles on a continuous branch."""
+        from scipy.spatial.transform import Rotation
+
+        from shared.skeleton import continuous_euler
+
+        cols = x.reshape(len(x), len(self.rot_joints), 2, 3)
+        a, b = cols[:, :, 0], cols[:, :, 1]
+        e1 = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-12)
+        b = b - np.sum(e1 * b, axis=-1, keepdims=True) * e1
+        e2 = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
+        local = np.stack([e1, e2, np.cross(e1, e2)], axis=-1)  # columns of M
+        for k, name in enumerate(self.rot_joints):
+            j = self.skeleton.joints[self.skeleton.index(name)]
+            m = local[:, k]  # already in the joint's own frame (M = C^T L C)
+            ang = continuous_euler(Rotation.from_matrix(m).as_euler(j.euler, degrees=True), j.euler)
+            for i, ax in enumerate(j.euler.lower()):
+                values[f"{name}.r{ax}"] = ang[:, i]
 
     def _root_features(self, clip: Clip) -> np.ndarray:
         return self._root_terms(clip)[0]
@@ -374,8 +437,10 @@ class MotionFeatures:
             raise BadInput(f"feature frames must be T x {self.n_features}, got {x.shape}")
         n = len(x)
         values: dict[str, np.ndarray] = {}
-        k = 0
-        for c in self.angle_channels:
+        k = 6 * len(self.rot_joints)
+        if self.rot_joints:
+            self._decode_rotations(x[:, :k], values)
+        for c in self.sincos_channels:
             values[c] = np.rad2deg(np.unwrap(np.arctan2(x[:, k], x[:, k + 1])))
             k += 2
         for c in self.plain_channels:
@@ -435,6 +500,7 @@ class MotionFeatures:
             "sensor_channels": self.sensor_channels,
             "sensor_mean": self.sensor_mean.tolist(),
             "sensor_scale": self.sensor_scale.tolist(),
+            "rotations": self.rotations,
             **({"position_mean": self.position_mean.tolist(), "position_scale": self.position_scale.tolist()}
                if self.has_position else {}),
         })
@@ -444,4 +510,4 @@ class MotionFeatures:
         d = json.loads(text)
         sk = Skeleton.from_json(d["skeleton"]) if d["skeleton"] else None
         return cls(sk, d["motion_channels"], d["sensor_channels"], d["sensor_mean"], d["sensor_scale"],
-                   d.get("position_mean"), d.get("position_scale"))
+                   d.get("position_mean"), d.get("position_scale"), d.get("rotations", "sincos"))

@@ -507,12 +507,10 @@ class ProtoSymbolSpace:
     def _associate_channels(self, clip, method, seed, weighting="affine") -> Association:
         if not self.features.sensor_channels:
             raise BadInput(f"space {self.name!r} has no sensor channels to associate")
-        midx = self.features.feature_indices("motion")
         # the motion is recognised on the recognition group (positions where the space has them:
         # eq. 3.9 error 26.6 % against 33.8 % on the angle channels, HDM05 arm torques, 13 states)
         group = "position" if self.features.has_position else "motion"
         seqs = self._sequences(clip, ("motion", "position") if group == "position" else ("motion",))
-        seq = [x[:, midx] for x in seqs]
         gidx = self.features.feature_indices(group)
         p = self.params
         hmm = fit_hmm([x[:, gidx] for x in seqs], p.n_states, covariance_type=p.covariance_type,
@@ -522,8 +520,9 @@ class ProtoSymbolSpace:
         c = self.weights(rec.point, method=weighting)
         model = self.synthesize(c)
         whole = self.features.decode(generate(model, method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
-        # the missing channels on the observed frames: E[s_t] = sum_i gamma_t(i) mu_i^S
-        gamma = model.marginal(midx).posteriors(seq[0])
+        # the missing channels on the observed frames: E[s_t] = sum_i gamma_t(i) mu_i^S, the state
+        # posteriors read on the recognition group (positions: no Euler branch enters)
+        gamma = model.marginal(gidx).posteriors(seqs[0][:, gidx])
         sidx = self.features.feature_indices("sensor")
         est = gamma @ model.means[:, sidx]
         sens = est * self.features.sensor_scale + self.features.sensor_mean
