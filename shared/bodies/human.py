@@ -109,6 +109,9 @@ def map_segments(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
     unmapped = []
     for i, j in enumerate(sk.joints):
         side, w = parts[j.name]
+        kids = [parts[sk.joints[k].name][1] for k in sk.children(i)]
+        if joint_named and w == "hipjoint" and "knee" in kids:  # LeftHipJoint -> LeftKneeJoint: the thigh
+            w = "hip"
         base = re.sub(r"\d+$", "", w)
         seg = None
         for cand in (w, base):

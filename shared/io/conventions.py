@@ -5,11 +5,11 @@ translation channels add to the joint offsets. Everything is read off the *motio
 frames), per file, because a rest pose says little: game studios' skeletons rest with every
 bone along its local X axis, and their root is a static node on the floor.
 
-* **The body's root.** A file root that never moves (every channel constant over the take, or
-  none) and has a single child is a floor or scene node, not the body: it is folded into its
-  child (its constant transform composed into the child's offset, translations and, if it is
-  turned, the child's rotations), so the pelvis is the root every later step and the simulator
-  see. ``read_as["root"]`` says what was folded.
+* **The body's root.** A file root with a single child that never turns (its rotation
+  channels constant over the take, or none) is a floor, scene or trajectory node, not the body:
+  it is folded into its child (its constant rotation and first position composed into the
+  child's offset, translations and rotations, its path over the floor added to the child's
+  translation channels), so the pelvis is the root every later step and the simulator see. ``read_as["root"]`` says what was folded.
 * **Translation channels against OFFSET, per joint.** Blender reads a joint's position channels
   as its whole local position (the offset is their rest value); other files add them to the
   offset. For a joint below the root the reading that keeps the skeleton consistent wins: the
@@ -19,12 +19,12 @@ bone along its local X axis, and their root is a static node on the floor.
   the body nearer the origin), i.e. the hips at a person's height above the floor.
   ``translations=`` overrides both. Inside mirrorcoach the channels always add to the offset
   (a "replace" joint is stored as the difference), and the BVH writer writes Blender's form.
-* **Up axis.** BVH says nothing; Blender exports Z-up. In the posed frames the head lies above
-  the feet (joints named head, and foot, ankle or toe): the axis and sign of that direction is
-  up. A Z-up body is turned to Y-up by rotating every offset, every translation channel and
+* **Up axis.** BVH says nothing; Blender exports Z-up. The head lies above the feet (joints
+  named head, and foot, ankle or toe): the axis and sign of that direction is up. A Z-up body is turned to Y-up by rotating every offset, every translation channel and
   (through the joints' ``pre`` rotation, ``L' = R0 L R0^T``) every local rotation by ``R0`` =
-  -90 deg about x; the channels' angles are kept. A body without such names falls back to its
-  rest pose. ``up=`` overrides.
+  -90 deg about x; the channels' angles are kept. An upright rest pose (head above feet along
+  one axis) is taken first, since a take may lie down on the floor; a body without such names
+  falls back to its feet below its root. ``up=`` overrides.
 * **Length unit.** A file states no unit (BVH) or one that is often wrong (ASF ``:units
   length``). A person stands 1.0-2.2 m tall, and the usual units map that onto disjoint ranges
   of file units (cm 100-220, in 39-87, CMU 17.7-39, m 1.0-2.2), so the body's height picks the
@@ -128,11 +128,17 @@ def _named(sk, pattern) -> list[int]:
 
 
 def detect_up(sk, data: np.ndarray, channels: list[str], path=None) -> int:
-    """1 (Y up) or 2 (Z up): the axis along which the head lies above the feet in the posed
-    frames (module docstring); the rest pose's feet below the root when no head or feet are
-    named; Y when nothing is named at all."""
+    """1 (Y up) or 2 (Z up): the axis along which the head stands above the feet in an upright
+    rest pose, else over the posed frames (a game studio's rest pose lies along X; a take may
+    lie down on the floor); the rest pose's feet below the root when no head is named; Y when
+    nothing is named at all."""
     feet, head = _named(sk, FOOT_RE), _named(sk, HEAD_RE)
     if feet and head:
+        rest = rest_points(sk)
+        v = rest[head].mean(axis=0) - rest[feet].mean(axis=0)
+        axis = int(np.argmax(np.abs(v)))
+        if axis in (1, 2) and v[axis] > 0.8 * np.linalg.norm(v):  # an upright rest pose tells (a take may lie down)
+            return axis
         p = _posed(sk, data, channels)
         v = (p[:, head].mean(axis=1) - p[:, feet].mean(axis=1)).mean(axis=0)
         where = "the head is not above the feet along y or z in the motion"
@@ -169,12 +175,19 @@ def fold_static_root(sk, data: np.ndarray, channels: list[str], path=None):
     size = max(float(np.ptp(rest_points(sk), axis=0).max()), 1e-9)
     while len(sk.joints) > 1:
         root, kids = sk.joints[0], sk.children(0)
-        cols = [channels.index(f"{root.name}.{d}") for d in root.dofs]
-        if len(kids) != 1 or (cols and np.ptp(data[:, cols], axis=0).max() > 1e-6 * size):
+        if len(kids) != 1:
             break
         child = sk.joints[kids[0]]
         col = {c: i for i, c in enumerate(channels)}
-        t0 = np.array([data[0, col[f"{root.name}.t{a}"]] if f"{root.name}.t{a}" in col else 0.0 for a in "xyz"])
+        rcols = [col[f"{root.name}.{d}"] for d in root.dofs if d.startswith("r")]
+        tcols = [col.get(f"{child.name}.t{a}") for a in "xyz"]
+        troot = np.column_stack([data[:, col[f"{root.name}.t{a}"]] if f"{root.name}.t{a}" in col else
+                                 np.zeros(len(data)) for a in "xyz"])
+        moves = np.ptp(troot, axis=0).max() > 1e-6 * size
+        if (rcols and np.ptp(data[:, rcols], axis=0).max() > 1e-6 * size) or (
+                moves and any(c is None for c in tcols)):
+            break  # a turning scene node, or a moving one over a joint that cannot take its path: kept
+        t0 = troot[0]
         p0 = t0 if np.linalg.norm(t0 - root.offset) < np.linalg.norm(t0) else root.offset + t0
         r0 = sk.local_matrices(data[:1], channels, slice(0, 1))[0, 0]
         turned = not np.allclose(r0, np.eye(3), atol=1e-9)
@@ -182,9 +195,8 @@ def fold_static_root(sk, data: np.ndarray, channels: list[str], path=None):
         if turned and not all(c in col for c in rot):
             break  # a turned scene node over a joint that cannot turn freely: kept as it is
         data = np.array(data, dtype=float)
-        tcols = [col.get(f"{child.name}.t{a}") for a in "xyz"]
-        if all(c is not None for c in tcols):
-            data[:, tcols] = data[:, tcols] @ r0.T
+        if all(c is not None for c in tcols):  # a trajectory node's path becomes the hips' own
+            data[:, tcols] = data[:, tcols] @ r0.T + (troot - t0)
         if turned:
             from scipy.spatial.transform import Rotation
 

@@ -13,9 +13,12 @@ import bpy
 _open = builtins.open
 builtins.open = lambda file, mode="r", *a, **k: _open(file, mode.replace("U", ""), *a, **k)
 
-src, out_json, out_bvh = sys.argv[sys.argv.index("--") + 1:]
+args = sys.argv[sys.argv.index("--") + 1:]
+src, out_json, out_bvh = args[:3]
+# optional: a scale on import (a file authored in other units) and the Euler order of the export
+scale, rotate = (float(args[3]), args[4]) if len(args) > 3 else (1.0, "NATIVE")
 bpy.ops.wm.read_factory_settings(use_empty=True)
-bpy.ops.import_anim.bvh(filepath=src, global_scale=1.0, rotate_mode="NATIVE", update_scene_fps=True,
+bpy.ops.import_anim.bvh(filepath=src, global_scale=scale, rotate_mode=rotate, update_scene_fps=True,
                         update_scene_duration=True, axis_forward="-Z", axis_up="Y")
 scene = bpy.context.scene
 arm = next(o for o in scene.objects if o.type == "ARMATURE")
@@ -31,4 +34,4 @@ bpy.ops.object.select_all(action="DESELECT")
 arm.select_set(True)
 bpy.context.view_layer.objects.active = arm
 bpy.ops.export_anim.bvh(filepath=out_bvh, frame_start=scene.frame_start, frame_end=scene.frame_end, global_scale=1.0,
-                        rotate_mode="NATIVE")
+                        rotate_mode=rotate)

@@ -1,0 +1,265 @@
+"""Motion capture from other studios read right with no options (issue 28): the game studio's
+files of ``../shared/data/bandai1`` (static floor root, 6 channels on every joint, cm, bones
+along local X), the CMU conversions, HDM05, files Blender authors, and bad files. Positions are
+checked against an independent forward kinematics of the file (:mod:`bench.bvh_reference`)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.bvh_reference import read_positions
+from shared.errors import ClipFormatError
+from shared.io import load_clip, save_clip
+
+BANDAI = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "bandai1" / "bvh"
+SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
+
+
+@pytest.fixture(scope="module")
+def bandai() -> list[Path]:
+    files = sorted(BANDAI.glob("*.bvh"))
+    if len(files) < 170:
+        pytest.fail(f"the game studio's BVH files are not at {BANDAI} (see ../shared/data/bandai1/SOURCE.md)")
+    return files
+
+
+def _against_reference(path: Path, clip) -> float:
+    """Largest distance (m) of any joint from the independent forward kinematics."""
+    names, ref = read_positions(path)
+    p = clip.skeleton.forward_kinematics(clip.data, clip.channels, ends=False)
+    return float(np.abs(ref[:, [names.index(j.name) for j in clip.skeleton.joints]] * clip.skeleton.unit_m - p).max())
+
+
+def test_the_game_studios_files_read_with_no_options_upright_at_a_persons_height(bandai):
+    for path in bandai[::6]:  # 29 files of 15 styles and 12 contents
+        clip = load_clip(path)
+        assert clip.read_as["units"].startswith("cm") and clip.read_as["up"].startswith("y")
+        assert clip.skeleton.root.name == "Hips" and "joint_Root" in clip.read_as["root"], path.name
+        assert "joint_Root.tx" not in clip.channels
+        assert _against_reference(path, clip) < 1e-3, path.name
+        p = clip.positions()
+        head, toe = clip.skeleton.index("Head"), clip.skeleton.index("Toes_L")
+        assert np.median(p[:, head, 1] - p[:, toe, 1]) > 1.0  # upright, a person's size
+        assert 0.6 < np.median(p[:, 0, 1]) < 1.2  # the hips at a person's hip height over the floor (y = 0)
+
+
+def test_each_joints_translations_are_decided_in_the_file_and_an_option_still_wins(bandai):
+    path = next(f for f in bandai if "_walk_normal_" in f.name)
+    clip = load_clip(path)
+    assert clip.read_as["translations"] == ["replace"]  # the hips' channels replace their OFFSET (-452 cm)
+    wrong = load_clip(path, translations="add", units="cm")  # every bone twice its length: no unit fits alone
+    assert np.median(wrong.positions()[:, 0, 1]) > 1.5  # the hips 1.8 m up: why the file decides
+    assert np.abs(wrong.positions() - clip.positions()).max() > 1.0
+
+
+def test_the_cmu_conversions_match_the_independent_kinematics(cmu):
+    for name in ("131_01.bvh", "scaled_131_01.bvh"):
+        clip = load_clip(cmu / name)
+        assert _against_reference(cmu / name, clip) < 1e-3
+
+
+def test_a_take_lying_down_keeps_the_up_axis_of_its_upright_rest_pose(hdm05, tmp_path):
+    amc = next((hdm05 / "amc" / "lieDownFloor").glob("HDM_bd_*.amc"))
+    save_clip(load_clip(amc), tmp_path / "lie.bvh")
+    assert load_clip(tmp_path / "lie.bvh").read_as["up"].startswith("y")
+
+
+# ---------------------------------------------------------------------------- one motion, one representation
+def test_the_same_motion_as_amc_and_as_bvh_is_one_proto_symbol(hdm05, tmp_path):
+    from shared.pss.distance import hmm_distance
+    from shared.pss.space import ProtoSymbolSpace
+
+    clips = [load_clip(f) for f in sorted((hdm05 / "amc").rglob("HDM_bd_*.amc"))]
+    space = ProtoSymbolSpace.build(clips)
+    geo = space.features.group_indices(("motion",))
+    for label in ("squat1Reps", "rotateArmsBothBackward1Reps", "throwBasketball"):
+        a, b = [c for c in clips if c.label == label][:2]
+        save_clip(a, tmp_path / "a.bvh")
+        bvh = load_clip(tmp_path / "a.bvh")
+        h = [space.abstract(c).marginal(geo) for c in (a, bvh, b)]
+        assert hmm_distance(h[0], h[1]) < 0.01 * hmm_distance(h[0], h[2]), label
+
+
+def test_the_same_rotation_on_another_euler_branch_is_the_same_features_and_torques(hdm05):
+    from scipy.spatial.transform import Rotation
+
+    from shared.bodies.body import perform
+    from shared.bodies.human import human_body
+    from shared.pss.features import MotionFeatures
+
+    clip = load_clip(hdm05 / SQUAT).resample(30)
+    data = clip.data.copy()
+    j = clip.skeleton.joints[clip.skeleton.index("lhumerus")]
+    cols = [clip.channels.index(f"lhumerus.r{a}") for a in j.euler]
+    twin = data[:, cols] + np.array([180.0, 0.0, 180.0])
+    twin[:, 1] = 180.0 - data[:, cols[1]]
+    half = len(data) // 2
+    data[half:, cols] = twin[half:]  # the second half on the other branch, plus whole turns on the first
+    data[:half, cols[0]] += 360.0
+    other = clip.with_data(data)
+    r1 = Rotation.from_euler(j.euler, clip.data[:, cols], degrees=True)
+    r2 = Rotation.from_euler(j.euler, data[:, cols], degrees=True)
+    assert (r1 * r2.inv()).magnitude().max() < 1e-9  # the same rotations
+    f = MotionFeatures.for_clips([clip])
+    assert np.abs(f.encode(clip) - f.encode(other)).max() < 1e-9
+    body = human_body(clip.skeleton)
+    t1, _ = perform(body, clip)
+    t2, _ = perform(body, other)
+    s = t1.group("sensor")
+    assert np.abs(t1.select(s) - t2.select(s)).max() < 1e-6 * np.abs(t1.select(s)).max()
+
+
+def test_generation_gives_back_the_rotations_on_a_continuous_branch(hdm05):
+    from shared.pss.features import MotionFeatures
+
+    clip = load_clip(hdm05 / SQUAT).resample(30)
+    f = MotionFeatures.for_clips([clip])
+    back = f.decode(f.encode(clip), clip.fps)
+    rows = [clip.skeleton.index(j) for j in f.rot_joints]
+    la = clip.skeleton.local_matrices(clip.data, clip.channels)[:, rows]
+    lb = clip.skeleton.local_matrices(back.select(clip.channels), clip.channels)[:, rows]
+    assert np.abs(la - lb).max() < 1e-9
+    ang = back.select([f"{j}.r{a}" for j in f.rot_joints for a in "xyz"])
+    assert np.abs(np.diff(ang, axis=0)).max() < 30.0  # no jump of a branch or a turn between frames
+
+
+# ---------------------------------------------------------------------------- bodies
+def test_a_body_from_the_game_studios_skeleton_is_a_person_and_walks_with_human_torques(bandai):
+    from shared.bodies.body import perform
+    from shared.bodies.human import human_body, map_segments
+
+    clip = load_clip(next(f for f in bandai if "_walk_normal_" in f.name))
+    body = human_body(clip.skeleton)
+    d = body.describe()
+    assert d["mass"] == pytest.approx(70.0, abs=0.05) and not d["missing_segments"] and not d["unmapped_bones"]
+    seg, _ = map_segments(clip.skeleton)
+    share: dict = {}
+    for k, jn in enumerate(j.name for j in clip.skeleton.joints):
+        share[seg[jn]] = share.get(seg[jn], 0.0) + float(body.model.body_mass[k + 1]) / 70.0
+    assert max(v for (s, _), v in share.items() if s not in ("pelvis", "spine")) < 0.20
+    assert share[("pelvis", "")] < 0.2
+    performed, report = perform(body, clip)
+    tau = performed.select([c for c in performed.group("sensor") if c.startswith("tau.") and c[-3:-1] == ".r"])
+    assert np.abs(tau).max() < 500.0
+
+
+def test_bones_named_joint_are_read_by_their_word_and_their_place(bundled):
+    from shared.bodies.human import human_body
+    from shared.io import load_skeleton
+    from shared.skeleton import Joint, Skeleton
+
+    sk = load_skeleton(bundled / "asf" / "HDM_bd.asf")
+    names = {"lowerback": "LowerSpineJoint", "upperback": "MiddleSpineJoint", "thorax": "UpperSpineJoint",
+             "lowerneck": "LowerNeckJoint", "upperneck": "UpperNeckJoint", "head": "HeadJoint",
+             "lfemur": "LeftHipJoint", "ltibia": "LeftKneeJoint", "lfoot": "LeftAnkleJoint", "rfemur": "RightHipJoint",
+             "rtibia": "RightKneeJoint", "rfoot": "RightAnkleJoint"}
+    renamed = Skeleton(sk.name, [Joint(names.get(j.name, j.name), j.parent, j.offset, j.dofs, j.euler, j.pre, j.end,
+                                       j.limits) for j in sk.joints], sk.unit_m, sk.up_axis, sk.source_format)
+    ref, body = human_body(sk), human_body(renamed)
+    pelvis = float(body.model.body_mass[1])
+    assert pelvis == pytest.approx(float(ref.model.body_mass[1]), rel=0.05) and pelvis < 0.2 * 70.0
+    assert "MiddleSpineJoint" not in body.unmapped
+
+
+# ---------------------------------------------------------------------------- bad and unusual files
+def _bvh(tmp_path, hierarchy: str, frames: list[str]) -> Path:
+    p = tmp_path / "odd.bvh"
+    p.write_text(f"HIERARCHY\n{hierarchy}\nMOTION\nFrames: {len(frames)}\nFrame Time: 0.0333333\n" + "\n".join(frames) + "\n")
+    return p
+
+
+def test_channels_0_and_fewer_rotation_channels_are_legal(tmp_path):
+    leg = ("JOINT LeftUpLeg { OFFSET 10 -5 0 CHANNELS 2 Zrotation Xrotation JOINT LeftLeg { OFFSET 0 -45 0 "
+           "CHANNELS 0 JOINT LeftFoot { OFFSET 0 -45 0 CHANNELS 1 Xrotation End Site { OFFSET 0 -8 10 } } } }")
+    h = ("ROOT Hips { OFFSET 0 0 0 CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation "
+         f"{leg} JOINT Spine {{ OFFSET 0 20 0 CHANNELS 3 Zrotation Xrotation Yrotation JOINT Head {{ OFFSET 0 55 0 "
+         "CHANNELS 0 End Site { OFFSET 0 20 0 } } } }")
+    rows = [f"0 98 0 0 {k} 0 10 {k} 0 0 0 {2 * k}" for k in range(6)]
+    clip = load_clip(_bvh(tmp_path, h, rows))
+    assert clip.read_as["units"].startswith("cm") and "LeftLeg.rx" not in clip.channels
+    assert clip.n_frames == 6 and _against_reference(tmp_path / "odd.bvh", clip) < 1e-9
+    with pytest.raises(ClipFormatError, match=r"odd\.bvh.*CHANNELS 9"):
+        load_clip(_bvh(tmp_path, h.replace("CHANNELS 0 JOINT LeftFoot", "CHANNELS 9 JOINT LeftFoot"), rows))
+
+
+def _asf_variant(bundled, tmp_path, sub, name="HDM_bd.asf") -> Path:
+    text = (bundled / "asf" / "HDM_bd.asf").read_bytes().decode("latin-1")
+    (tmp_path / "asf").mkdir(exist_ok=True)
+    out = tmp_path / "asf" / name
+    out.write_bytes(sub(text).encode("latin-1"))
+    return out
+
+
+def test_asf_unit_errors_name_the_file(bundled, tmp_path):
+    from shared.io import read_asf
+
+    zero = _asf_variant(bundled, tmp_path, lambda t: re.sub(r"length 0\.45", "length 0", t, count=1), "zero.asf")
+    with pytest.raises(ClipFormatError, match=r"zero\.asf.*length unit must be positive"):
+        read_asf(zero)
+    odd = _asf_variant(bundled, tmp_path, lambda t: re.sub(r"angle deg", "angle turns", t, count=1), "odd.asf")
+    with pytest.raises(ClipFormatError, match=r"odd\.asf.*unknown angle unit"):
+        read_asf(odd)
+
+
+@pytest.mark.parametrize("unit,per_degree", [("rad", np.pi / 180.0), ("grad", 1.0 / 0.9)])
+def test_asf_angle_units_apply_to_the_amc_values(bundled, tmp_path, unit, per_degree):
+    from shared.io import read_asf
+
+    text = (bundled / "asf" / "HDM_bd.asf").read_bytes().decode("latin-1")
+    assert "angle deg" in text
+
+    def convert(t):  # the ASF's own angles (axis, limits) in the new unit too
+        t = t.replace("angle deg", f"angle {unit}", 1)
+        t = re.sub(r"(\n\s*axis\s+)([-0-9.eE]+)\s+([-0-9.eE]+)\s+([-0-9.eE]+)",
+                   lambda m: m.group(1) + " ".join(f"{float(v) * per_degree:.12g}" for v in m.groups()[1:]), t)
+        return re.sub(r"(\n\s*orientation\s+)([-0-9.eE]+)\s+([-0-9.eE]+)\s+([-0-9.eE]+)",
+                      lambda m: m.group(1) + " ".join(f"{float(v) * per_degree:.12g}" for v in m.groups()[1:]), t)
+
+    asf = _asf_variant(bundled, tmp_path, convert)
+    sk = read_asf(asf)
+    orig = load_clip(bundled / SQUAT)
+    rot = [i for i, c in enumerate(orig.channels) if c.rsplit(".", 1)[1].startswith("r")]
+    lines, data = [], orig.data.copy()
+    data[:, rot] *= per_degree
+    for t, row in enumerate(data):  # the AMC in the ASF's unit, with no declaration of its own
+        lines.append(str(t + 1))
+        k = 0
+        for j in sk.joints:
+            if j.dofs:
+                lines.append(j.name + " " + " ".join(f"{v:.12g}" for v in row[k:k + len(j.dofs)]))
+                k += len(j.dofs)
+    amc = tmp_path / "HDM_bd_squat1Reps_001_120.amc"
+    amc.write_text("\n".join(lines) + "\n")
+    back = load_clip(amc)
+    assert np.abs(back.positions() - orig.positions()).max() < 1e-6
+
+
+# ---------------------------------------------------------------------------- files for other tools
+def test_the_bvh_we_write_is_in_metres_whatever_the_input_units(cmu, tmp_path):
+    save_clip(load_clip(cmu / "131_01.bvh"), tmp_path / "out.bvh")  # CMU's own unit in, metres out
+    back = load_clip(tmp_path / "out.bvh")
+    assert back.read_as["units"].startswith("m ") and 1.2 < back.skeleton.rest_height() < 1.5
+
+
+@pytest.mark.skipif(shutil.which("blender") is None, reason="Blender is not installed (Debian: apt-get install "
+                                                               "blender; `make test` installs it when CI=true)")
+def test_a_file_blender_authors_in_inches_z_up_with_xyz_eulers_reads_as_the_same_motion(bundled, tmp_path):
+    clip = load_clip(bundled / SQUAT).frames(0, 60)
+    save_clip(clip, tmp_path / "ours.bvh")
+    script = Path(__file__).parent / "blender" / "bvh_round_trip.py"
+    r = subprocess.run(["blender", "-b", "--factory-startup", "--python-exit-code", "3", "--python", str(script), "--",
+                        str(tmp_path / "ours.bvh"), str(tmp_path / "b.json"), str(tmp_path / "authored.bvh"),
+                        str(1.0 / 0.0254), "XYZ"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    back = load_clip(tmp_path / "authored.bvh")
+    assert back.read_as["units"].startswith("in") and back.read_as["up"].startswith("z")
+    mine = load_clip(tmp_path / "ours.bvh")
+    names = [j.name for j in mine.skeleton.joints]
+    pb = back.positions()[:, [back.skeleton.index(n) for n in names]]
+    assert np.abs(pb - mine.positions()[:, :len(names)]).max() < 2e-3
