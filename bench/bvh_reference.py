@@ -1,5 +1,5 @@
 """An independent forward kinematics of BVH files, as Blender reads them: the reference the
-motion-capture measurements and tests compare mirrorcoach's reader with (issue 28).
+motion-capture measurements and tests compare mirrorcoach's reader with.
 
 Nothing of ``shared/`` is used: its own parser, its own rotations. Blender's reading: a joint's
 position channels are its whole local position (its OFFSET when it has none), its rotation

@@ -53,6 +53,20 @@ def dev_space(dev_split):
 
 
 @pytest.fixture(scope="session")
+def blender() -> str:
+    """Blender, the real client of our BVH files: a skip where it is not installed, a failure
+    under CI, which installs it (`make test` with CI=true)."""
+    import shutil
+
+    path = shutil.which("blender")
+    if path is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail("Blender is not installed in CI (`make test` installs Debian's blender when CI=true)")
+        pytest.skip("Blender is not installed (Debian: apt-get install blender; `make test` installs it when CI=true)")
+    return path
+
+
+@pytest.fixture(scope="session")
 def bundled() -> Path:
     return BUNDLED_HDM05
 

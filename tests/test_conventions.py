@@ -332,15 +332,7 @@ def test_a_write_error_names_the_users_file_not_a_temporary_one(plain, tmp_path)
 
 
 # ---------------------------------------------------------------------------- Blender, the real client
-def _blender():
-    import shutil
-
-    return shutil.which("blender")
-
-
-@pytest.mark.skipif(_blender() is None, reason="Blender is not installed (Debian: apt-get install blender; "
-                                                "`make test` installs it when CI=true)")
-def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain, mixed_space, tmp_path):
+def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain, mixed_space, tmp_path, blender):
     import json
     import subprocess
     from pathlib import Path
@@ -349,7 +341,7 @@ def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain,
     clip = plain.frames(0, 30)
     save_clip(clip, ours)
     script = Path(__file__).parent / "blender" / "bvh_round_trip.py"
-    r = subprocess.run([_blender(), "-b", "--factory-startup", "--python-exit-code", "3", "--python", str(script), "--",
+    r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "3", "--python", str(script), "--",
                         str(ours), str(tmp_path / "blender.json"), str(tmp_path / "blender.bvh")],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]

@@ -30,6 +30,7 @@ import numpy as np
 
 from shared.clip import Clip
 from shared.errors import BadInput
+from shared.skeleton import Skeleton
 
 
 def _mujoco_warning(message: str) -> None:
@@ -114,8 +115,8 @@ def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
     w = smooth_window(clip.fps, n)
     q = np.tile(m.qpos0, (n, 1))
     # Euler angles continuous before anything is smoothed or differentiated: a wrap of 360 degrees or
-    # a change of Euler branch is no motion (a file crossing +-180 gave hip torques of 47,000 N m, issue 28)
-    if body.skeleton is not None and hasattr(body.skeleton, "continuous_angles"):
+    # a change of Euler branch is no motion (a file crossing +-180 gave hip torques of 47,000 N m)
+    if isinstance(body.skeleton, Skeleton):
         clip = clip.with_data(body.skeleton.continuous_angles(clip.data, clip.channels, keep_first=True))
     else:
         rot = [i for i, c in enumerate(clip.channels) if c.rsplit(".", 1)[-1] in ("rx", "ry", "rz")]

@@ -54,7 +54,7 @@ _BONE_NAMED = {
 _BONE_PREFIXES = (("spine", "spine"), ("chest", "spine"), ("neck", "neck"), ("head", "head"), ("toe", "foot"),
                   ("foot", "foot"), ("hand", "hand"), ("finger", "hand"), ("thumb", "hand"), ("index", "hand"),
                   ("middle", "hand"), ("ring", "hand"), ("pinky", "hand"))
-#: words that name a finger only below a hand (``MiddleSpineJoint`` is a spine, issue 28)
+#: words that name a finger only below a hand (``MiddleSpineJoint`` is a spine)
 _FINGER_WORDS = {"finger", "thumb", "index", "middle", "ring", "pinky"}
 # joint-named schemes (CMU BVH): the bone that starts at the joint
 _JOINT_NAMED = {"hip": "thigh", "knee": "shank", "ankle": "foot", "shoulder": "upper_arm", "elbow": "forearm",

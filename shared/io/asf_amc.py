@@ -158,8 +158,6 @@ def read_asf(path, units: str | None = None) -> Skeleton:
     missing = [b for b in bone_order if b not in order]
     if missing:
         raise ClipFormatError(path, f"bones not connected to the root: {missing[:3]}")
-    scale = angle_scale
-
     def bone_vec(name):
         if name == "root":
             return np.zeros(3)
@@ -172,12 +170,12 @@ def read_asf(path, units: str | None = None) -> Skeleton:
     index = {}
     for name in order:
         if name == "root":
-            pre = euler_matrix(root["axis"], np.asarray(root["orientation"]) * scale)
+            pre = euler_matrix(root["axis"], np.asarray(root["orientation"]) * angle_scale)
             j = Joint(name="root", parent=-1, offset=np.asarray(root["position"], float), dofs=list(root["order"]),
                       euler=root["axis"], pre=pre)
         else:
             b = bones[name]
-            pre = euler_matrix(b["axis_order"], np.asarray(b["axis"]) * scale)
+            pre = euler_matrix(b["axis_order"], np.asarray(b["axis"]) * angle_scale)
             limits = {}
             if len(b["limits"]) == len(b["dof"]):
                 limits = {d: lim for d, lim in zip(b["dof"], b["limits"])}

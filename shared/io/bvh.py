@@ -200,7 +200,7 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
     from shared.io import conventions as cv
 
     cv.check_reading(path, units, up, translations)
-    sk, data, channels, rest, folded = cv.fold_static_root(sk, data, channels, path)
+    sk, data, channels, rest, folded = cv.fold_scene_root(sk, data, channels)
     col = {c: i for i, c in enumerate(channels)}
     size = max(float(np.ptp(cv.rest_points(sk), axis=0).max()), 1e-9)
     modes = {}
@@ -220,15 +220,16 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
     if axis == 2:
         sk, data = cv.turn_z_up_to_y_up(sk, data, channels)
         root_rest = cv.Z_TO_Y @ root_rest
-    height = cv.standing_height(sk, data, channels, 1)
+    heights = cv.standing_heights(sk, data, channels)
+    height = float(heights[1])
     if up and not units and not cv.human_height(height):  # told the up axis of a body lying down: its length
-        height = max(cv.standing_height(sk, data, channels, a) for a in range(3))
+        height = float(heights.max())
     sk.unit_m = cv.choose_unit(path, height, units)
     root = sk.root
     t = [col.get(f"{root.name}.t{a}") for a in "xyz"]
     if all(k is not None for k in t):
         modes[root.name] = translations if translations in ("add", "replace") else \
-            cv.root_translation_mode(sk, data, channels, root_rest, 1)
+            cv.root_translation_mode(sk, data, channels, root_rest, 1, size)
         if modes[root.name] == "replace":
             data[:, t] -= root_rest
     data = sk.continuous_angles(data, channels, keep_first=True)
@@ -236,7 +237,7 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
     read_as = {"units": unit + ("" if units else " (from the body's height)"),
                "up": ("z, turned to y" if axis == 2 else "y") + ("" if up else " (from the motion)"),
                "translations": sorted(set(modes.values())) or ["none"],
-               "root": root.name + (f" (the static node{'s' if len(folded) > 1 else ''} {', '.join(folded)} "
+               "root": root.name + (f" (the scene node{'s' if len(folded) > 1 else ''} {', '.join(folded)} "
                                     "above it folded in)" if folded else "")}
     return sk, data, channels, read_as
 

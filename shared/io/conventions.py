@@ -1,5 +1,5 @@
 """What a motion file means: its length unit, its up axis, which joint is the body's root and
-what its translation channels add to (issues 12 and 28). Readers call these after parsing, so
+what its translation channels add to. Readers call these after parsing, so
 every clip inside mirrorcoach is a Y-up body in known units, rooted at the pelvis, whose
 translation channels add to the joint offsets. Everything is read off the *motion* (the posed
 frames), per file, because a rest pose says little: game studios' skeletons rest with every
@@ -155,20 +155,21 @@ def detect_up(sk, data: np.ndarray, channels: list[str], path=None) -> int:
     return axis
 
 
-def standing_height(sk, data: np.ndarray, channels: list[str], up_axis: int = 1) -> float:
-    """The body's standing height over the take in file units: from its lowest point to its
-    head (or its highest point when no joint is named head), 90th percentile of the frames."""
-    p = _posed(sk, data, channels)[..., up_axis]
+def standing_heights(sk, data: np.ndarray, channels: list[str]) -> np.ndarray:
+    """The body's standing height over the take in file units along x, y and z (3,): from its
+    lowest point to its head (or its highest point when no joint is named head), 90th
+    percentile of the frames."""
+    p = _posed(sk, data, channels)
     head = _named(sk, HEAD_RE)
     top = p[:, head].max(axis=1) if head else p.max(axis=1)
-    return float(np.percentile(top - p.min(axis=1), 90))
+    return np.percentile(top - p.min(axis=1), 90, axis=0)
 
 
-def fold_static_root(sk, data: np.ndarray, channels: list[str], path=None):
-    """A file root that never moves and has one child, folded into the child (module
-    docstring). Returns (skeleton, data, channels, the replace-offsets of translated joints,
+def fold_scene_root(sk, data: np.ndarray, channels: list[str]):
+    """A file root with one child that never turns (a floor, scene or trajectory node), folded
+    into the child (module docstring). Returns (skeleton, data, channels, the replace-offsets of translated joints,
     the names folded)."""
-    from shared.skeleton import Joint, Skeleton
+    from shared.skeleton import Joint, Skeleton, continuous_euler
 
     rest = {j.name: np.asarray(j.offset, float) for j in sk.joints}  # what "replace" channels stand in for
     folded: list[str] = []
@@ -203,8 +204,6 @@ def fold_static_root(sk, data: np.ndarray, channels: list[str], path=None):
             local = sk.local_matrices(data, channels)[:, kids[0]]
             m = np.asarray(child.pre).T @ (r0 @ local) @ np.asarray(child.pre)
             ang = np.rad2deg(Rotation.from_matrix(m).as_euler(child.euler))
-            from shared.skeleton import continuous_euler
-
             data[:, [col[c] for c in rot]] = continuous_euler(ang, child.euler)
         rest[child.name] = r0 @ rest[child.name]
         keep = [i for i, c in enumerate(channels) if not c.startswith(f"{root.name}.")]
@@ -236,12 +235,13 @@ def joint_translation_mode(t: np.ndarray, rest: np.ndarray, size: float) -> str:
     return "add" if spread_add < 0.5 * spread_replace else "replace"
 
 
-def root_translation_mode(sk, data: np.ndarray, channels: list[str], rest: np.ndarray, up_axis: int) -> str:
+def root_translation_mode(sk, data: np.ndarray, channels: list[str], rest: np.ndarray, up_axis: int,
+                          size: float) -> str:
     """``"add"`` or ``"replace"`` for the root's position channels: the reading that puts the
     body's lowest point over the take nearer the file's floor (height 0) and the body nearer
-    the origin (module docstring). Ties (a root offset of zero) read as Blender does."""
+    the origin (module docstring). Ties (a root offset of zero) read as Blender does;
+    ``size`` is the body's rest extent in file units."""
     r = sk.root
-    size = max(float(np.ptp(rest_points(sk), axis=0).max()), 1e-9)
     if float(np.linalg.norm(rest)) < 1e-6 * size:
         return "replace"
     t = data[:, [channels.index(f"{r.name}.t{a}") for a in "xyz"]]

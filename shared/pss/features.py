@@ -10,7 +10,7 @@ The representation here is turn-invariant and invertible:
   continuous 6-D representation of Zhou et al., CVPR 2019). One rotation has two Euler triples
   (and each angle is defined modulo 360), and files and tools pick either: on sin/cos of the
   angles the same HDM05 squat as AMC and as the BVH written from it lay 258 apart, a different
-  take 36.5 (issue 28). On ``L`` they are the same numbers, whatever the Euler order, axis
+  take 36.5. On ``L`` they are the same numbers, whatever the Euler order, axis
   convention or branch of the file; so are the HMM distances (eq. 2.4) the coach's ``d_p``
   and the estimator decide on;
 * every other rotation channel ``theta`` (joints turning about one or two axes, whose Euler
@@ -18,7 +18,7 @@ The representation here is turn-invariant and invertible:
   convention: a clip whose skeleton composes the joint's rotation otherwise (a BVH written
   from an AMC clip: ZXY angles of the folded rotation) has that rotation re-expressed as the
   reference skeleton's Euler angles (the branch that keeps the channels the joint lacks at 0);
-  spaces saved before the rotations (issue 28) read every angle this way (``rotations="sincos"``);
+  spaces saved before the rotations read every angle this way (``rotations="sincos"``);
 * the root's orientation without its heading: the root's swing (its rotation with the twist
   about the vertical removed) as the unit vector it turns the vertical into (3 values);
 * the root's height in metres;
@@ -134,7 +134,7 @@ class MotionFeatures:
         Standardisation of the sensor channels (fitted by :meth:`fit`).
     rotations : {"6d", "sincos"}
         How three-axis joints enter: their rotation (``"6d"``, every new space) or sin/cos of
-        their Euler angles (``"sincos"``, spaces saved before issue 28).
+        their Euler angles (``"sincos"``, spaces saved before the rotations).
     """
 
     def __init__(self, skeleton: Skeleton | None, motion_channels: list[str], sensor_channels: list[str] | None = None,
@@ -154,7 +154,10 @@ class MotionFeatures:
             per_joint.setdefault(c.rsplit(".", 1)[0], []).append(c)
         #: joints whose rotation (not its Euler angles) is modelled
         self.rot_joints = [j for j, chs in per_joint.items() if len(chs) == 3] if (
-            rotations != "sincos" and skeleton is not None) else []
+            rotations == "6d" and skeleton is not None) else []
+        #: their axis pre-rotations ``C`` in the space's skeleton (R, 3, 3)
+        self.rot_pre = np.array([skeleton.joints[skeleton.index(j)].pre for j in self.rot_joints],
+                                dtype=float).reshape(-1, 3, 3)
         self.sincos_channels = [c for c in self.angle_channels if c.rsplit(".", 1)[0] not in self.rot_joints]
         self.plain_channels = [c for c in self.motion_channels
                                if c not in self.angle_channels and c.rsplit(".", 1)[0] != root]
@@ -371,16 +374,9 @@ class MotionFeatures:
         rotation in the world-aligned rest frame (module docstring)."""
         body = self.body(clip)
         local = body.local_matrices(clip.data, clip.channels)[:, [body.index(j) for j in self.rot_joints]]
-        pre = self._rot_pre()
+        pre = self.rot_pre
         m = np.einsum("jba,tjbc,jcd->tjad", pre, local, pre)  # C^T L C: the space's own joint frame
         return np.ascontiguousarray(m[..., :2].transpose(0, 1, 3, 2)).reshape(clip.n_frames, -1)
-
-    def _rot_pre(self) -> np.ndarray:
-        """The space skeleton's axis pre-rotations ``C`` (R, 3, 3) of the three-axis joints."""
-        if "_pre" not in self.__dict__:
-            self.__dict__["_pre"] = np.array([self.skeleton.joints[self.skeleton.index(j)].pre
-                                              for j in self.rot_joints], dtype=float).reshape(-1, 3, 3)
-        return self.__dict__["_pre"]
 
     def _decode_rotations(self, x: np.ndarray, values: dict) -> None:
         """Euler channels of the three-axis joints from their 6-D rotations (T, 6 R): Gram-Schmidt
