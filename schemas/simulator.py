@@ -33,7 +33,7 @@ BODY_INFO = Map({"name": F(Str(max_len=128)), "kind": F(Str(choices=("robot", "h
                  "feet": F(List(Str(max_len=128), max_len=1000), "bones whose points make the support area",
                            required=False),
                  "unmapped_bones": F(List(Str(max_len=128), max_len=1000),
-                                     "bones no naming scheme names (mass from their parent's segment)", required=False),
+                                     "unusual bones: a limb no person has, a tail or a prop (no segment's mass)", required=False),
                  "missing_segments": F(List(Str(max_len=64), max_len=100),
                                        "body segments the skeleton lacks (their mass spread over the rest)",
                                        required=False)})

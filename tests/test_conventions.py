@@ -289,21 +289,47 @@ def test_human_bodies_from_any_naming_scheme_weigh_what_they_should(plain, schem
     d = body.describe()
     assert d["mass"] == pytest.approx(70.0, abs=0.05) and not d["missing_segments"]
     assert len(body.feet) == 4 and set(body.feet) == {names[f] for f in ("lfoot", "rfoot", "ltoes", "rtoes")}
-    m_ref = {j: float(ref.model.body_mass[k + 1]) for k, j in enumerate(j.name for j in plain.skeleton.joints)}
-    m_new = {j: float(body.model.body_mass[k + 1]) for k, j in enumerate(j.name for j in sk.joints)}
+    m_ref = {j.name: float(ref.model.body(j.name).mass[0]) for j in plain.skeleton.joints}
+    m_new = {j.name: float(body.model.body(j.name).mass[0]) for j in sk.joints}
     for seg in (("lfemur",), ("ltibia",), ("lhumerus",), ("head",), ("lfoot", "ltoes"), ("rfemur",)):
         assert sum(m_new[names[b]] for b in seg) == pytest.approx(sum(m_ref[b] for b in seg), rel=0.05), seg
 
 
-def test_a_body_whose_bones_no_scheme_names_says_so(plain):
-    from shared.bodies.human import human_body
+def _without(sk: Skeleton, drop: set[str]) -> Skeleton:
+    """The skeleton with the joints ``drop`` (and all below them) cut off; a parent that loses
+    its children ends where they began."""
+    gone = set()
+    for i, j in enumerate(sk.joints):
+        if j.name in drop or j.parent in gone:
+            gone.add(i)
+    keep = [i for i in range(len(sk.joints)) if i not in gone]
+    new = {old: n for n, old in enumerate(keep)}
+    out = []
+    for i in keep:
+        j = sk.joints[i]
+        cut = [k for k in gone if sk.joints[k].parent == i]
+        end = sk.joints[cut[0]].offset if cut and not [k for k in sk.children(i) if k in new] else j.end
+        out.append(Joint(j.name, new.get(j.parent, -1), j.offset, j.dofs, j.euler, j.pre, end, j.limits))
+    return Skeleton(sk.name, out, sk.unit_m, sk.up_axis, sk.source_format)
 
-    sk = _renamed(plain.skeleton, {"lfoot": "bone_17", "ltoes": "bone_18", "rfoot": "bone_23", "rtoes": "bone_24",
-                                   "ltibia": "xx_1", "rtibia": "xx_2"})
-    d = human_body(sk).describe()
-    assert {"bone_17", "xx_1"} <= set(d["unmapped_bones"])
-    assert "l foot" in d["missing_segments"] and "r shank" in d["missing_segments"]
-    assert d["mass"] == pytest.approx(70.0, abs=0.05) and d["feet"] == []
+
+def test_a_limb_the_body_has_not_is_a_missing_segment_and_a_tail_is_reported(plain):
+    from shared.bodies.human import MIN_MASS, human_body
+
+    legless = human_body(_without(plain.skeleton, {"lfoot", "rtibia"})).describe()
+    assert {"l foot", "r shank", "r foot"} <= set(legless["missing_segments"]) and "l shank" not in legless[
+        "missing_segments"]
+    assert legless["mass"] == pytest.approx(70.0, abs=0.05)
+    sk = plain.skeleton  # a tail of three bones (0.6 m) behind the pelvis: a limb no person has
+    tail = [Joint(f"tail{n}", len(sk.joints) + n - 1 if n else 0, np.array([0.0, 0.0, -0.2 / sk.unit_m]), ["rx"],
+                  "xyz", np.eye(3), np.array([0.0, 0.0, -0.2 / sk.unit_m]) if n == 2 else None) for n in range(3)]
+    tailed = Skeleton(sk.name, sk.joints + tail, sk.unit_m, sk.up_axis, sk.source_format)
+    ref, body = human_body(sk), human_body(tailed)
+    assert body.unmapped == ["tail0", "tail1", "tail2"] and not body.describe()["missing_segments"]
+    assert body.mass == pytest.approx(70.0, abs=0.05)
+    assert all(body.model.body(f"tail{n}").mass[0] == MIN_MASS for n in range(3))  # no segment's mass
+    assert all(body.model.body(j.name).mass[0] == pytest.approx(ref.model.body(j.name).mass[0], rel=0.01)
+               for j in sk.joints)
 
 
 def test_a_report_where_nothing_was_checked_does_not_say_feasible(plain):
@@ -311,13 +337,12 @@ def test_a_report_where_nothing_was_checked_does_not_say_feasible(plain):
     from shared.bodies.human import human_body
 
     clip = plain.frames(0, 40)
-    names = {"lfoot": "bone_17", "ltoes": "bone_18", "rfoot": "bone_23", "rtoes": "bone_24"}
-    feetless = _renamed(plain.skeleton, names)
-    chans = [names.get(c.rsplit(".", 1)[0], c.rsplit(".", 1)[0]) + "." + c.rsplit(".", 1)[1] for c in clip.channels]
-    _, report = perform(human_body(feetless), clip.with_data(clip.data, channels=chans, skeleton=feetless,
+    feetless = _without(plain.skeleton, {"lfoot", "rfoot"})
+    chans = [c for c in clip.channels if c.rsplit(".", 1)[0] in {j.name for j in feetless.joints}]
+    _, report = perform(human_body(feetless), clip.with_data(clip.select(chans), channels=chans, skeleton=feetless,
                                                              groups={"motion": chans}))
     assert report["feasible"] is None and len(report["not_checked"]) == 2  # a BVH body has no joint limits either
-    assert "no feet" in report["not_checked"][1] and "bone_17" in report["not_checked"][1]
+    assert "no feet" in report["not_checked"][1]
     _, report = perform(human_body(plain.skeleton), clip)  # feet, no limits: balance checked, limits said
     assert report["feasible"] in (True, False) and report["support"]["checked"]
     assert report["not_checked"] == ["joint limits (the body has none for this clip's channels)"]

@@ -29,8 +29,13 @@ def bandai() -> list[Path]:
 
 
 def _against_reference(path: Path, clip) -> float:
-    """Largest distance (m) of any joint from the independent forward kinematics."""
+    """Largest distance (m) of any joint from the independent forward kinematics (in the
+    clip's axes: a Z-up file is read turned to Y up)."""
+    from shared.io.conventions import Z_TO_Y
+
     names, ref = read_positions(path)
+    if clip.read_as["up"].startswith("z"):
+        ref = ref @ Z_TO_Y.T
     p = clip.skeleton.forward_kinematics(clip.data, clip.channels, ends=False)
     return float(np.abs(ref[:, [names.index(j.name) for j in clip.skeleton.joints]] * clip.skeleton.unit_m - p).max())
 
@@ -139,13 +144,39 @@ def test_a_body_from_the_game_studios_skeleton_is_a_person_and_walks_with_human_
     assert d["mass"] == pytest.approx(70.0, abs=0.05) and not d["missing_segments"] and not d["unmapped_bones"]
     seg, _ = map_segments(clip.skeleton)
     share: dict = {}
-    for k, jn in enumerate(j.name for j in clip.skeleton.joints):
-        share[seg[jn]] = share.get(seg[jn], 0.0) + float(body.model.body_mass[k + 1]) / 70.0
+    for jn in (j.name for j in clip.skeleton.joints):
+        share[seg[jn]] = share.get(seg[jn], 0.0) + float(body.model.body(jn).mass[0]) / 70.0
     assert max(v for (s, _), v in share.items() if s not in ("pelvis", "spine")) < 0.20
     assert share[("pelvis", "")] < 0.2
     performed, report = perform(body, clip)
     tau = performed.select([c for c in performed.group("sensor") if c.startswith("tau.") and c[-3:-1] == ".r"])
     assert np.abs(tau).max() < 500.0
+
+
+@pytest.mark.parametrize("source", ["hdm05", "cmu", "game studio"])
+def test_bodies_are_segmented_by_their_tree_and_proportions_when_no_bone_has_a_name(source, bundled, cmu, bandai):
+    from shared.bodies.human import human_body, map_segments
+    from shared.skeleton import Joint, Skeleton
+
+    path = {"hdm05": bundled / SQUAT, "cmu": cmu / "131_01.bvh", "game studio": bandai[0]}[source]
+    sk = load_clip(path).skeleton
+    anon = Skeleton(sk.name, [Joint(f"b{i:02d}", j.parent, j.offset, j.dofs, j.euler, j.pre, j.end, j.limits)
+                              for i, j in enumerate(sk.joints)], sk.unit_m, sk.up_axis, sk.source_format)
+    named, blind = human_body(sk), human_body(anon)
+    assert not blind.unmapped and not blind.missing_segments and blind.mass == pytest.approx(70.0, abs=0.05)
+    assert len(blind.feet) == len(named.feet) >= 2
+    seg, _ = map_segments(sk)
+    by = {}  # kg per (segment, side) as the names say; forearm and hand as one (where the wrist ends)
+    for k, j in enumerate(sk.joints):
+        s, side = seg[j.name]
+        key = ("forearm+hand" if s in ("forearm", "hand") else s, side)
+        m = by.setdefault(key, [0.0, 0.0])
+        m[0] += float(named.model.body(j.name).mass[0])
+        m[1] += float(blind.model.body(f"b{k:02d}").mass[0])
+    assert {s for s, _ in by} >= {"pelvis", "spine", "neck", "head", "clavicle", "upper_arm", "forearm+hand", "thigh",
+                                  "shank", "foot"}
+    for key, (m_named, m_blind) in by.items():
+        assert m_blind == pytest.approx(m_named, rel=0.01, abs=0.02), key
 
 
 def test_bones_named_joint_are_read_by_their_word_and_their_place(bundled):
@@ -161,8 +192,9 @@ def test_bones_named_joint_are_read_by_their_word_and_their_place(bundled):
     renamed = Skeleton(sk.name, [Joint(names.get(j.name, j.name), j.parent, j.offset, j.dofs, j.euler, j.pre, j.end,
                                        j.limits) for j in sk.joints], sk.unit_m, sk.up_axis, sk.source_format)
     ref, body = human_body(sk), human_body(renamed)
-    pelvis = float(body.model.body_mass[1])
-    assert pelvis == pytest.approx(float(ref.model.body_mass[1]), rel=0.05) and pelvis < 0.2 * 70.0
+    root = sk.joints[0].name
+    pelvis = float(body.model.body(root).mass[0])
+    assert pelvis == pytest.approx(float(ref.model.body(root).mass[0]), rel=0.05) and pelvis < 0.2 * 70.0
     assert "MiddleSpineJoint" not in body.unmapped
 
 
@@ -260,3 +292,31 @@ def test_a_file_blender_authors_in_inches_z_up_with_xyz_eulers_reads_as_the_same
     names = [j.name for j in mine.skeleton.joints]
     pb = back.positions()[:, [back.skeleton.index(n) for n in names]]
     assert np.abs(pb - mine.positions()[:, :len(names)]).max() < 2e-3
+
+
+def test_a_file_blender_authors_in_a_game_studios_conventions_reads_as_the_same_motion(bundled, tmp_path, blender):
+    """Blender authors the squat with a static root at the floor, every bone's rest along its
+    parent's X, 6 channels on every joint (positions replacing the offset), Z up, centimetres."""
+    from shared.bodies.human import human_body
+
+    clip = load_clip(bundled / SQUAT).frames(0, 60)
+    save_clip(clip, tmp_path / "ours.bvh")
+    script = Path(__file__).parent / "blender" / "author_game_studio.py"
+    r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "3", "--python", str(script), "--",
+                        str(tmp_path / "ours.bvh"), str(tmp_path / "authored.bvh")],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    text = (tmp_path / "authored.bvh").read_text()
+    assert text.count("CHANNELS 6") == text.count("JOINT") + 1 and "ROOT joint_Root" in text
+    back = load_clip(tmp_path / "authored.bvh")
+    assert back.read_as["units"].startswith("cm") and back.read_as["up"].startswith("z")
+    assert "joint_Root" in back.read_as["root"] and back.skeleton.joints[0].name == "root"
+    assert back.read_as["translations"] == ["replace"]
+    assert _against_reference(tmp_path / "authored.bvh", back) < 1e-3
+    mine = load_clip(tmp_path / "ours.bvh")
+    names = [j.name for j in mine.skeleton.joints]
+    pb = back.positions()[:, [back.skeleton.index(n) for n in names]]
+    assert np.abs(pb - mine.positions()[:, :len(names)]).max() < 1e-3
+    ref, body = human_body(mine.skeleton), human_body(back.skeleton)
+    assert not body.unmapped and not body.missing_segments
+    assert all(body.model.body(n).mass[0] == pytest.approx(ref.model.body(n).mass[0], rel=0.01) for n in names)

@@ -79,7 +79,7 @@ class Body:
     root: str | None = None
     feet: list[str] = field(default_factory=list)
     up_axis: int = 2
-    unmapped: list[str] = field(default_factory=list)  # bones no naming scheme names (human bodies)
+    unmapped: list[str] = field(default_factory=list)  # unusual bones: a limb no person has (human bodies)
     missing_segments: list[str] = field(default_factory=list)  # de Leva segments the skeleton lacks
     friction: dict[str, float] = field(default_factory=dict)  # channel -> Coulomb friction, N m (robots, issue 13)
 
@@ -254,7 +254,7 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
         not_checked.append("joint limits (the body has none for this clip's channels)")
     if not support.get("checked"):
         not_checked.append("balance (no feet found on the body"
-                           + (f"; unnamed bones: {', '.join(body.unmapped[:5])}" if body.unmapped else "") + ")")
+                           + (f"; unusual bones: {', '.join(body.unmapped[:5])}" if body.unmapped else "") + ")")
     if warned:  # MuJoCo's numbers are suspect: the reply says so instead of a log line only
         not_checked.append("dynamics (MuJoCo warned: " + ", ".join(f"{k} x{n}" for k, n in warned.items()) + ")")
     failed = bool(limits) or bool(support.get("checked") and support["frames_outside_support"] > 0)

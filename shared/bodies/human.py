@@ -11,8 +11,8 @@ skeleton's up axis, so no axis conversion is needed.
 
 Segment masses: de Leva (1996), *Adjustments to Zatsiorsky-Seluyanov's segment inertia
 parameters*, J. Biomechanics 29(9):1223-1230, table 4 (male), as fractions of the body mass;
-a segment is shared equally by the bones a naming scheme maps to it (:func:`map_segments`;
-fingers belong to the hand, toes to the foot), and the mass of segments a skeleton lacks is
+a segment is shared equally by the bones :func:`map_segments` finds for it from the skeleton's
+tree and proportions (fingers belong to the hand, toes to the foot), and the mass of segments a skeleton lacks is
 spread over the others so that the body weighs what was asked. Inertias come from capsule
 geometry along each bone with that mass.
 Joint limits are the skeleton's (ASF ``limits``), checked in the feasibility report.
@@ -27,6 +27,7 @@ import numpy as np
 
 from shared.bodies.body import Body, DofMap, check_mass
 from shared.errors import BadInput
+from shared.io.conventions import HEAD_RE
 from shared.skeleton import Skeleton
 
 MIN_MASS = 0.01  # kg: a bone with joints but no segment of its own (MuJoCo needs mass to move)
@@ -64,7 +65,7 @@ _SEGMENTS = {
     "pelvis": ("lower_trunk", 0.12), "spine": ("trunk", 0.12), "neck": ("neck", 0.05), "head": ("head", 0.09),
     "clavicle": ("clavicle", 0.04), "upper_arm": ("upper_arm", 0.045), "forearm": ("forearm", 0.035),
     "hand": ("hand", 0.03), "thigh": ("thigh", 0.07), "shank": ("shank", 0.05), "foot": ("foot", 0.04),
-    "hipjoint": ("", 0.02),
+    "hipjoint": ("", 0.02), "unusual": ("", 0.02),
 }
 # de Leva (1996) male, percent of body mass; the middle and upper trunk shared by the spine
 # bones less what the clavicles take; head 6.94 % split head 70 % / neck 30 %
@@ -94,11 +95,12 @@ def name_parts(bone: str) -> tuple[str, str]:
     return side, n
 
 
-def map_segments(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
-    """Every bone's (segment, side) and the bones no scheme names. A bone no scheme names
-    belongs to its parent's segment (fingers to the hand, toes to the foot)."""
+def _segments_by_name(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
+    """Every bone's (segment, side) read from its name alone, and the bones no scheme names (they
+    continue their parent's segment; on the way from the root to the head, the trunk). The
+    hints :func:`map_segments` falls back on where a skeleton's topology is not a person's."""
     parts = {j.name: name_parts(j.name) for j in sk.joints}
-    to_head: set[int] = set()  # the joints from the root to the first joint named head (topology)
+    to_head: set[int] = set()  # the joints from the root to the first joint named head
     head = next((i for i, j in enumerate(sk.joints) if "head" in parts[j.name][1]), None)
     while head is not None and head >= 0:
         to_head.add(head)
@@ -126,13 +128,224 @@ def map_segments(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
             seg = next((s for p, s in _BONE_PREFIXES if p in base and (p not in _FINGER_WORDS or below_hand)), None)
         if i == 0:
             seg = "pelvis"
-        if seg is None:  # reported (Body.unmapped); by topology: on the way to the head it is the trunk,
-            unmapped.append(j.name)  # elsewhere it continues its parent's segment
+        if seg is None:
+            unmapped.append(j.name)
             seg, side = out[sk.joints[j.parent].name]
             if i in to_head and seg == "pelvis":
                 seg = "spine"
         out[j.name] = (seg, side if seg in _SIDED else "")
     return out, unmapped
+
+
+# ---------------------------------------------------------------------------- topology
+#: a branch is a limb when its longest way to a tip is at least this share of the skeleton's
+#: longest way from the root (HDM05, CMU, the game studio: the head 0.23-0.34, a thumb 0.13)
+LIMB_SHARE = 0.18
+#: de Leva (1996) segment lengths (male, mm): thigh 422.2 / shank 434.0, upper arm 281.7 / forearm 268.9
+_LIMB_RATIO = {"leg": 422.2 / 434.0, "arm": 281.7 / 268.9}
+#: a limb's segments along its chain: (before the two long bones, first, second, after)
+_LIMB_SEGMENTS = {"leg": ("hipjoint", "thigh", "shank", "foot"), "arm": ("clavicle", "upper_arm", "forearm", "hand")}
+
+
+class _Tree:
+    """A skeleton's tree with lengths in metres: ``off[i]`` the length of joint ``i``'s offset
+    from its parent, ``reach[i]`` the longest way from joint ``i`` to a tip (through its
+    children or its end site)."""
+
+    def __init__(self, sk: Skeleton):
+        n = len(sk.joints)
+        self.kids: list[list[int]] = [[] for _ in range(n)]
+        for i, j in enumerate(sk.joints[1:], 1):
+            self.kids[j.parent].append(i)
+        self.off = np.array([float(np.linalg.norm(j.offset)) for j in sk.joints]) * sk.unit_m
+        end = np.array([0.0 if j.end is None else float(np.linalg.norm(j.end)) for j in sk.joints]) * sk.unit_m
+        self.reach = end.copy()
+        for i in reversed(range(n)):
+            for k in self.kids[i]:
+                self.reach[i] = max(self.reach[i], self.off[k] + self.reach[k])
+
+    def branch(self, k: int) -> float:
+        """The longest way through child ``k`` from its parent to a tip."""
+        return float(self.off[k] + self.reach[k])
+
+    def limb_tips(self, big: float) -> np.ndarray:
+        """For every joint, the tips below it reached through limb-sized branches only."""
+        tips = np.ones(len(self.kids), int)
+        for i in reversed(range(len(self.kids))):
+            kids = [k for k in self.kids[i] if self.branch(k) >= big]
+            if kids:
+                tips[i] = sum(tips[k] for k in kids)
+        return tips
+
+    def chain(self, k: int) -> list[int]:
+        """The limb from joint ``k`` to its farthest tip."""
+        out = [k]
+        while self.kids[out[-1]]:
+            out.append(max(self.kids[out[-1]], key=self.branch))
+        return out
+
+    def subtree(self, i: int) -> list[int]:
+        out, todo = [], [i]
+        while todo:
+            out.append(todo.pop())
+            todo.extend(self.kids[out[-1]])
+        return out
+
+
+#: de Leva (1996) lengths (male, mm) of a limb's segments around its two long bones, as shares of
+#: the neighbouring long bone: hip joint centre from the pelvis' centre ~90 of the thigh's 422,
+#: clavicle ~170 of the upper arm's 282; foot (ankle to toe tip) ~200 of the shank's 434, hand
+#: (wrist to finger tip) ~190 of the forearm's 269
+_LIMB_ENDS = {"leg": (90 / 422.2, 200 / 434.0), "arm": (170 / 281.7, 190 / 268.9)}
+
+
+def _bones(tree: _Tree, chain: list[int]) -> np.ndarray:
+    """Each chain joint's bone length (to the next joint of the chain, or its farthest tip)."""
+    return np.array([float(tree.off[chain[n + 1]]) if n + 1 < len(chain) else float(tree.reach[i])
+                     for n, i in enumerate(chain)])
+
+
+def _split_limb(tree: _Tree, chain: list[int], kind: str, hints: list[str]) -> list[str]:
+    """A leg's or an arm's bones along its chain, segment by segment.
+
+    The bones' names (``hints``) decide when they name all the limb's bones, one of its long
+    segments among them, in the order a limb has them (hip joint or clavicle, thigh or upper
+    arm, shank or forearm, foot or hand). Otherwise proportions alone do: the two consecutive runs of bones whose
+    lengths are nearest de Leva's ratio (thigh/shank, upper arm/forearm), the bones before
+    and after them shorter than their neighbour and as near de Leva's shares as they can be,
+    each run of as few bones as possible, a hand or a foot at the end."""
+    names = _LIMB_SEGMENTS[kind]
+    rank = [names.index(h) if h in names else -1 for h in hints]
+    if -1 not in rank and rank == sorted(rank) and (1 in rank or 2 in rank):
+        return list(hints)
+    pre, first, second, post = names
+    length = _bones(tree, chain)
+    n, total = len(chain), float(length.sum()) or 1.0
+    if n == 1:
+        return [first]
+    counted = length > 0.05 * total  # zero-length helpers (twist joints on the chain) count for nothing
+    share_pre, share_post = _LIMB_ENDS[kind]
+
+    def off_share(got: float, want: float) -> float:
+        return 0.2 * abs(np.log(got / want)) if got > 0.02 * total else 0.0
+
+    best, cut = np.inf, (0, 1, 2)
+    for a in range(n - 1):
+        for b in range(a + 1, n):
+            for c in range(b + 1, n + 1):
+                s1, s2 = length[a:b].sum(), length[b:c].sum()
+                if s1 <= 0 or s2 <= 0:
+                    continue
+                cost = (abs(np.log(s1 / s2) - np.log(_LIMB_RATIO[kind]))
+                        + 0.3 * (max(counted[a:b].sum() - 1, 0) + max(counted[b:c].sum() - 1, 0))
+                        + off_share(length[:a].sum(), share_pre * s1) + off_share(length[c:].sum(), share_post * s2)
+                        + (length[:a].sum() >= s1) + (length[c:].sum() >= s2)  # a clavicle, a hand: shorter
+                        + 0.3 * (c == n))  # a limb ends in a hand or a foot
+                if cost < best - 1e-12:
+                    best, cut = cost, (a, b, c)
+    a, b, c = cut
+    return [pre] * a + [first] * (b - a) + [second] * (c - b) + [post] * (n - c)
+
+
+def _head_start(tree: _Tree, chain: list[int]) -> int:
+    """Where the head begins along the chain from the trunk (the joints before it are the neck):
+    the last joint with a bone of a head's size; when the chain ends in a marker (a joint with
+    no bone), the marker's parent if the marker sits a head's height above it (a crown marker),
+    else the marker itself (a head joint with no end site)."""
+    bone, off = _bones(tree, chain), tree.off[chain]
+    last = len(chain) - 1
+    if last > 0 and bone[last] < 0.1 * max(off.max(), 1e-9):
+        return last - 1 if off[last] >= 0.6 * off.max() else last
+    return max(i for i, b in enumerate(bone) if b >= 0.3 * bone.max()) if bone.max() > 0 else last
+
+
+def _side(sk: Skeleton, bones: list[int]) -> str:
+    """A limb's side from its bones' names (a hint: the majority of l/r words), or ``""``."""
+    votes = [name_parts(sk.joints[i].name)[0] for i in bones]
+    left, right = votes.count("l"), votes.count("r")
+    return "l" if left > right else "r" if right > left else ""
+
+
+def _segments_by_topology(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]] | None:
+    """Every bone's (segment, side) from the skeleton's tree and bone lengths, or None when the
+    tree is not a person's (not two legs below two arms and a head).
+
+    The trunk is the way from the root towards the most limbs (a limb: a branch whose longest
+    way to a tip is at least :data:`LIMB_SHARE` of the skeleton's). The two limbs that leave it
+    lowest are the legs, the three that leave it highest the arms and the head (the head the
+    shortest of them, or the one named so); trunk joints up to the legs are the pelvis, the
+    rest the spine. Each limb is cut into segments by :func:`_split_limb`; its side branches
+    (fingers, toes, twist bones) join the segment they leave from. A limb-sized branch that is
+    none of these (a tail, a prop) is returned as unusual."""
+    tree = _Tree(sk)
+    hint, _ = _segments_by_name(sk)
+    big = LIMB_SHARE * float(tree.reach[0])
+    if big <= 0:
+        return None
+    tips = tree.limb_tips(big)
+    trunk = [0]
+    while True:
+        kids = [k for k in tree.kids[trunk[-1]] if tree.branch(k) >= big and tips[k] >= 2]
+        if len(kids) != 1:
+            break
+        trunk.append(kids[0])
+    limbs = [(t, k) for t, i in enumerate(trunk) for k in tree.kids[i]
+             if tree.branch(k) >= big and (t + 1 == len(trunk) or k != trunk[t + 1])]
+    by_level = sorted(limbs, key=lambda tk: -tk[0])
+    cut = 3
+    while cut < len(by_level) and by_level[cut][0] == by_level[cut - 1][0]:
+        cut += 1  # limbs leaving the trunk at one joint are all upper or all lower
+    upper, lower = [k for _, k in by_level[:cut]], [k for _, k in by_level[cut:]]
+    if len(upper) < 3 or len(lower) < 2:
+        return None
+
+    def pair(ks):  # the two most alike (a left and a right)
+        return list(min(((a, b) for n, a in enumerate(ks) for b in ks[n + 1:]),
+                        key=lambda ab: abs(np.log(tree.branch(ab[0]) / tree.branch(ab[1])))
+                        + 0.1 * abs(len(tree.chain(ab[0])) - len(tree.chain(ab[1])))))
+
+    named_head = [k for k in upper if any(HEAD_RE.search(sk.joints[i].name) for i in tree.chain(k))]
+    head = named_head[0] if len(named_head) == 1 else None
+    arms = pair([k for k in upper if k != head])
+    if head is None:
+        head = min((k for k in upper if k not in arms), key=tree.branch)
+    legs = pair(lower)
+    seg: dict[int, tuple[str, str]] = {}
+    leg_level = max(t for t, k in limbs if k in legs)
+    for t, i in enumerate(trunk):
+        seg[i] = ("pelvis" if t <= leg_level else "spine", "")
+    for kind, two in (("leg", legs), ("arm", arms)):
+        sides = [_side(sk, tree.chain(k)) for k in two]
+        if sides[0] == sides[1] or "" in sides:  # no names to go by: a side each (masses are symmetric)
+            sides = ["l", "r"]
+        for k, side in zip(two, sides):
+            chain = tree.chain(k)
+            for i, name in zip(chain, _split_limb(tree, chain, kind, [hint[sk.joints[i].name][0] for i in chain])):
+                seg[i] = (name, side if name in _SIDED else "")
+    chain = tree.chain(head)
+    top = _head_start(tree, chain)
+    for n, i in enumerate(chain):
+        seg[i] = ("head" if n >= top else "neck", "")
+    unusual = []
+    for t, k in limbs:
+        if k not in (head, *arms, *legs):
+            unusual.extend(tree.subtree(k))
+    for i in range(1, len(sk.joints)):  # side branches continue the segment they leave from
+        if i not in seg:
+            p = sk.joints[i].parent
+            seg[i] = ("unusual", "") if i in unusual else seg[p]
+    return {sk.joints[i].name: s for i, s in seg.items()}, [sk.joints[i].name for i in sorted(unusual)]
+
+
+def map_segments(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], list[str]]:
+    """Every bone's (segment, side) and the unusual bones, from the skeleton's topology and
+    proportions (:func:`_segments_by_topology`; names only break ties and give sides). A tree
+    that is not a person's (no two legs below two arms and a head: a half body, a robot) is
+    read from its bone names instead (:func:`_segments_by_name`), and the bones no name
+    places are the unusual ones (they continue their parent's segment there). Unusual bones
+    are reported (``Body.unmapped``); a limb no person has carries no segment's mass."""
+    topo = _segments_by_topology(sk)
+    return topo if topo is not None else _segments_by_name(sk)
 
 
 def segment_masses(seg_of: dict[str, tuple[str, str]], mass: float) -> tuple[dict[str, float], list[str]]:
@@ -157,26 +370,28 @@ def segment_masses(seg_of: dict[str, tuple[str, str]], mass: float) -> tuple[dic
 
 def stature(sk: Skeleton) -> float:
     """The body's standing height in metres from its bone lengths alone, whatever its rest pose
-    (a game studio's skeleton rests with its bones along X): the longest way from a foot (a
-    joint named foot or ankle) up to the root, plus the way from the root up to the head and
-    its end site. The skeleton's rest-pose height when it names no head or feet."""
-    from shared.io.conventions import FOOT_RE, HEAD_RE
+    (a game studio's skeleton rests with its bones along X): the longest way from an ankle (the
+    first joint of a foot, :func:`map_segments`) up to the root, plus the way from the root up
+    to the head and over it to its farthest tip. The skeleton's rest-pose height when it has no
+    feet or no head."""
+    seg, _ = map_segments(sk)
+    tree = _Tree(sk)
 
     def up_to_root(i):
         total = 0.0
         while i > 0:
-            total += float(np.linalg.norm(sk.joints[i].offset))
+            total += float(tree.off[i])
             i = sk.joints[i].parent
         return total
 
-    feet = [i for i, j in enumerate(sk.joints) if FOOT_RE.search(j.name) and not FOOT_RE.search(
-        sk.joints[j.parent].name if j.parent >= 0 else "")]
-    heads = [i for i, j in enumerate(sk.joints) if HEAD_RE.search(j.name)]
+    def first(name):
+        return [i for i, j in enumerate(sk.joints) if seg[j.name][0] == name and (
+            j.parent < 0 or seg[sk.joints[j.parent].name][0] != name)]
+
+    feet, heads = first("foot"), first("head")
     if not feet or not heads:
         return sk.rest_height()
-    h = heads[0]
-    top = up_to_root(h) + (0.0 if sk.joints[h].end is None or sk.children(h) else float(np.linalg.norm(sk.joints[h].end)))
-    return (max(up_to_root(f) for f in feet) + top) * sk.unit_m
+    return max(up_to_root(f) for f in feet) + up_to_root(heads[0]) + float(tree.reach[heads[0]])
 
 
 def _hinge_order(seq: str, dofs: list[str]) -> list[str]:

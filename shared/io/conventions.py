@@ -235,12 +235,19 @@ def joint_translation_mode(t: np.ndarray, rest: np.ndarray, size: float) -> str:
     return "add" if spread_add < 0.5 * spread_replace else "replace"
 
 
+#: how well a take's floor is known, as a share of the body's size (feet end sites sit a few cm
+#: above or below a studio's floor)
+FLOOR_TOLERANCE = 0.05
+
+
 def root_translation_mode(sk, data: np.ndarray, channels: list[str], rest: np.ndarray, up_axis: int,
                           size: float) -> str:
     """``"add"`` or ``"replace"`` for the root's position channels: the reading that puts the
     body's lowest point over the take nearer the file's floor (height 0) and the body nearer
-    the origin (module docstring). Ties (a root offset of zero) read as Blender does;
-    ``size`` is the body's rest extent in file units."""
+    the origin (module docstring). Ties read as Blender does (replace): a root offset of
+    zero, or one too small for the floor to tell (the readings' scores within 5 % of the
+    body's size: a floor is known to a few centimetres); ``size`` is the body's rest extent
+    in file units."""
     r = sk.root
     if float(np.linalg.norm(rest)) < 1e-6 * size:
         return "replace"
@@ -253,7 +260,7 @@ def root_translation_mode(sk, data: np.ndarray, channels: list[str], rest: np.nd
         floor = float(np.min(root_pos[idx, up_axis] + low))
         return abs(floor) + 0.25 * float(np.linalg.norm(root_pos[:, plane].mean(axis=0)))
 
-    return "add" if score(r.offset + t) < score(r.offset + t - rest) else "replace"
+    return "add" if score(r.offset + t) < score(r.offset + t - rest) - FLOOR_TOLERANCE * size else "replace"
 
 
 def turn_z_up_to_y_up(skeleton, data: np.ndarray, channels: list[str]):
