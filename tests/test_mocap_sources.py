@@ -75,7 +75,7 @@ def test_a_take_lying_down_keeps_the_up_axis_of_its_upright_rest_pose(hdm05, tmp
 
 
 # ---------------------------------------------------------------------------- one motion, one representation
-def test_the_same_motion_as_amc_and_as_bvh_is_one_proto_symbol(hdm05, tmp_path):
+def test_the_same_motion_as_amc_bvh_and_npz_is_one_proto_symbol(hdm05, tmp_path):
     from shared.pss.distance import hmm_distance
     from shared.pss.space import ProtoSymbolSpace
 
@@ -85,9 +85,28 @@ def test_the_same_motion_as_amc_and_as_bvh_is_one_proto_symbol(hdm05, tmp_path):
     for label in ("squat1Reps", "rotateArmsBothBackward1Reps", "throwBasketball"):
         a, b = [c for c in clips if c.label == label][:2]
         save_clip(a, tmp_path / "a.bvh")
-        bvh = load_clip(tmp_path / "a.bvh")
-        h = [space.abstract(c).marginal(geo) for c in (a, bvh, b)]
-        assert hmm_distance(h[0], h[1]) < 0.01 * hmm_distance(h[0], h[2]), label
+        save_clip(a, tmp_path / "a.npz")
+        bvh, npz = load_clip(tmp_path / "a.bvh"), load_clip(tmp_path / "a.npz")
+        h = [space.abstract(c).marginal(geo) for c in (a, bvh, npz, b)]
+        assert hmm_distance(h[0], h[1]) < 0.01 * hmm_distance(h[0], h[3]), label
+        assert hmm_distance(h[0], h[2]) < 0.01 * hmm_distance(h[0], h[3]), label
+
+
+def test_blenders_re_export_is_the_same_proto_symbol(hdm05, tmp_path, blender):
+    from shared.pss.distance import hmm_distance
+    from shared.pss.space import ProtoSymbolSpace
+
+    clips = [load_clip(f) for f in sorted((hdm05 / "amc").rglob("HDM_bd_squat1Reps_*.amc"))[:3]]
+    space = ProtoSymbolSpace.build(clips)
+    geo = space.features.group_indices(("motion",))
+    save_clip(clips[0], tmp_path / "a.bvh")
+    script = Path(__file__).parent / "blender" / "bvh_round_trip.py"
+    r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "3", "--python", str(script), "--",
+                        str(tmp_path / "a.bvh"), str(tmp_path / "b.json"), str(tmp_path / "blender.bvh")],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    h = [space.abstract(c).marginal(geo) for c in (clips[0], load_clip(tmp_path / "blender.bvh"), clips[1])]
+    assert hmm_distance(h[0], h[1]) < 0.01 * hmm_distance(h[0], h[2])
 
 
 def test_the_same_rotation_on_another_euler_branch_is_the_same_features_and_torques(hdm05):
