@@ -56,6 +56,13 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     assert r.returncode == 0, r.stderr
     info = json.loads(r.stdout)
     assert info["n_proto_symbols"] == len(train) and len(info["labels"]) == 4
+    logs = Path(env["MIRRORCOACH_HOME"]) / "logs"
+    for svc in ("pss", "simulator", "estimator", "coach", "dialogue"):  # request workers: one native thread each
+        line = next(ln for ln in (logs / f"{svc}.log").read_text().splitlines() if "native thread pools:" in ln)
+        pools = dict(p.rsplit(" ", 1) for p in line.split("native thread pools: ", 1)[1].split(", ") if p != "none")
+        assert all(n == "1" for n in pools.values()), line
+        if svc == "pss":  # BLAS and scikit-learn's OpenMP are both loaded there
+            assert any(k.startswith("openmp:") for k in pools) and any(k.startswith("openblas:") for k in pools), line
 
     held = next((amc / "squat1Reps").glob("HDM_dg_*.amc"))
     r = cli(env, "space", "recognize", "moves", held, "--json")

@@ -32,6 +32,11 @@ def space_info(name: str, space: ProtoSymbolSpace) -> dict:
 
 def make_service(settings: Settings | None = None) -> Service:
     settings = settings or Settings()
+    # recognition's calibration uses scikit-learn, whose OpenMP pool loads with it: loaded here,
+    # before the first build, so that the runner's thread limit and its log line cover it
+    import sklearn.covariance  # noqa: F401
+    import sklearn.linear_model  # noqa: F401
+
     store = SpaceStore(settings.data_dir("pss"))
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings, workers=settings.workers)
 
