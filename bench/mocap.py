@@ -112,7 +112,8 @@ def _across_performers(space, clips) -> list[dict]:
 
 def _body(source: str, clip) -> dict:
     from shared.bodies.body import perform
-    from shared.bodies.human import human_body, map_segments
+    from shared.bodies.human import human_body
+    from shared.bodies.segments import map_segments
 
     body = human_body(clip.skeleton)
     seg, _ = map_segments(clip.skeleton)

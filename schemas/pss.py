@@ -25,6 +25,8 @@ PARAMS = Map({
     "backend": F(Str(choices=("banded", "hmmlearn")), "HMM trainer"),
     "n_iter": F(Int(1, 1000), "Baum-Welch iteration cap"),
     "group_by": F(Str(choices=("clip", "label")), "one proto-symbol per clip or per label"),
+    "recognition_var_ceiling": F(Float(0.0), "state variances capped at this value when recognising (absent: none, "
+                                             "a space saved before it)", required=False),
 })
 
 SYMBOL_ROW = Map({"name": F(Str(max_len=64)), "label": F(Str(max_len=64))})
@@ -174,6 +176,9 @@ ASSOCIATE = Endpoint(
         "whole": F(CLIP, "the whole generated pattern"),
         "aligned": F(CLIP, "the missing channels estimated on the clip's own frames", required=False),
         "progress": F(Float(0.0, 1.0), "how far through the motion the partial clip reaches", required=False),
+        "reach": F(Float(0.0), "distance to the nearest proto-symbol over the 95th percentile of the proto-symbols' "
+                               "own nearest-neighbour distances", required=False),
+        "extrapolating": F(Bool(), "reach above 1: the estimate goes beyond what the space learnt", required=False),
     })),
     "Associate: the whole pattern (motion and sensor, or the rest of the motion) from a partial one.",
 )

@@ -103,6 +103,17 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
         assert load_clip(out).n_frames > 10
     r = cli(env, "space", "generate", "moves", "--point", ",".join(map(str, rec["point"])), "--out", tmp_path / "p.bvh")
     assert r.returncode == 0, r.stderr
+    # association (eq. 2.8): the rest of a held-out squat from its first 60 %, and whether it extrapolates
+    whole = load_clip(held)
+    save_clip(whole.frames(0, int(0.6 * whole.n_frames)), tmp_path / "start.npz")
+    r = cli(env, "space", "associate", "moves", tmp_path / "start.npz", "--missing", "frames", "--out",
+            tmp_path / "rest.bvh", "--json")
+    assert r.returncode == 0, r.stderr
+    a = json.loads(r.stdout)
+    assert a["label"] == "squat1Reps" and 0 < a["progress"] < 1 and a["reach"] > 0 and a["extrapolating"] is False
+    assert load_clip(tmp_path / "rest.bvh").n_frames > 10
+    r = cli(env, "space", "associate", "moves", tmp_path / "start.npz")  # this space has no sensor channels
+    assert r.returncode == 2 and "no sensor channels" in r.stderr and "Traceback" not in r.stderr, r.stderr
 
     r = cli(env, "space", "list")
     assert r.returncode == 0 and "moves" in r.stdout

@@ -155,7 +155,8 @@ def test_generation_gives_back_the_rotations_on_a_continuous_branch(hdm05):
 # ---------------------------------------------------------------------------- bodies
 def test_a_body_from_the_game_studios_skeleton_is_a_person_and_walks_with_human_torques(bandai):
     from shared.bodies.body import perform
-    from shared.bodies.human import human_body, map_segments
+    from shared.bodies.human import human_body
+    from shared.bodies.segments import map_segments
 
     clip = load_clip(next(f for f in bandai if "_walk_normal_" in f.name))
     body = human_body(clip.skeleton)
@@ -174,7 +175,8 @@ def test_a_body_from_the_game_studios_skeleton_is_a_person_and_walks_with_human_
 
 @pytest.mark.parametrize("source", ["hdm05", "cmu", "game studio"])
 def test_bodies_are_segmented_by_their_tree_and_proportions_when_no_bone_has_a_name(source, bundled, cmu, bandai):
-    from shared.bodies.human import human_body, map_segments
+    from shared.bodies.human import human_body
+    from shared.bodies.segments import map_segments
     from shared.skeleton import Joint, Skeleton
 
     path = {"hdm05": bundled / SQUAT, "cmu": cmu / "131_01.bvh", "game studio": bandai[0]}[source]
@@ -313,18 +315,60 @@ def test_a_file_blender_authors_in_inches_z_up_with_xyz_eulers_reads_as_the_same
     assert np.abs(pb - mine.positions()[:, :len(names)]).max() < 2e-3
 
 
-def test_a_file_blender_authors_in_a_game_studios_conventions_reads_as_the_same_motion(bundled, tmp_path, blender):
-    """Blender authors the squat with a static root at the floor, every bone's rest along its
-    parent's X, 6 channels on every joint (positions replacing the offset), Z up, centimetres."""
-    from shared.bodies.human import human_body
+def test_the_body_frame_is_the_pelvis_axes_whatever_the_take(hdm05, bandai):
+    """HDM05's pelvis is the body's frame already (B = I), also in a take that bends down or
+    lies on the floor; the game studio's hips turn X up (one B for all its files)."""
+    from shared.bodies.segments import body_frame
 
-    clip = load_clip(bundled / SQUAT).frames(0, 60)
+    for name in ("depositFloorR", "lieDownFloor", "squat1Reps"):
+        f = next((hdm05 / "amc").rglob(f"HDM_bd_{name}_*.amc"))
+        c = load_clip(f)
+        c.skeleton.__dict__.pop("_body_frame", None)  # decided from this take, not an earlier one
+        assert np.allclose(body_frame(c.skeleton, c.data, c.channels), np.eye(3)), name
+    frames = {tuple(body_frame(c.skeleton, c.data, c.channels).ravel()) for c in map(load_clip, bandai[::12])}
+    assert len(frames) == 1
+    b = np.array(frames.pop()).reshape(3, 3)
+    assert np.allclose(b[:, 1], [1, 0, 0])  # the hips' X is the body's up
+
+
+def _author_game_studio(blender: str, clip, tmp_path: Path) -> Path:
     save_clip(clip, tmp_path / "ours.bvh")
     script = Path(__file__).parent / "blender" / "author_game_studio.py"
     r = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "3", "--python", str(script), "--",
                         str(tmp_path / "ours.bvh"), str(tmp_path / "authored.bvh")],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    return tmp_path / "authored.bvh"
+
+
+def test_a_studios_root_frame_changes_neither_the_recognition_features_nor_the_label(bundled, tmp_path, blender):
+    """The same squat with its skeleton re-rested along X by Blender (the root's frame turned):
+    the body frame puts the heading where the body faces, so the recognition features and the
+    label are the original's."""
+    from shared.bodies.segments import body_frame
+    from shared.pss.space import ProtoSymbolSpace
+
+    clips = [load_clip(f) for f in sorted((bundled / "amc").rglob("*.amc")) if "_dg_" not in f.name]
+    space = ProtoSymbolSpace.build(clips)
+    probe = load_clip(next((bundled / "amc" / "squat1Reps").glob("HDM_dg_*.amc")))
+    studio = load_clip(_author_game_studio(blender, probe, tmp_path))
+    assert not np.allclose(body_frame(studio.skeleton, studio.data, studio.channels), np.eye(3))
+    pos = space.features.feature_indices("position")
+    a, b = (space.features.encode(c.resample(30))[:, pos] for c in (probe, studio))
+    joints = [k for k, n in enumerate(space.features.position_feature_names) if ".end)" not in n]
+    assert np.abs(a - b)[:, joints].max() < 1e-2  # z-scored; Blender puts its own end sites
+    ra, rb = space.recognize(probe), space.recognize(studio)
+    assert ra.label == rb.label == "squat1Reps"
+    assert rb.recognition_distances.min() < 1.05 * ra.recognition_distances.min() + 1e-6
+
+
+def test_a_file_blender_authors_in_a_game_studios_conventions_reads_as_the_same_motion(bundled, tmp_path, blender):
+    """Blender authors the squat with a static root at the floor, every bone's rest along its
+    parent's X, 6 channels on every joint (positions replacing the offset), Z up, centimetres."""
+    from shared.bodies.human import human_body
+
+    clip = load_clip(bundled / SQUAT).frames(0, 60)
+    _author_game_studio(blender, clip, tmp_path)
     text = (tmp_path / "authored.bvh").read_text()
     assert text.count("CHANNELS 6") == text.count("JOINT") + 1 and "ROOT joint_Root" in text
     back = load_clip(tmp_path / "authored.bvh")

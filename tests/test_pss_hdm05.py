@@ -103,6 +103,25 @@ def test_association_estimates_torques_from_motion_alone(torque_space, capsys):
     assert ok / len(test) >= 0.7
 
 
+def test_association_says_when_it_extrapolates(torque_space):
+    """A motion like the space's own lies within its proto-symbols' spacing; the same motion
+    played three times faster with its arms swung twice as far does not, and says so."""
+    from shared.evaluation import transformed
+
+    space, _, test = torque_space
+    near = [space.associate(c.with_data(c.select(c.group("motion")), channels=c.group("motion"),
+                                        groups={"motion": c.group("motion")}), "sensor") for c in test[::10]]
+    assert np.isfinite([a.reach for a in near]).all()
+    assert np.median([a.reach for a in near]) <= 1.0
+    c = test[0]
+    motion = c.with_data(c.select(c.group("motion")), channels=c.group("motion"), groups={"motion": c.group("motion")})
+    arms = [i for i, ch in enumerate(motion.channels) if ch.split(".")[0] in ("lhumerus", "rhumerus", "lradius", "rradius")]
+    wild = motion.data.copy()
+    wild[:, arms] *= 2.0
+    far = space.associate(transformed(motion.with_data(wild), "played at 1.4x speed"), "sensor")
+    assert far.reach > max(a.reach for a in near) and far.extrapolating
+
+
 def test_association_from_the_first_part_of_a_motion(dev_space, dev_split):
     test = dev_split[1]
     ok, later = 0, 0

@@ -238,8 +238,8 @@ def test_channel_weights_are_saved_with_the_space_and_older_files_recognise_unwe
     old = ProtoSymbolSpace.load(tmp_path / "old.npz")
     assert np.all(old.recognition_weights == 1.0)
     idx = old.features.group_indices(("position",))
-    hmm = old.abstract(clip).marginal(idx)
-    assert np.allclose(old.recognize(clip).recognition_distances, ModelBank(old.models_on(("position",))).distances(hmm))
+    hmm = old.as_recognised(old.abstract(clip).marginal(idx))
+    assert np.allclose(old.recognize(clip).recognition_distances, ModelBank(old.recognition_models()).distances(hmm))
 
 
 # ---------------------------------------------------------------------------- the novelty model (open set)
@@ -411,3 +411,50 @@ def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_the
         want = decide(r.recognition_distances, old.labels, old.calibration, old.novelty_model,
                       hmm_features(h.means, h.covars))
         assert r.decision.ratio_novelty == 0.0 and r.novelty == pytest.approx(want.novelty)
+
+
+# ---------------------------------------------------------------------------- what must not change a label
+def test_the_robustness_changes_are_the_motion_moved_turned_sped_and_scaled(dev_split):
+    from scipy.spatial.transform import Rotation
+
+    from shared.evaluation import transformed
+
+    clip = dev_split[1][0].resample(30)
+    p = clip.positions()
+    moved = transformed(clip, "pelvis moved 3 m sideways").positions()
+    assert np.allclose(moved - p, [3.0, 0.0, 0.0], atol=1e-9)
+    turned = transformed(clip, "turned 90 degrees").positions()
+    assert np.abs(turned - p @ Rotation.from_euler("y", 90, degrees=True).as_matrix().T).max() < 1e-9
+    scaled = transformed(clip, "body scaled 1.2x").positions()
+    assert np.abs(scaled - 1.2 * p).max() < 1e-9
+    fast = transformed(clip, "played at 1.4x speed")
+    assert fast.fps == clip.fps and abs(fast.n_frames - clip.n_frames / 1.4) <= 1
+
+
+def test_where_a_person_stands_and_faces_changes_no_label(dev_space, dev_split):
+    from shared.evaluation import robustness
+
+    res = robustness(dev_space, dev_split[1][::6])
+    assert res["pelvis moved 3 m sideways"]["changed"] == 0 and res["turned 90 degrees"]["changed"] == 0
+    assert res["as is"]["as_shown"] >= 0.9
+
+
+def test_recognition_caps_state_variances_and_older_files_do_not(dev_space, dev_split, tmp_path):
+    import json
+
+    from shared.pss.space import RECOGNITION_VAR_CEILING
+
+    assert dev_space.params.recognition_var_ceiling == RECOGNITION_VAR_CEILING
+    assert max(float(m.covars.max()) for m in dev_space.recognition_models()) <= RECOGNITION_VAR_CEILING
+    assert max(float(m.covars.max()) for m in dev_space.models_on(("position",))) > RECOGNITION_VAR_CEILING
+    path = dev_space.save(tmp_path / "c.npz")
+    assert ProtoSymbolSpace.load(path).params.recognition_var_ceiling == RECOGNITION_VAR_CEILING
+    with np.load(path, allow_pickle=False) as z:  # a file written before the ceiling
+        arrays = {k: np.array(z[k]) for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    del header["params"]["recognition_var_ceiling"]
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "old.npz", **arrays)
+    old = ProtoSymbolSpace.load(tmp_path / "old.npz")
+    assert old.params.recognition_var_ceiling is None
+    assert all(a is b for a, b in zip(old.recognition_models(), old.models_on(("position",))))

@@ -22,6 +22,7 @@ def space_info(name: str, space: ProtoSymbolSpace) -> dict:
     info = space.info()
     info.pop("name", None)
     info["space"] = name
+    info["params"] = {k: v for k, v in info["params"].items() if v is not None}  # absent: a space saved before it
     info["proto_symbols"] = [{"name": s.name, "label": s.label} for s in space.symbols]
     info["points"] = np.asarray(space.points, dtype=np.float64)
     info["mds_converged"] = bool(info["mds_converged"])
@@ -116,6 +117,8 @@ def make_service(settings: Settings | None = None) -> Service:
             out["aligned"] = clip_to_wire(a.aligned, with_skeleton=False)
         if a.progress is not None:
             out["progress"] = float(a.progress)
+        if np.isfinite(a.reach):
+            out["reach"], out["extrapolating"] = float(a.reach), a.extrapolating
         return out
 
     @svc.handler("distance")

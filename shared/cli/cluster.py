@@ -180,6 +180,52 @@ def space_generate(name: str = typer.Argument(..., help="Space name."),
                    f"({', '.join(f'{v:.3f}' for v in r['point'])})")
 
 
+@space_app.command("associate")
+def space_associate(name: str = typer.Argument(..., help="Space name."),
+                    clip: Path = typer.Argument(..., help="The partial clip (.amc, .bvh or .npz)."),
+                    missing: str = typer.Option("sensor", help="What the clip lacks: 'sensor' (its torques and centre "
+                                                                "of gravity, from its motion) or 'frames' (the rest of "
+                                                                "a motion, from its start)."),
+                    out: Optional[Path] = typer.Option(None, "--out", help="Write the estimate: the clip with its "
+                                                                           "sensor channels (.npz), or the whole motion "
+                                                                           "(.bvh, .npz or .amc)."),
+                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                    timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+                    as_json: bool = typer.Option(False, "--json")):
+    """Associate (eq. 2.8): what the space's proto-symbols say of the part a clip lacks, and
+    whether the clip lies within what the space learnt or the estimate extrapolates."""
+    from schemas.common import clip_from_wire
+    from shared.io import save_clip
+
+    if missing not in ("sensor", "frames"):
+        _fail(f"--missing must be 'sensor' or 'frames', got {missing!r}")
+    partial = read_clip(clip, skeleton=skeleton)
+    with _client() as c:
+        r = c.request("pss", "associate", {"space": name, "clip": _wire(partial), "missing": missing}, timeout=timeout)
+    est = clip_from_wire(r.get("aligned") or r["whole"])
+    if out is not None:
+        save_clip(est, out)
+    sensors = est.group("sensor") if missing == "sensor" else []
+    peaks = {ch: float(abs(est.column(ch)).max()) for ch in sensors}
+    summary = {"space": name, "label": r["label"], "point": r["point"].tolist(), "reach": r.get("reach"),
+               "extrapolating": r.get("extrapolating"), "progress": r.get("progress"), "frames": est.n_frames,
+               "sensor_peaks": peaks, **({"file": str(out)} if out is not None else {})}
+    if as_json:
+        typer.echo(json.dumps(summary))
+        return
+    where = ("beyond what the space learnt: the estimate extrapolates" if r.get("extrapolating")
+             else "within what the space learnt")
+    typer.echo(f"{clip.name}: nearest {r['label'] or 'none of these'}; {where}"
+               + (f" (reach {r['reach']:.2f}: its nearest proto-symbol over the space's own spacing)"
+                  if r.get("reach") is not None else ""))
+    if r.get("progress") is not None:
+        typer.echo(f"the clip reaches {100 * r['progress']:.0f} % of the motion")
+    for ch, v in peaks.items():
+        typer.echo(f"  {ch}: peak {v:.3g}")
+    if out is not None:
+        typer.echo(f"wrote {out} ({est.n_frames} frames at {est.fps:g} fps)")
+
+
 @space_app.command("delete")
 def space_delete(name: str = typer.Argument(..., help="Space name.")):
     """Delete a space from the pss service (and its file)."""

@@ -54,6 +54,7 @@ import json
 import numpy as np
 from typing import TYPE_CHECKING
 
+from shared.bodies.segments import body_frame, stature
 from shared.clip import Clip
 from shared.errors import BadInput
 from shared.skeleton import Skeleton
@@ -138,8 +139,12 @@ class MotionFeatures:
     """
 
     def __init__(self, skeleton: Skeleton | None, motion_channels: list[str], sensor_channels: list[str] | None = None,
-                 sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None, rotations: str = "6d"):
+                 sensor_mean=None, sensor_scale=None, position_mean=None, position_scale=None, rotations: str = "6d",
+                 frame=None):
         self.skeleton = skeleton
+        #: the body frame ``B`` of the space's skeleton (:func:`shared.bodies.segments.body_frame`);
+        #: None for spaces saved before it (the root's own frame, heights from the rest pose)
+        self.frame = None if frame is None else np.asarray(frame, float).reshape(3, 3)
         self.motion_channels = list(motion_channels)
         self.sensor_channels = list(sensor_channels or [])
         root = skeleton.root.name if skeleton is not None else None
@@ -217,7 +222,7 @@ class MotionFeatures:
         p = sk.forward_kinematics(clip.data, clip.channels)  # (T, J + ends, 3) metres, Y up, in sk's order
         if sk is not self.skeleton:  # the same joints listed in another order (a BVH lists them depth first)
             p = p[:, _point_rows(sk, self.skeleton)]
-        height = sk.rest_height()
+        height = sk.rest_height() if self.frame is None else stature(sk, head_top=False)
         rel = (p[:, 1:] - p[:, :1]) / height
         c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
         x = c * rel[..., 0] - s * rel[..., 2]
@@ -250,13 +255,14 @@ class MotionFeatures:
             allv = np.vstack([c.select(sensors) for c in clips])
             mean = allv.mean(axis=0)
             scale = np.maximum(allv.std(axis=0), 1e-6 * max(1.0, float(np.abs(allv).max())))
-        base = cls(first.skeleton, motion, sensors, mean, scale)
+        frame = None if first.skeleton is None else body_frame(first.skeleton, first.data, first.channels)
+        base = cls(first.skeleton, motion, sensors, mean, scale, frame=frame)
         if not base._position_names():
             return base
         raw = np.vstack([base._raw_positions(c, *base._root_terms(c)) for c in clips])
         p_mean = raw.mean(axis=0)
         p_scale = np.maximum(raw.std(axis=0), 1e-3)
-        return cls(first.skeleton, motion, sensors, mean, scale, p_mean, p_scale)
+        return cls(first.skeleton, motion, sensors, mean, scale, p_mean, p_scale, frame=frame)
 
     # ---------------------------------------------------------------- other conventions
     def _foreign(self, clip: Clip) -> Skeleton | None:
@@ -406,7 +412,10 @@ class MotionFeatures:
         sk = self.body(clip)
         r = sk.root.name
         out = []
-        psi, up = _yaw_and_swing(sk.root_matrices(clip.data, clip.channels))
+        rot = sk.root_matrices(clip.data, clip.channels)
+        if self.frame is not None:  # the body's axes, whatever rest frame the studio gave the root
+            rot = rot @ (self.frame if sk is self.skeleton else body_frame(sk, clip.data, clip.channels))
+        psi, up = _yaw_and_swing(rot)
         if self.root_rot:
             out.append(up)
         if self.root_trans:
@@ -480,6 +489,8 @@ class MotionFeatures:
             from scipy.spatial.transform import Rotation
 
             rot = Rotation.from_euler("y", psi[:, None]) * _swing_from_vector(up)
+            if self.frame is not None:  # from the body's axes back to the root's
+                rot = rot * Rotation.from_matrix(self.frame.T)
             c = Rotation.from_matrix(root.pre)
             m = c.inv() * rot * c
             seq = root.euler
@@ -497,6 +508,7 @@ class MotionFeatures:
             "sensor_mean": self.sensor_mean.tolist(),
             "sensor_scale": self.sensor_scale.tolist(),
             "rotations": self.rotations,
+            **({} if self.frame is None else {"frame": self.frame.tolist()}),
             **({"position_mean": self.position_mean.tolist(), "position_scale": self.position_scale.tolist()}
                if self.has_position else {}),
         })
@@ -506,4 +518,4 @@ class MotionFeatures:
         d = json.loads(text)
         sk = Skeleton.from_json(d["skeleton"]) if d["skeleton"] else None
         return cls(sk, d["motion_channels"], d["sensor_channels"], d["sensor_mean"], d["sensor_scale"],
-                   d.get("position_mean"), d.get("position_scale"), d.get("rotations", "sincos"))
+                   d.get("position_mean"), d.get("position_scale"), d.get("rotations", "sincos"), d.get("frame"))

@@ -3,7 +3,8 @@ author a BVH in a game studio's conventions from a clip, with Blender doing the 
 
 Blender imports ``IN.bvh``, then the armature is rebuilt the way a game studio's skeleton is:
 a static root bone at the floor above the hips, every bone's rest pose along the X axis of
-its parent (the first child's offset on +X, the other children turned with it), no bone
+its parent (the way to its largest child on +X, the other children turned with it: the
+hips' own frame turns its trunk along X), no bone
 connected (so Blender's exporter writes 6 channels on every joint, its positions replacing
 the offset), and the animation re-expressed so that every bone's head stays where it was in
 every frame. Exported in centimetres (``global_scale=100``) with Blender's Z up."""
@@ -45,8 +46,39 @@ def along_x(v: Vector) -> Matrix:
     return v.normalized().rotation_difference(Vector((1.0, 0.0, 0.0))).to_matrix() if v.length > 1e-9 else Matrix.Identity(3)
 
 
-# Q[n]: the turn of bone n's rest frame that puts its first child on +X; new offsets Q_parent o
-Q = {n: (along_x(rest_head[kids[n][0]] - rest_head[n]) if kids[n] else Matrix.Identity(3)) for n in bones}
+def size(n: str) -> int:
+    return 1 + sum(size(k) for k in kids[n])
+
+
+def first_away(n: str) -> Vector:
+    """From bone n's head to the first head elsewhere down its largest children (the trunk
+    from the hips, as a game studio's Hips -> Spine lies along X; a skeleton may start several
+    bones at one point, as HDM05's pelvis does)."""
+    k = n
+    while kids[k]:
+        k = max(kids[k], key=size)
+        if (rest_head[k] - rest_head[n]).length > 1e-6:
+            return rest_head[k] - rest_head[n]
+    return Vector((0.0, 0.0, 0.0))
+
+
+# Q[n]: the turn of bone n's rest frame that puts the way to its largest child on +X; new offsets Q_parent o
+Q = {n: (along_x(first_away(n)) if kids[n] else Matrix.Identity(3)) for n in bones}
+
+
+def to_axes(m: Matrix) -> Matrix:
+    """The axis rotation (a signed permutation) nearest m: a studio's root frame differs from
+    another's by a turn of its axes (Y up against X up), not by any angle."""
+    out = Matrix(((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
+    used = set()
+    for col in range(3):
+        row = max((r for r in range(3) if r not in used), key=lambda r: abs(m[r][col]))
+        used.add(row)
+        out[row][col] = 1.0 if m[row][col] > 0 else -1.0
+    return out
+
+
+Q[bones[0]] = to_axes(Q[bones[0]])
 new_head = {}
 for n in bones:
     p = parent[n]
