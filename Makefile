@@ -57,6 +57,7 @@ bench: bytecode
 	$(BIN)/python -m bench.load --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.mocap --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.styles --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.scale --hdm05 $(HDM05) --out bench/results
 
 reproduce: $(STAMP)
 	$(BIN)/mirrorcoach reproduce ch3 ch4 ch5 ch6 --out reports

@@ -99,9 +99,12 @@ ADD = Endpoint(
         "clips": F(List(CLIP, min_len=1, max_len=MAX_CLIPS), "clips to add as new proto-symbols"),
         "as_one": F(Str(pattern=NAME_PATTERN, max_len=64), "add all clips as the repetitions of one proto-symbol of this name",
                     required=False),
-    }), doc="add proto-symbols and rebuild the space"),
+        "rebuild": F(Bool(), "true: embed every point again (eq. 2.5); false: place the new points among the fixed "
+                             "ones and extend the distances (N per clip), the rest unchanged (not with as_one)",
+                     required=False, default=True),
+    }), doc="add proto-symbols (and rebuild the space, or place them)"),
     Message("pss.add.reply", INFO),
-    "Add clips as proto-symbols and rebuild the space's points.",
+    "Add clips as proto-symbols: rebuild the space's points, or place the new ones among them.",
 )
 
 RECOGNIZE = Endpoint(

@@ -280,3 +280,27 @@ def test_generation_is_smooth_seeded_and_follows_the_states():
         hits = [int(np.argmin(np.linalg.norm(traj - mu, axis=1))) for mu in m.means]
         assert hits == sorted(hits)
     assert np.abs(det - mc1).mean() < 0.2
+
+
+def test_channel_weights_kernel_equals_the_numpy_reference():
+    """The compiled pair sums against eq. 2.3's terms computed pair by pair in numpy."""
+    from shared.pss.distance import bhattacharyya_terms
+    from shared.pss.recognition import channel_weights
+
+    rng = np.random.default_rng(3)
+    n, states, dim = 14, 4, 6
+    mu, var = rng.normal(size=(n, states, dim)), rng.uniform(0.05, 2.0, size=(n, states, dim))
+    labels = np.array(list("aabbccaabbccab"))
+    for perf in (np.array(["p", "q"] * 7), None):
+        within, between = np.zeros(dim), np.zeros(dim)
+        nw = nb = 0
+        for i in range(n - 1):
+            for j in range(i + 1, n):
+                mean, cov = bhattacharyya_terms(mu[i], var[i], mu[j], var[j])
+                t = (mean + cov).sum(axis=0)
+                if labels[i] == labels[j] and (perf is None or perf[i] != perf[j]):
+                    within, nw = within + t, nw + 1
+                elif labels[i] != labels[j]:
+                    between, nb = between + t, nb + 1
+        w = np.sqrt((between / nb + 1e-9) / (within / nw + 1e-9))
+        assert np.allclose(channel_weights(mu, var, labels, perf), w / w.mean(), rtol=1e-10)

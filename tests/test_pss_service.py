@@ -16,6 +16,7 @@ import pytest
 
 from schemas import pss as contract
 from schemas.common import clip_to_wire
+from shared.bus.client import RemoteError
 from shared.codec import pack
 from tests.conftest import assert_refused, cycle_skeleton
 
@@ -117,17 +118,24 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     _checked(contract.BUILD, c.request("pss", "build", {"space": "copy", "clips": [clip_to_wire(x) for x in train[:4]]}))
     added = _checked(contract.ADD, c.request("pss", "add", {"space": "copy", "clips": [clip_to_wire(train[5])]}))
     assert added["n_proto_symbols"] == 5
-    assert _checked(contract.INFO_EP, c.request("pss", "info", {"space": "copy"}))["n_proto_symbols"] == 5
+    before = _checked(contract.INFO_EP, c.request("pss", "info", {"space": "copy"}))
+    assert before["n_proto_symbols"] == 5
+    placed = _checked(contract.ADD, c.request("pss", "add", {"space": "copy", "clips": [clip_to_wire(train[6])],
+                                                             "rebuild": False}))
+    assert placed["n_proto_symbols"] == 6 and np.allclose(placed["points"][:5], before["points"])  # the rest kept
+    with pytest.raises(RemoteError) as e:
+        c.request("pss", "add", {"space": "copy", "clips": [clip_to_wire(train[7])], "rebuild": False, "as_one": "x"})
+    assert e.value.code == "bad_request" and "as_one needs rebuild" in e.value.message
     listed = _checked(contract.LIST, c.request("pss", "list"))
     assert {s["space"] for s in listed["spaces"]} >= {"base", "copy"} and listed["interrupted"] == []
     assert _checked(contract.DELETE, c.request("pss", "delete", {"space": "copy"}))["deleted"] is True
     assert "copy" not in {s["space"] for s in c.request("pss", "list")["spaces"]}
 
     deadline = time.monotonic() + 5
-    while len(events) < 3 and time.monotonic() < deadline:
+    while len(events) < 4 and time.monotonic() < deadline:
         time.sleep(0.05)
     changes = [(e["space"], e["change"]) for e in events]
-    assert changes == [("copy", "built"), ("copy", "added"), ("copy", "deleted")]
+    assert changes == [("copy", "built"), ("copy", "added"), ("copy", "added"), ("copy", "deleted")]
     for e in events:
         contract.EVENTS["space"].validate(e)
 

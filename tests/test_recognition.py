@@ -458,3 +458,19 @@ def test_recognition_caps_state_variances_and_older_files_do_not(dev_space, dev_
     old = ProtoSymbolSpace.load(tmp_path / "old.npz")
     assert old.params.recognition_var_ceiling is None
     assert all(a is b for a, b in zip(old.recognition_models(), old.models_on(("position",))))
+
+
+def test_a_clip_is_added_without_rebuilding_the_rest(dev_space, dev_split):
+    from shared.pss.distance import distance_matrix
+
+    new = dev_split[1][:2]
+    placed = dev_space.added(new)
+    n = len(dev_space.symbols)
+    assert len(placed.symbols) == n + 2 and np.array_equal(placed.points[:n], dev_space.points)
+    full = dev_space.rebuilt(add=new)  # the same proto-symbols, every point embedded again
+    assert np.allclose(placed.distances, full.distances)
+    ref = distance_matrix(placed.recognition_models(), dev_space.recognition_weights)  # the space's weights kept
+    assert np.allclose(placed.recognition_matrix, ref)
+    assert placed.recognize(new[0]).nearest[0][0] == new[0].name  # its own proto-symbol is now the nearest
+    with pytest.raises(BadInput):
+        placed.added([new[0]])  # a name the space already has

@@ -69,7 +69,10 @@ def make_service(settings: Settings | None = None) -> Service:
         name = req["space"]
         old = store.get(name)
         clips = [clip_from_wire(c, old.features.skeleton) for c in req["clips"]]
-        space = write(name, "add", lambda: old.rebuilt(add=clips, as_one=req["as_one"]))
+        if not req["rebuild"] and req["as_one"] is not None:
+            raise BadInput("as_one needs rebuild: a proto-symbol of several repetitions is placed by a rebuild")
+        space = write(name, "add", lambda: old.rebuilt(add=clips, as_one=req["as_one"]) if req["rebuild"]
+                      else old.added(clips))
         changed(name, "added", space)
         return space_info(name, space)
 

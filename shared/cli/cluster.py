@@ -180,6 +180,28 @@ def space_generate(name: str = typer.Argument(..., help="Space name."),
                    f"({', '.join(f'{v:.3f}' for v in r['point'])})")
 
 
+@space_app.command("add")
+def space_add(name: str = typer.Argument(..., help="Space name."),
+              paths: list[Path] = typer.Argument(..., help="Clip files or folders to add, one proto-symbol each."),
+              label: Optional[str] = typer.Option(None, help="Label for every clip (default: parent folder name)."),
+              rebuild: bool = typer.Option(False, "--rebuild/--place",
+                                           help="--place (default): the new proto-symbols' points are placed among "
+                                                "the fixed ones, N distances per clip; --rebuild: every point embedded "
+                                                "again (eq. 2.5), N^2 distances."),
+              skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+              timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+              as_json: bool = typer.Option(False, "--json")):
+    """Add clips to a space as new proto-symbols, without rebuilding the rest by default."""
+    clips = _load_clips(paths, skeleton, label)
+    with _client() as c, _busy(f"adding {len(clips)} clips to {name}"):
+        info = c.request("pss", "add", {"space": name, "clips": [_wire(x) for x in clips], "rebuild": rebuild},
+                         timeout=timeout)
+    if as_json:
+        typer.echo(json.dumps(_jsonable(info)))
+    else:
+        _print_info(info)
+
+
 @space_app.command("associate")
 def space_associate(name: str = typer.Argument(..., help="Space name."),
                     clip: Path = typer.Argument(..., help="The partial clip (.amc, .bvh or .npz)."),

@@ -67,18 +67,14 @@ def smacof(f: np.ndarray, dim: int, *, init: np.ndarray | None = None, max_iter:
     if n < 2:
         return Embedding(x, 0.0, 0.0, 0, True)
     total = float(np.sum(np.triu(f, 1) ** 2)) or 1.0
-    stress = raw_stress(f, x)
+    f = np.ascontiguousarray(f)
+    x = np.ascontiguousarray(x)
+    step, stress = _guttman_step(f, x)  # the Guttman transform of x and the stress at x
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        d = _pdist(x)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(d > 1e-12, f / d, 0.0)
-        b = -ratio
-        np.fill_diagonal(b, 0.0)
-        np.fill_diagonal(b, -b.sum(axis=1))
-        x = b @ x / n
-        new = raw_stress(f, x)
+        x = step
+        step, new = _guttman_step(f, x)
         if stress - new < eps * total:
             stress = new
             converged = True
@@ -86,6 +82,31 @@ def smacof(f: np.ndarray, dim: int, *, init: np.ndarray | None = None, max_iter:
         stress = new
     x = x - x.mean(axis=0)
     return Embedding(x, stress, float(np.sqrt(stress / total)), it, converged)
+
+
+@numba.njit(cache=True, nogil=True)
+def _guttman_step(f, x):
+    """One SMACOF iteration in one pass over the pairs, with no N x N temporary: the stress
+    ``sum_{i<j} (f_ij - d_ij)^2`` at ``x`` and the Guttman transform ``B(x) x / n``
+    (``b_ij = -f_ij / d_ij``, ``b_ii = -sum_j b_ij``)."""
+    n, dim = x.shape
+    out = np.zeros((n, dim))
+    stress = 0.0
+    diff = np.empty(dim)
+    for i in range(n - 1):
+        for j in range(i + 1, n):
+            d2 = 0.0
+            for c in range(dim):
+                diff[c] = x[i, c] - x[j, c]
+                d2 += diff[c] * diff[c]
+            d = np.sqrt(d2)
+            stress += (f[i, j] - d) ** 2
+            if d > 1e-12:
+                r = f[i, j] / d
+                for c in range(dim):
+                    out[i, c] += r * diff[c]
+                    out[j, c] -= r * diff[c]
+    return out / n, stress
 
 
 @numba.njit(cache=True, nogil=True)

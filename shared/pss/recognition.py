@@ -59,6 +59,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 KNOWN_QUANTILE = 0.98
@@ -82,33 +83,51 @@ def channel_weights(means: np.ndarray, covars: np.ndarray, labels, performers) -
     space has one performer), of eq. 2.3's per-channel terms summed over states; the weight
     is ``sqrt(B_d / W_d)``, scaled to mean 1, and 0 for a channel that never varies.
     All ones (eq. 2.4 itself) when the space has no same-class pair or only one class."""
-    from shared.pss.distance import bhattacharyya_terms
-
-    mu = np.asarray(means, float)
-    var = np.asarray(covars, float)
+    mu = np.ascontiguousarray(means, dtype=float)
+    var = np.ascontiguousarray(covars, dtype=float)
     n, _, dim = mu.shape
     labels = np.asarray(labels)
     perf = np.asarray(performers) if performers is not None and len(performers) == n else np.array([""] * n)
     across = len(set(perf)) > 1
-    within, between = np.zeros(dim), np.zeros(dim)
-    n_within = n_between = 0
-    for i in range(n - 1):
-        mean, cov = bhattacharyya_terms(mu[i], var[i], mu[i + 1:], var[i + 1:])
-        bd = (mean + cov).sum(axis=1)  # (n-i-1, D): summed over states
-        same = labels[i + 1:] == labels[i]
-        if across:
-            same &= perf[i + 1:] != perf[i]
-        other = labels[i + 1:] != labels[i]
-        within += bd[same].sum(axis=0)
-        between += bd[other].sum(axis=0)
-        n_within += int(same.sum())
-        n_between += int(other.sum())
+    lab_id = np.unique(labels, return_inverse=True)[1].astype(np.int64)
+    perf_id = np.unique(perf, return_inverse=True)[1].astype(np.int64)
+    within, between, n_within, n_between = _channel_pair_sums(mu, var, lab_id, perf_id, across)
     if not n_within or not n_between:
         return np.ones(dim)
     within /= n_within
     between /= n_between
     w = np.where(within > 1e-12, np.sqrt((between + 1e-9) / (within + 1e-9)), 0.0)
     return w / w.mean() if w.mean() > 0 else np.ones(dim)
+
+
+@numba.njit(cache=True, nogil=True)
+def _channel_pair_sums(mu, var, label, perf, across):
+    """Over every pair of proto-symbols, eq. 2.3's per-channel terms summed over states
+    (:func:`shared.pss.distance.bhattacharyya_terms`), added up separately for pairs of one
+    class (from different performers when ``across``) and pairs of different classes; one
+    pass, no N x N x D temporary (the numpy reference took 6.7 s for 1,000 proto-symbols)."""
+    n, n_states, dim = mu.shape
+    within = np.zeros(dim)
+    between = np.zeros(dim)
+    n_within = 0
+    n_between = 0
+    logv = np.log(var)
+    for i in range(n - 1):
+        for j in range(i + 1, n):
+            if label[i] == label[j]:
+                if across and perf[i] == perf[j]:
+                    continue
+                acc = within
+                n_within += 1
+            else:
+                acc = between
+                n_between += 1
+            for s in range(n_states):
+                for d in range(dim):
+                    v = 0.5 * (var[i, s, d] + var[j, s, d])
+                    diff = mu[i, s, d] - mu[j, s, d]
+                    acc[d] += 0.125 * diff * diff / v + 0.5 * (np.log(v) - 0.5 * (logv[i, s, d] + logv[j, s, d]))
+    return within, between, n_within, n_between
 
 
 @dataclass

@@ -179,7 +179,7 @@ class ProtoSymbolSpace:
             raise BadInput(f"group_by must be 'clip' or 'label', got {group_by!r}")
         if dim < 1:
             raise BadInput("dimension must be at least 1")
-        clips = [c.resample(fps) for c in clips]
+        clips = [c if c.fps == fps else c.resample(fps) for c in clips]  # read only here: no copy at the rate
         features = MotionFeatures.for_clips(clips, sensor=sensor)
         groups: dict[str, list[Clip]] = {}
         for c in clips:
@@ -215,6 +215,61 @@ class ProtoSymbolSpace:
         f = distance_matrix([s.hmm.marginal(geo) for s in symbols])
         emb = smacof(f, params.dim)
         return cls(params, features, symbols, f, emb, name=name)
+
+    def added(self, clips: list[Clip]) -> "ProtoSymbolSpace":
+        """A new space with one proto-symbol per clip added **without rebuilding the rest**: the
+        new HMMs, their eq. 2.4 distances to the proto-symbols already there (N per clip, not
+        N^2), their points placed among the fixed points as eq. 2.6 places a recognised motion
+        (the others keep theirs), the recognition distances extended by the same rows (with the
+        space's channel weights as they are). Recognition's calibration, discriminant ratio and
+        novelty model are fitted again, lazily, from the extended distances and HMMs.
+        :meth:`rebuilt` re-embeds every point instead (eq. 2.5 from scratch)."""
+        if not clips:
+            raise BadInput("no clips to add")
+        names = {s.name for s in self.symbols}
+        symbols = list(self.symbols)
+        for c in clips:
+            c = c.resample(self.params.fps)
+            if c.name in names:
+                raise BadInput(f"space {self.name!r} already has a proto-symbol named {c.name!r}")
+            symbols.append(ProtoSymbol(c.name, c.label or c.name, self.abstract([c]), [c.name], [c.n_frames],
+                                       [performer(c)]))
+            names.add(c.name)
+        n, new = len(self.symbols), symbols[len(self.symbols):]
+        geo = self.features.group_indices(GEOMETRY_GROUPS)
+        f = np.zeros((len(symbols), len(symbols)))
+        f[:n, :n] = self.distances
+        bank = self.bank_on(GEOMETRY_GROUPS)
+        for k, sym in enumerate(new):
+            row = np.r_[bank.distances(sym.hmm.marginal(geo)),
+                        [distances_to(sym.hmm.marginal(geo), [o.hmm.marginal(geo)])[0] for o in new[:k]]]
+            f[n + k, :n + k] = f[:n + k, n + k] = row
+        points = np.array(self.points, float)
+        for k in range(len(new)):
+            x, _ = place_point(points, f[n + k, :n + k])
+            points = np.vstack([points, x])
+        from shared.pss.mds import _guttman_step
+
+        stress = float(_guttman_step(f, np.ascontiguousarray(points))[1])  # one compiled pass, no N x N temporary
+        iu = np.triu_indices(len(f), 1)
+        emb = Embedding(points, stress, float(np.sqrt(stress / max(float(np.sum(f[iu] ** 2)), 1e-300))),
+                        self.embedding.n_iter, self.embedding.converged)
+        space = ProtoSymbolSpace(self.params, self.features, symbols, f, emb, name=self.name)
+        space.format = self.format
+        if self.recognition_groups != GEOMETRY_GROUPS:
+            w = self.recognition_weights
+            space._recognition_weights = w
+            rec = space.recognition_models()
+            old = self.recognition_matrix
+            m = np.zeros_like(f)
+            m[:n, :n] = old
+            known = self.recognition_bank()
+            for k in range(len(new)):
+                row = np.r_[known.distances(rec[n + k]),
+                            ModelBank(rec[n:n + k], w).distances(rec[n + k]) if k else []]
+                m[n + k, :n + k] = m[:n + k, n + k] = row
+            space._recognition_matrix = m
+        return space
 
     def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None,
                 as_one: str | None = None) -> "ProtoSymbolSpace":

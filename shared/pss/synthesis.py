@@ -29,8 +29,6 @@ Three steps, each a choice the thesis leaves open, made and written down here:
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
-from scipy.ndimage import gaussian_filter1d
 
 from shared.errors import BadInput
 from shared.pss.hmm import LeftToRightHMM
@@ -134,6 +132,8 @@ def expected_trajectory(model: LeftToRightHMM, n_frames: int | None = None) -> n
     centres = 0.5 * (edges[:-1] + edges[1:]) / total
     t = (np.arange(n_frames) + 0.5) / n_frames
     t = np.clip(t, centres[0], centres[-1])
+    from scipy.interpolate import PchipInterpolator  # here, not at import: recognition never generates
+
     return PchipInterpolator(centres, model.means, axis=0)(t)
 
 
@@ -173,6 +173,8 @@ def monte_carlo_trajectory(model: LeftToRightHMM, n_frames: int | None = None, *
                 acc += (1 - frac) * o[lo] + frac * o[hi]
     out = acc / (n_paths * n_outputs)
     if smooth > 0:
+        from scipy.ndimage import gaussian_filter1d
+
         out = gaussian_filter1d(out, smooth, axis=0, mode="nearest")
     return out
 

@@ -1,0 +1,101 @@
+"""How a space's build grows with its number of clips, and what adding one clip costs.
+
+Clips: the game studio's 174 BVH files (``../shared/data/bandai1``, CC BY-NC 4.0: see its
+SOURCE.md), each also played 0.80-1.20x as fast (a time warp: a new clip of the same motion) until
+there are N. For each N, in a fresh process: the library's build with recognition's decision
+(calibration, discriminant ratio, novelty model) and the save, its wall time and the process's
+peak memory (clips included), then one more clip added without rebuilding the rest
+(:meth:`ProtoSymbolSpace.added`, its decision fitted again) and the same clip by a rebuild. The
+growth exponent is the slope of log time against log N.
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.common import parse_args, write_results
+
+SPEEDS = (1.0, 0.9, 1.1, 0.8, 1.2, 0.85, 1.15, 0.95, 1.05, 0.82, 1.18, 0.88, 1.12, 0.93, 1.07, 0.84, 1.16, 0.97)
+
+
+def clips_of(folder: Path, n: int) -> list:
+    from shared.io import load_clip
+
+    base = [load_clip(f) for f in sorted(folder.glob("*.bvh"))]
+    out = []
+    for speed in SPEEDS:
+        for c in base:
+            if len(out) == n:
+                return out
+            warped = c if speed == 1.0 else c.with_data(c.data, fps=c.fps * speed, name=f"{c.name}-x{speed:g}").resample(c.fps)
+            out.append(warped)
+    raise SystemExit(f"at most {len(out)} clips from {len(base)} files and {len(SPEEDS)} speeds")
+
+
+def one(folder: Path, n: int) -> dict:
+    """Run in its own process: build N clips, add one, report."""
+    from shared.pss.space import ProtoSymbolSpace
+
+    clips = clips_of(folder, n + 1)
+    extra = clips.pop()
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        space = ProtoSymbolSpace.build(clips)
+        built = time.perf_counter()
+        space.save(Path(tmp) / "s.npz")  # recognition's decision is fitted here
+        saved = time.perf_counter()
+        peak_build = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        t1 = time.perf_counter()
+        placed = space.added([extra])
+        placed.save(Path(tmp) / "p.npz")
+        added = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        space.rebuilt(add=[extra]).save(Path(tmp) / "r.npz")
+        rebuilt = time.perf_counter() - t2
+    return {"clips": n, "frames": int(sum(c.n_frames for c in clips)), "build_s": built - t0,
+            "decision_and_save_s": saved - built, "total_s": saved - t0, "add_one_s": added,
+            "add_one_by_rebuild_s": rebuilt, "peak_mb": peak_build,
+            "peak_with_adds_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def main(argv=None) -> int:
+    if argv is None and len(sys.argv) > 2 and sys.argv[1] == "--one":
+        print(json.dumps(one(Path(sys.argv[2]), int(sys.argv[3]))))
+        return 0
+    args = parse_args(__doc__, argv, extra=lambda ap: ap.add_argument(
+        "--sizes", default="250,500,1000", help="Numbers of clips, comma-separated."))
+    folder = args.hdm05.parent / "bandai1" / "bvh"
+    rows = []
+    for n in (int(v) for v in args.sizes.split(",")):
+        r = subprocess.run([sys.executable, "-m", "bench.scale", "--one", str(folder), str(n)], capture_output=True,
+                           text=True, check=True)
+        rows.append(json.loads(r.stdout.strip().splitlines()[-1]))
+        print(rows[-1], flush=True)
+    ns = np.array([r["clips"] for r in rows], float)
+    slope = float(np.polyfit(np.log(ns), np.log([r["total_s"] for r in rows]), 1)[0]) if len(rows) > 1 else float("nan")
+    res = {"rows": rows, "exponent": slope}
+    md = ["# A space's build against its number of clips (`python -m bench.scale`)", "",
+          "The game studio's 174 files and their time warps (0.80-1.20x); each size in a fresh process; peak memory "
+          "includes the clips (the process's peak up to the saved space; the adds after it hold two spaces at once).", "",
+          "| clips | frames | build (HMMs, distances, MDS) | decision and save | total | peak memory | add one clip "
+          "(placed, decision refitted) | add one clip by a rebuild |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        md.append(f"| {r['clips']} | {r['frames']} | {r['build_s']:.1f} s | {r['decision_and_save_s']:.1f} s | "
+                  f"{r['total_s']:.1f} s | {r['peak_mb']:.0f} MB | {r['add_one_s']:.2f} s | "
+                  f"{r['add_one_by_rebuild_s']:.1f} s |")
+    md += ["", f"Time grows as N^{slope:.2f} over these sizes (slope of log total time against log N)."]
+    write_results(args.out, "scale", res, md)
+    print("\n".join(md))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
