@@ -114,6 +114,14 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     assert load_clip(tmp_path / "rest.bvh").n_frames > 10
     r = cli(env, "space", "associate", "moves", tmp_path / "start.npz")  # this space has no sensor channels
     assert r.returncode == 2 and "no sensor channels" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    # a clip added without rebuilding the rest: the other points stay where they were
+    r = cli(env, "space", "add", "moves", held, "--json")
+    assert r.returncode == 0, r.stderr
+    grown = json.loads(r.stdout)
+    assert grown["n_proto_symbols"] == info["n_proto_symbols"] + 1
+    assert np.allclose(np.array(grown["points"])[:-1], np.array(info["points"]))
+    r = cli(env, "space", "add", "moves", held)  # its name is taken now
+    assert r.returncode == 2 and "already has a proto-symbol" in r.stderr and "Traceback" not in r.stderr, r.stderr
 
     r = cli(env, "space", "list")
     assert r.returncode == 0 and "moves" in r.stdout
