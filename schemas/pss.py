@@ -129,6 +129,8 @@ RECOGNIZE = Endpoint(
                         required=False),
         "novelty": F(Float(0.0), "distance from the known motions relative to the open-set threshold (> 1: unknown)",
                      required=False),
+        "rejected_by": F(List(Str(choices=("distance", "ratio", "model")), max_len=3),
+                         "the open-set tests that said none of these (only when known is false)", required=False),
         "label_in_space": F(Str(max_len=64), "label of the nearest point in the space"),
         "point": F(Array(shape=(None,)), "the motion's point"),
         "nearest": F(List(NEAREST, max_len=100), "nearest proto-symbols, nearest first"),

@@ -122,6 +122,30 @@ def test_a_motion_of_no_known_class_comes_back_as_none_of_these(dev_space, dev_s
     data[:, angles] += walk
     r = dev_space.recognize(c.with_data(data, name="flail"))
     assert r.label is None and r.novelty > 1.0 and r.nearest_label
+    from shared.cli.app import recognition_text
+    from shared.pss.recognition import rejected_by
+
+    tests = rejected_by(r.decision)
+    assert tests and set(tests) <= {"distance", "ratio", "model"}
+    text = recognition_text({"known": False, "nearest_label": r.nearest_label, "novelty": r.novelty, "point": r.point,
+                             "nearest": [], "rejected_by": tests})
+    assert text.startswith("none of these: ") and f"(novelty {r.novelty:.2f} > 1)" in text
+
+
+def test_none_of_these_names_the_test_that_rejected():
+    from shared.cli.app import recognition_text
+    from shared.pss.recognition import Decision, rejected_by
+
+    d = Decision(None, "squat", 0.6, 1.4, distance_novelty=0.7, model_novelty=1.4, ratio_novelty=1.1)
+    assert rejected_by(d) == ["ratio", "model"]
+    assert rejected_by(Decision("squat", "squat", 0.9, 0.8, 0.8, 0.2, 0.5)) == []
+    base = {"known": False, "nearest_label": "squat", "novelty": 1.4, "point": [0.0, 0.0, 0.0], "nearest": []}
+    says = {"distance": "farther from its nearest class (squat)", "ratio": "not clearly nearer to squat than to the next",
+            "model": "novelty model finds it between"}
+    for test, words in says.items():
+        text = recognition_text({**base, "rejected_by": [test]})
+        assert words in text and all(w not in text for t, w in says.items() if t != test), text
+    assert "farther from every class" in recognition_text(base)  # a service that does not say which
 
 
 def test_open_set_rule_as_documented():

@@ -87,6 +87,10 @@ def make_service(settings: Settings | None = None) -> Service:
             clips = [clip_from_wire(c, space.features.skeleton) for c in req["clips"]]
         rec = space.recognize(clips[0] if len(clips) == 1 else clips, top=req["top"])
         decided = {"label": rec.label} if rec.label is not None else {}
+        if rec.label is None and rec.decision is not None:
+            from shared.pss.recognition import rejected_by
+
+            decided["rejected_by"] = rejected_by(rec.decision)
         return {"space": req["space"], **decided, "known": rec.label is not None, "nearest_label": rec.nearest_label,
                 "confidence": float(rec.confidence), "novelty": float(rec.novelty), "label_in_space": rec.label_in_space,
                 "point": np.asarray(rec.point, float), "stress": float(rec.stress), "seconds": float(rec.seconds),

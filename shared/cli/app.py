@@ -182,7 +182,10 @@ def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
     space = ProtoSymbolSpace.load(space_file)
     reps = [read_clip(c, skeleton=skeleton) for c in clips]
     r = space.recognize(reps)
+    from shared.pss.recognition import rejected_by
+
     out = {**({"label": r.label} if r.label is not None else {}), "known": r.label is not None,
+           **({"rejected_by": rejected_by(r.decision)} if r.label is None and r.decision is not None else {}),
            "nearest_label": r.nearest_label, "confidence": r.confidence, "novelty": r.novelty,
            "point": [float(v) for v in r.point],
            "nearest": [{"name": n, "label": lab, "distance": d} for n, lab, d in r.nearest], "stress": r.stress}
@@ -226,8 +229,14 @@ def recognition_text(r: dict) -> str:
     if r.get("known", True):
         head = f"{r['label']}   (confidence {r['confidence']:.2f})"
     else:
-        head = (f"none of these: the motion is farther from every class of the space than its known motions are "
-                f"(nearest class {r['nearest_label']}, novelty {r['novelty']:.2f} > 1)")
+        why = {"distance": f"it is farther from its nearest class ({r['nearest_label']}) than the space's known "
+                           f"motions are from theirs",
+               "ratio": f"it is not clearly nearer to {r['nearest_label']} than to the next class",
+               "model": "the novelty model finds it between the space's classes"}
+        said = [why[t] for t in r.get("rejected_by") or [] if t in why] or [
+            f"it is farther from every class of the space than its known motions are (nearest class "
+            f"{r['nearest_label']})"]
+        head = f"none of these: {'; '.join(said)} (novelty {r['novelty']:.2f} > 1)"
     lines = [head, f"point in the space ({', '.join(f'{v:.3f}' for v in r['point'])})", "nearest proto-symbols:"]
     lines += [f"  {n['distance']:9.3f}  {n['label']:<30} {n['name']}" for n in r["nearest"]]
     return "\n".join(lines)

@@ -237,6 +237,18 @@ class Decision:
     ratio_novelty: float = 0.0  # the discriminant ratio's: ratio / threshold (0 without one)
 
 
+#: the open-set tests by the names a rejection gives them (:func:`rejected_by`)
+TESTS = ("distance", "ratio", "model")
+
+
+def rejected_by(d: Decision) -> list[str]:
+    """Which of the open-set tests said "none of these" (each novelty above 1): ``distance``
+    (farther from its nearest class than the space's known motions are), ``ratio`` (not
+    clearly nearer to one class than to the next), ``model`` (the novelty model finds it
+    between classes)."""
+    return [name for name, v in zip(TESTS, (d.distance_novelty, d.ratio_novelty, d.model_novelty)) if v > 1.0]
+
+
 def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_model: "NoveltyModel | None" = None,
            features: np.ndarray | None = None, discriminant: "DiscriminantRatio | None" = None) -> Decision:
     """Label, calibrated confidence and open-set verdict of one motion. The motion is "none of
