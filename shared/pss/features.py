@@ -20,7 +20,11 @@ The representation here is turn-invariant and invertible:
   reference skeleton's Euler angles (the branch that keeps the channels the joint lacks at 0);
   spaces saved before the rotations read every angle this way (``rotations="sincos"``);
 * the root's orientation without its heading: the root's swing (its rotation with the twist
-  about the vertical removed) as the unit vector it turns the vertical into (3 values);
+  about the vertical removed) as the unit vector it turns the vertical into (3 values). The
+  rotation is the body's, not the root joint's: the root's frame turned onto the body's axes
+  (:func:`shared.bodies.segments.body_frame`, trunk up and feet forward, saved with the space
+  as ``frame``), so a studio whose hips rest with X up reads the same heading as HDM05; a
+  space saved before it (no ``frame``) keeps the root's own frame;
 * the root's height in metres;
 * the root's horizontal velocity in its own heading frame (forward, lateral, m/s) and its
   yaw rate (rad/s): where a person faces and stands on the floor is not part of a motion,
@@ -33,9 +37,11 @@ alike and near poses far; DESIGN.md), so a space of clips with a skeleton also m
 ``position`` group that recognition reads and generation ignores:
 
 * every joint and end site in the body's heading frame (relative to the root, turned by
-  minus the root's heading about the vertical), divided by the body's rest height, so
-  where a person stands or faces and how tall they are do not enter;
-* the root's height, swing vector, forward and lateral velocity (in body heights) and yaw rate;
+  minus the root's heading about the vertical), divided by the body's length (ankle to the
+  head's base along the bones, :func:`shared.bodies.segments.stature`: no end site and no
+  rest pose enters; a space saved before it divides by the rest pose's height), so where a
+  person stands or faces and how tall they are do not enter;
+* the root's height, swing vector, forward and lateral velocity (in body lengths) and yaw rate;
 * all of it z-scored per channel with the space's mean and scale.
 
 One HMM models all groups (its states align on every channel); :meth:`feature_indices`
