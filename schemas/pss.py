@@ -171,8 +171,9 @@ ASSOCIATE = Endpoint(
         "method": F(Str(choices=("expected", "monte_carlo")), required=False, default="expected"),
         "seed": F(Int(0, 2**32 - 1), required=False, default=0),
         "weighting": F(Str(choices=("affine", "inverse_distance")),
-                       "point -> weights: exact affine (may extrapolate) or convex inverse-distance",
-                       required=False, default="affine"),
+                       "point -> weights: exact affine (may extrapolate) or convex inverse-distance; absent: "
+                       "inverse-distance for missing sensor channels, affine for missing frames",
+                       required=False),
     }), doc="the whole pattern from a partial one (eq. 2.8)"),
     Message("pss.associate.reply", Map({
         "space": SPACE,

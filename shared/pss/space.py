@@ -572,7 +572,7 @@ class ProtoSymbolSpace:
         return self._partial_scale[group]
 
     def associate(self, clip: Clip, missing: str = "sensor", *, method: str = "expected", seed: int = 0,
-                  weighting: str = "affine") -> Association:
+                  weighting: str | None = None) -> Association:
         """Eq. 2.8: the whole pattern from a partial one.
 
         ``missing="sensor"``: the clip has the motion channels only; recognition uses the
@@ -587,7 +587,13 @@ class ProtoSymbolSpace:
         ``weighting``: how the point becomes proto-symbol weights: ``"affine"`` (exact, may
         extrapolate) or ``"inverse_distance"`` (convex: the estimate stays among the known
         patterns, which is steadier for motions outside the space's hull; ch. 3 uses it).
+        ``None``: inverse-distance for missing sensor channels, affine for missing frames.
+        Chosen on HDM05's bd and bk splits (arm torques from motion, eq. 3.9 error against
+        the training mean's: inverse-distance 31 / 24 % below it, affine 17 / 10 %) and
+        reported on dg (32 % below, affine 9 %).
         """
+        if weighting is None:
+            weighting = "inverse_distance" if missing == "sensor" else "affine"
         if missing == "sensor":
             return self._associate_channels(clip, method, seed, weighting)
         if missing == "frames":
