@@ -28,16 +28,9 @@ class Embedding:
     converged: bool
 
 
-def _pdist(x: np.ndarray) -> np.ndarray:
-    sq = np.sum(x * x, axis=1)
-    d2 = sq[:, None] + sq[None, :] - 2.0 * x @ x.T
-    return np.sqrt(np.maximum(d2, 0.0))
-
-
 def raw_stress(f: np.ndarray, x: np.ndarray) -> float:
-    d = _pdist(x)
-    iu = np.triu_indices(len(x), 1)
-    return float(np.sum((f[iu] - d[iu]) ** 2))
+    """``sum_{i<j} (f_ij - |x_i - x_j|)^2``, in one compiled pass (no N x N temporary)."""
+    return float(_guttman_step(np.ascontiguousarray(f, dtype=float), np.ascontiguousarray(x, dtype=float))[1])
 
 
 def classical_mds(f: np.ndarray, dim: int) -> np.ndarray:

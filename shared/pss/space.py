@@ -248,9 +248,9 @@ class ProtoSymbolSpace:
         for k in range(len(new)):
             x, _ = place_point(points, f[n + k, :n + k])
             points = np.vstack([points, x])
-        from shared.pss.mds import _guttman_step
+        from shared.pss.mds import raw_stress
 
-        stress = float(_guttman_step(f, np.ascontiguousarray(points))[1])  # one compiled pass, no N x N temporary
+        stress = raw_stress(f, points)
         iu = np.triu_indices(len(f), 1)
         emb = Embedding(points, stress, float(np.sqrt(stress / max(float(np.sum(f[iu] ** 2)), 1e-300))),
                         self.embedding.n_iter, self.embedding.converged)
