@@ -8,11 +8,12 @@ clip does not import numba.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from shared.compiled import kernel
 
-@numba.njit(cache=True, nogil=True)
+
+@kernel(cache=True, nogil=True)
 def _axis(code, a, out):
     """Rotation by ``a`` about axis ``code`` (0 x, 1 y, 2 z) into ``out``."""
     c, s = np.cos(a), np.sin(a)
@@ -25,7 +26,7 @@ def _axis(code, a, out):
     out[j, i] = s
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def _mul(a, b, out):
     """3x3 product by hand (numba's ``@`` calls BLAS, whose overhead dominates at 3x3)."""
     for i in range(3):
@@ -33,7 +34,7 @@ def _mul(a, b, out):
             out[i, k] = a[i, 0] * b[0, k] + a[i, 1] * b[1, k] + a[i, 2] * b[2, k]
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def _joint_local(angles, axes, intrinsic, pre, pre_t, m, r, tmp, out):
     """``out = C M C^T`` for one joint and frame; ``m``, ``r``, ``tmp`` are scratch 3x3s."""
     m[:] = 0.0
@@ -55,7 +56,7 @@ def _joint_local(angles, axes, intrinsic, pre, pre_t, m, r, tmp, out):
     _mul(tmp, pre_t, out)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def fk_positions(ang, axes, intrinsic, pre, parent, offset, trans, end_joint, end_offset):
     """Joint and end-site positions (T, J + E, 3) in the skeleton's unit.
 
@@ -103,7 +104,7 @@ def fk_positions(ang, axes, intrinsic, pre, parent, offset, trans, end_joint, en
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def local_rotations(ang, axes, intrinsic, pre):
     """Every joint's local rotation ``L = C M C^T`` (T, J, 3, 3) (arguments as :func:`fk_positions`)."""
     n, nj = ang.shape[0], ang.shape[1]
@@ -118,12 +119,12 @@ def local_rotations(ang, axes, intrinsic, pre):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def _wrap180(x):
     return (x + 180.0) % 360.0 - 180.0
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def continuous_tait_bryan(ang, start):
     """The rotations of Tait-Bryan angles ``ang`` (T, 3) in degrees on the branch nearest the
     previous frame: each frame takes whichever of ``(a, b, c)`` and its twin
@@ -154,4 +155,80 @@ def continuous_tait_bryan(ang, start):
         for a in range(3):
             out[t, a] = prev[a] + _wrap180(cand[best, a] - prev[a])
             prev[a] = out[t, a]
+    return out
+
+
+# ---------------------------------------------------------------- numpy twins (shared.compiled)
+def _axis_matrices(code: int, a: np.ndarray) -> np.ndarray:
+    """:func:`_axis` for a vector of angles: (T, 3, 3)."""
+    c, s = np.cos(a), np.sin(a)
+    i, j = (code + 1) % 3, (code + 2) % 3
+    out = np.zeros(a.shape + (3, 3))
+    out[:, code, code] = 1.0
+    out[:, i, i] = c
+    out[:, j, j] = c
+    out[:, i, j] = -s
+    out[:, j, i] = s
+    return out
+
+
+@local_rotations.numpy
+def _local_rotations_numpy(ang, axes, intrinsic, pre):
+    n, nj = ang.shape[0], ang.shape[1]
+    out = np.empty((n, nj, 3, 3))
+    for j in range(nj):
+        m = np.broadcast_to(np.eye(3), (n, 3, 3))
+        for k in range(3):
+            if axes[j, k] < 0:
+                continue
+            r = _axis_matrices(int(axes[j, k]), ang[:, j, k])
+            m = m @ r if intrinsic[j] else r @ m
+        out[:, j] = pre[j] @ m @ pre[j].T
+    return out
+
+
+@fk_positions.numpy
+def _fk_positions_numpy(ang, axes, intrinsic, pre, parent, offset, trans, end_joint, end_offset):
+    n, nj = ang.shape[0], ang.shape[1]
+    local = _local_rotations_numpy(ang, axes, intrinsic, pre)
+    out = np.zeros((n, nj + len(end_joint), 3))
+    glob = np.empty((nj, n, 3, 3))
+    for j in range(nj):
+        p = parent[j]
+        o = offset[j] + trans[:, j]
+        if p < 0:
+            glob[j] = local[:, j]
+            out[:, j] = o
+        else:
+            glob[j] = glob[p] @ local[:, j]
+            out[:, j] = out[:, p] + np.einsum("tab,tb->ta", glob[p], o)
+    for e, j in enumerate(end_joint):
+        out[:, nj + e] = out[:, j] + glob[j] @ end_offset[e]
+    return out
+
+
+@continuous_tait_bryan.numpy
+def _continuous_tait_bryan_numpy(ang, start):
+    """The same choice frame by frame: which twin is nearest depends only on the previous
+    frame's chosen triple modulo whole turns, so the choices are a chain over two candidates
+    (looked up from precomputed distances) and the output a cumulative sum of wrapped steps."""
+    n = ang.shape[0]
+    if n == 0:
+        return np.empty((0, 3))
+    cand = np.stack([ang, ang * [1.0, -1.0, 1.0] + [180.0, 180.0, 180.0]], axis=1)  # (T, 2, 3)
+
+    def wrap(x):
+        return (x + 180.0) % 360.0 - 180.0
+
+    first = (wrap(cand[0] - start) ** 2).sum(axis=1)
+    # step[t, j, k]: squared distance from candidate j of frame t - 1 to candidate k of frame t
+    step = (wrap(cand[1:, None, :, :] - cand[:-1, :, None, :]) ** 2).sum(axis=3).tolist()
+    c = [0 if first[0] <= first[1] else 1]
+    for t in range(n - 1):
+        row = step[t][c[-1]]
+        c.append(0 if row[0] <= row[1] else 1)
+    chosen = cand[np.arange(n), c]
+    out = np.empty((n, 3))
+    out[0] = start + wrap(chosen[0] - start)
+    out[1:] = out[0] + np.cumsum(wrap(np.diff(chosen, axis=0)), axis=0)
     return out

@@ -304,3 +304,99 @@ def test_channel_weights_kernel_equals_the_numpy_reference():
                     between, nb = between + t, nb + 1
         w = np.sqrt((between / nb + 1e-9) / (within / nw + 1e-9))
         assert np.allclose(channel_weights(mu, var, labels, perf), w / w.mean(), rtol=1e-10)
+
+
+def _kernel_both_ways(kernel, *args):
+    """A kernel's numba result and its numpy twin's, on the same arguments."""
+    assert kernel.twin is not None
+    return kernel.compiled()(*args), kernel.twin(*args)
+
+
+@pytest.mark.parametrize("end_in_last", [True, False])
+def test_numpy_twins_of_the_hmm_kernels_match_numba(end_in_last):
+    from shared.pss import hmm
+
+    rng = np.random.default_rng(3)
+    logb = rng.normal(-20.0, 6.0, size=(90, 7))
+    bounds = np.array([0, 25, 58, 90], dtype=np.int64)
+    stay = rng.uniform(0.5, 0.95, 7)
+    log_stay, log_move = np.log(stay), np.log(1.0 - stay)
+    a, b = _kernel_both_ways(hmm._estep_scaled, logb, bounds, stay, end_in_last)
+    assert a[0] and b[0]
+    for x, y in zip(a[1:], b[1:]):
+        np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-12)
+    a, b = _kernel_both_ways(hmm._forward_backward, logb[:40], log_stay, log_move, end_in_last)
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-12)
+    a, b = _kernel_both_ways(hmm._forward_loglik, logb, log_stay, log_move, end_in_last)
+    np.testing.assert_allclose(a[0], b[0], rtol=1e-12)
+    np.testing.assert_allclose(a[1], b[1], rtol=1e-12)
+    # a repetition that cannot reach the last state: both say so the same way
+    short = np.array([0, 3], dtype=np.int64)
+    if end_in_last:
+        assert not _kernel_both_ways(hmm._estep_scaled, logb[:3], short, stay, True)[1][0]
+
+
+def test_numpy_twins_of_distance_placement_and_kinematics_match_numba(hdm05):
+    from shared import kinematics
+    from shared.pss import distance, mds
+
+    rng = np.random.default_rng(4)
+    mu, var = rng.normal(size=(30, 5, 40)), rng.uniform(0.05, 2.0, size=(30, 5, 40))
+    args = (mu[0], var[0], np.log(var[0]).sum(axis=1), mu, var, np.log(var).sum(axis=2), rng.uniform(0.5, 2.0, 40))
+    a, b = _kernel_both_ways(distance._diag_hmm_distances, *args)
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-6)  # atol: the kernel's fastmath on a model and itself
+    pts = rng.normal(size=(40, 3))
+    f = np.linalg.norm(pts - [0.3, -0.2, 0.5], axis=1) + rng.uniform(0, 0.1, 40)
+    starts = np.stack([pts[0] + 1e-3, pts.mean(axis=0), -pts[0]])
+    a, b = _kernel_both_ways(mds._guttman_point, pts, f, starts, 50, 1e-9)
+    np.testing.assert_allclose(a[0], b[0], atol=1e-9)
+    np.testing.assert_allclose(a[1], b[1], rtol=1e-9)
+    # forward kinematics of a real skeleton and real angles (every Euler order HDM05 uses)
+    from shared.io import load_clip
+
+    clip = load_clip(sorted((hdm05 / "amc").glob("*/*.amc"))[0])
+    k = clip.skeleton._fk_arrays(tuple(clip.channels), True)
+    padded = np.concatenate([clip.data[:50], np.zeros((50, 1))], axis=1)
+    ang = np.ascontiguousarray(np.deg2rad(padded[:, k["cols"]]))
+    trans = np.ascontiguousarray(padded[:, k["tcols"]])
+    fk = (ang, k["axes"], k["intrinsic"], k["pre"], k["parent"], k["offset"], trans, k["end_joint"], k["end_offset"])
+    a, b = _kernel_both_ways(kinematics.fk_positions, *fk)
+    np.testing.assert_allclose(a, b, atol=1e-9)
+    a, b = _kernel_both_ways(kinematics.local_rotations, *fk[:4])
+    np.testing.assert_allclose(a, b, atol=1e-12)
+    # Euler triples on either branch, jumping by whole turns: the same continuous choice
+    tb = rng.uniform(-180, 180, size=(200, 3)).cumsum(axis=0) * 0.05
+    tb[::7] = tb[::7] * [1, -1, 1] + 180.0
+    a, b = _kernel_both_ways(kinematics.continuous_tait_bryan, tb, np.zeros(3))
+    np.testing.assert_allclose(a, b, atol=1e-9)
+
+
+def test_offline_recognize_runs_without_numba_and_answers_as_the_compiled_path(tmp_path, hdm05):
+    """The one-shot command uses the numpy twins (numba is never imported) and shows the same
+    label, confidence and nearest proto-symbols as the library's compiled path."""
+    import json
+    import subprocess
+    import sys
+
+    from shared.io import load_clip
+    from shared.pss.space import ProtoSymbolSpace
+
+    files = sorted((hdm05 / "amc").glob("*/*.amc"))
+    train = [f for f in files if "_bd_" in f.name][::3]
+    probe = next(f for f in files if "_dg_" in f.name)
+    space = ProtoSymbolSpace.build([load_clip(f) for f in train])
+    space.save(tmp_path / "s.npz")
+    want = space.recognize(load_clip(probe))
+    code = ("import sys; sys.argv = ['mirrorcoach', 'offline', 'recognize', sys.argv[1], sys.argv[2], '--json'];"
+            "from shared.cli.app import main\ntry:\n    main()\nexcept SystemExit:\n    pass\n"
+            "print('numba imported' if 'numba' in sys.modules else 'no numba', file=sys.stderr)")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path / "s.npz"), str(probe)], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "no numba" in r.stderr
+    got = json.loads(r.stdout)
+    assert got.get("label") == want.label and got["nearest_label"] == want.nearest_label
+    assert got["confidence"] == pytest.approx(want.confidence, abs=1e-9)
+    assert [n["name"] for n in got["nearest"]] == [n for n, _, _ in want.nearest]
+    np.testing.assert_allclose([n["distance"] for n in got["nearest"]], [d for _, _, d in want.nearest], rtol=1e-9)

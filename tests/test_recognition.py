@@ -498,3 +498,18 @@ def test_a_clip_is_added_without_rebuilding_the_rest(dev_space, dev_split):
     assert placed.recognize(new[0]).nearest[0][0] == new[0].name  # its own proto-symbol is now the nearest
     with pytest.raises(BadInput):
         placed.added([new[0]])  # a name the space already has
+
+
+def test_a_loaded_space_adds_a_clip_by_one_row_with_the_same_result(dev_space, dev_split, tmp_path):
+    """The recognition distances are saved with the space: a space read back from its file
+    extends them by the new rows (no N^2 recomputation) and gives what the space in memory gives."""
+    path = dev_space.save(tmp_path / "s.npz")
+    loaded = ProtoSymbolSpace.load(path)
+    assert loaded._recognition_matrix is not None
+    np.testing.assert_array_equal(loaded.recognition_matrix, dev_space.recognition_matrix)
+    new = dev_split[1][2:3]
+    a, b = dev_space.added(new), loaded.added(new)
+    np.testing.assert_allclose(b.recognition_matrix, a.recognition_matrix, rtol=1e-12)
+    ra, rb = a.recognize(new[0]), b.recognize(new[0])
+    assert (ra.label, ra.nearest_label) == (rb.label, rb.nearest_label)
+    assert rb.confidence == pytest.approx(ra.confidence, abs=1e-9)

@@ -177,6 +177,9 @@ def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
     """Recognise a motion: its class with a calibrated confidence (or "none of these"), its
     nearest proto-symbols and its point in the space (eq. 2.6). How the label is decided:
     README, "How a motion is recognised"."""
+    from shared.compiled import use_numba
+
+    use_numba(False)  # one clip's work is milliseconds: numba's start-up (~0.6 s) would be most of the command
     from shared.pss.space import ProtoSymbolSpace
 
     space = ProtoSymbolSpace.load(space_file)

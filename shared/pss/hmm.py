@@ -29,10 +29,10 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from shared.deadline import check_time
+from shared.compiled import kernel
 from shared.errors import ModelError
 
 LOG2PI = np.log(2.0 * np.pi)
@@ -151,7 +151,7 @@ def emission_logprob(x: np.ndarray, means: np.ndarray, covars: np.ndarray, covar
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def _logaddexp(a, b):
     if a == -np.inf:
         return b
@@ -162,7 +162,7 @@ def _logaddexp(a, b):
     return b + np.log1p(np.exp(a - b))
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def _forward_loglik(logb, log_stay, log_move, end_in_last):
     t_len, n = logb.shape
     alpha = np.full(n, -np.inf)
@@ -179,7 +179,7 @@ def _forward_loglik(logb, log_stay, log_move, end_in_last):
     return m + np.log(np.sum(np.exp(alpha - m))), alpha
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def _forward_backward(logb, log_stay, log_move, end_in_last):
     """Banded forward-backward in log space. Returns (loglik, gamma (T,N), xi_stay (N,), xi_move (N,))."""
     t_len, n = logb.shape
@@ -214,6 +214,55 @@ def _forward_backward(logb, log_stay, log_move, end_in_last):
             xi_stay[i] += np.exp(la[t, i] + log_stay[i] + logb[t + 1, i] + lb[t + 1, i] - loglik)
             if i + 1 < n:
                 xi_move[i] += np.exp(la[t, i] + log_move[i] + logb[t + 1, i + 1] + lb[t + 1, i + 1] - loglik)
+    return loglik, gamma, xi_stay, xi_move
+
+
+def _log_step(prev, log_stay, log_move):
+    """One banded transition in log space: ``log(a_ii p_i + a_(i-1)i p_(i-1))`` per state."""
+    new = prev + log_stay
+    new[1:] = np.logaddexp(new[1:], prev[:-1] + log_move[:-1])
+    return new
+
+
+@_forward_loglik.numpy
+def _forward_loglik_numpy(logb, log_stay, log_move, end_in_last):
+    n = logb.shape[1]
+    alpha = np.full(n, -np.inf)
+    alpha[0] = logb[0, 0]
+    for t in range(1, logb.shape[0]):
+        alpha = _log_step(alpha, log_stay, log_move) + logb[t]
+    if end_in_last:
+        return alpha[n - 1], alpha
+    m = alpha.max()
+    return m + np.log(np.sum(np.exp(alpha - m))), alpha
+
+
+@_forward_backward.numpy
+def _forward_backward_numpy(logb, log_stay, log_move, end_in_last):
+    t_len, n = logb.shape
+    la = np.full((t_len, n), -np.inf)
+    lb = np.full((t_len, n), -np.inf)
+    la[0, 0] = logb[0, 0]
+    for t in range(1, t_len):
+        la[t] = _log_step(la[t - 1], log_stay, log_move) + logb[t]
+    if end_in_last:
+        lb[t_len - 1, n - 1] = 0.0
+        loglik = la[t_len - 1, n - 1]
+    else:
+        lb[t_len - 1] = 0.0
+        m = la[t_len - 1].max()
+        loglik = m + np.log(np.sum(np.exp(la[t_len - 1] - m)))
+    for t in range(t_len - 2, -1, -1):
+        nxt = lb[t + 1] + logb[t + 1]
+        lb[t] = nxt + log_stay
+        lb[t, :-1] = np.logaddexp(lb[t, :-1], nxt[1:] + log_move[:-1])
+    gamma = np.exp(la + lb - loglik)
+    with np.errstate(invalid="ignore"):
+        stay_terms = np.exp(la[:-1] + log_stay + logb[1:] + lb[1:] - loglik)
+        move_terms = np.exp(la[:-1, :-1] + log_move[:-1] + logb[1:, 1:] + lb[1:, 1:] - loglik)
+    xi_stay = np.nansum(np.where(np.isfinite(la[:-1]), stay_terms, 0.0), axis=0)
+    xi_move = np.zeros(n)
+    xi_move[:-1] = np.nansum(np.where(np.isfinite(la[:-1, :-1]), move_terms, 0.0), axis=0)
     return loglik, gamma, xi_stay, xi_move
 
 
@@ -316,7 +365,7 @@ def _stay_from_occupancy(frames_in_state: float, n_sequences: int) -> float:
     return float(np.clip(1.0 - 1.0 / d, 0.0, 0.999))
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def _estep_scaled(logb, bounds, stay, end_in_last):
     """E-step over every repetition at once, in the scaled probability domain (Rabiner's
     scaling, with each frame's emissions shifted by their largest reachable value).
@@ -399,6 +448,57 @@ def _estep_scaled(logb, bounds, stay, end_in_last):
                 if i + 1 < n:
                     xm[i] += a[t, i] * wm[i] / s
                 beta[i] = nb[i] / top
+    return True, total, gamma, xs, xm
+
+
+@_estep_scaled.numpy
+def _estep_scaled_numpy(logb, bounds, stay, end_in_last):
+    t_all, n = logb.shape
+    gamma = np.zeros((t_all, n))
+    xs, xm = np.zeros(n), np.zeros(n)
+    total = 0.0
+    move = 1.0 - stay
+    for k in range(len(bounds) - 1):
+        lo, hi = int(bounds[k]), int(bounds[k + 1])
+        t_len = hi - lo
+        a = np.zeros((t_len, n))
+        b = np.zeros((t_len, n))
+        b[0, 0] = a[0, 0] = 1.0
+        total += logb[lo, 0]
+        for t in range(1, t_len):
+            pred = a[t - 1] * stay
+            pred[1:] += a[t - 1, :-1] * move[:-1]
+            reach = logb[lo + t][pred > 0.0]
+            m = reach.max() if reach.size else -np.inf
+            b[t] = np.exp(logb[lo + t] - m)
+            a[t] = pred * b[t]
+            s = a[t].sum()
+            if not (s > 0.0) or not np.isfinite(s):
+                return False, -np.inf, gamma, xs, xm
+            a[t] /= s
+            total += m + np.log(s)
+        if end_in_last:
+            if not (a[t_len - 1, n - 1] > 0.0):
+                return False, -np.inf, gamma, xs, xm
+            total += np.log(a[t_len - 1, n - 1])
+            beta = np.zeros(n)
+            beta[n - 1] = 1.0
+        else:
+            beta = np.ones(n)
+        g = a[t_len - 1] * beta
+        gamma[hi - 1] = g / g.sum()
+        for t in range(t_len - 2, -1, -1):
+            ws = stay * b[t + 1] * beta
+            wm = np.zeros(n)
+            wm[:-1] = move[:-1] * b[t + 1, 1:] * beta[1:]
+            nb = ws + wm
+            s = a[t] @ nb
+            if not (s > 0.0) or not np.isfinite(s):
+                return False, -np.inf, gamma, xs, xm
+            gamma[lo + t] = a[t] * nb / s
+            xs += a[t] * ws / s
+            xm += a[t] * wm / s
+            beta = nb / nb.max()
     return True, total, gamma, xs, xm
 
 

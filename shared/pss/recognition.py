@@ -59,8 +59,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import numba
 import numpy as np
+
+from shared.compiled import kernel
 
 KNOWN_QUANTILE = 0.98
 
@@ -100,7 +101,7 @@ def channel_weights(means: np.ndarray, covars: np.ndarray, labels, performers) -
     return w / w.mean() if w.mean() > 0 else np.ones(dim)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(cache=True, nogil=True)
 def _channel_pair_sums(mu, var, label, perf, across):
     """Over every pair of proto-symbols, eq. 2.3's per-channel terms summed over states
     (:func:`shared.pss.distance.bhattacharyya_terms`), added up separately for pairs of one

@@ -150,7 +150,7 @@ class ProtoSymbolSpace:
         self.name = name
         self.format = FORMAT
         self._partial_scale: dict[str, float] = {}
-        self._group_models: dict[tuple, list[LeftToRightHMM] | ModelBank] = {}
+        self._group_models: dict[tuple, object] = {}  # per channel groups: models, banks, symbol features
         self._calibration = None
         self._novelty = None  # fitted on first use; False: a file written before it (the distance rule)
         self._discriminant = None  # likewise; False: a file written before it (the eq. 2.4 ratio)
@@ -473,11 +473,15 @@ class ProtoSymbolSpace:
         return self._discriminant or None
 
     def _symbol_features(self) -> np.ndarray:
-        """The proto-symbols' recognition-group HMMs as vectors (:func:`shared.pss.recognition.hmm_features`)."""
-        from shared.pss.recognition import hmm_features
+        """The proto-symbols' recognition-group HMMs as vectors (:func:`shared.pss.recognition.hmm_features`),
+        computed once for the novelty model and the discriminant ratio."""
+        key = ("symbol features",)
+        if key not in self._group_models:
+            from shared.pss.recognition import hmm_features
 
-        ms = self.recognition_models()
-        return hmm_features(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms]))
+            ms = self.recognition_models()
+            self._group_models[key] = hmm_features(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms]))
+        return self._group_models[key]
 
     def recognize(self, clip_or_clips, top: int = 5) -> Recognition:
         """``x = F_recog(M)`` (eq. 2.6): abstract the new clip (or the repetitions of one
@@ -701,6 +705,10 @@ class ProtoSymbolSpace:
         }
         if self.recognition_weights is not None:
             arrays["recognition_weights"] = self.recognition_weights
+        if self.recognition_groups != GEOMETRY_GROUPS and self._recognition_matrix is not None:
+            # kept so that adding a clip to a loaded space extends it by one row instead of
+            # recomputing N^2 / 2 distances (14 s for 3,000 proto-symbols)
+            arrays["recognition_matrix"] = self._recognition_matrix
         for model in (self.novelty_model, self.discriminant):
             if model is not None:
                 arrays.update(model.arrays())
@@ -715,6 +723,7 @@ class ProtoSymbolSpace:
                 header = json.loads(str(z["header"]))
                 arrays = {k: np.array(z[k]) for k in ("means", "covars", "stay", "distances", "points")}
                 weights = np.array(z["recognition_weights"]) if "recognition_weights" in z.files else None
+                rec_matrix = np.array(z["recognition_matrix"]) if "recognition_matrix" in z.files else None
                 # the open set's fitted tests, each its header entry and arrays named after it
                 tests = {key: {k: np.array(z[k]) for k in z.files if k.startswith(f"{key}_")}
                          for key in ("novelty", "discriminant")}
@@ -742,6 +751,8 @@ class ProtoSymbolSpace:
             # calibration was fitted on unweighted distances); rebuilding it gives the weights
             space._recognition_weights = weights if weights is not None else np.ones(len(space.features.group_indices(
                 space.recognition_groups)))
+            if rec_matrix is not None and rec_matrix.shape == space.distances.shape:
+                space._recognition_matrix = rec_matrix
         if header.get("calibration"):
             from shared.pss.recognition import Calibration
 
