@@ -17,7 +17,7 @@ OTHER = name("name of the other agent")
 LEARNER = name("name of the learner")
 ADVERBS = ("a little more", "more", "much more", "more like this")
 #: the learner families of shared/agents/learner.py (a test checks they agree)
-FAMILIES = ("thesis", "error_based", "copy", "fixed_step")
+FAMILIES = ("thesis", "error_based", "two_rate", "copy", "fixed_step")
 
 
 def _body_or_skeleton(req: dict, path: str):
@@ -166,6 +166,8 @@ LEARNER_PARAMS = Map({
     "family": F(Str(choices=FAMILIES), "the learner's rules (shared/agents/learner.py)", required=False),
     "retention": F(Float(0.0, 1.0), "error_based: A, the share of the learnt change kept per trial", required=False),
     "step": F(Float(0.0, 90.0), "fixed_step: degrees RMS moved per trial", required=False),
+    "adverb_response": F(Float(-3.0, 3.0), "error_based: r, a word's effect on the error taken up (< 0: less)",
+                         required=False),
 })
 
 LEARNER_CREATE = Endpoint(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shared.agents.learner import SimulatedLearner, population, to_phase
+from shared.agents.learner import FAMILIES, SimulatedLearner, population, to_phase
 from shared.agents.other import OtherParams, SimulatedOther
 from shared.clip import Clip
 from shared.errors import BadInput
@@ -147,7 +147,7 @@ def _phase_clip(learner, phase):
 
 
 def test_the_error_based_family_corrects_towards_what_it_is_shown_from_its_own_performance(squat):
-    """m <- m0 + A (m - m0) + min(gain a, 1) P(D - p), p its last performance; the target is
+    """m <- m0 + A (m - m0) + clip(gain a_r, 0, 1) P(D - p), p its last performance; the target is
     never read: shown the same motions, learners of two different targets with the same habit
     move the same way."""
     p = population(1, seed=4, family="error_based")[0]
@@ -159,17 +159,54 @@ def test_the_error_based_family_corrects_towards_what_it_is_shown_from_its_own_p
     for demo, adverb in ((squat, None), (_phase_clip(learner, learner.memory + 12.0 * mask), "much more")):
         performed = learner.performed()
         assert np.allclose(performed, twin.performed())
-        a = 1.0 + p.adverb_sensitivity * (1.35 - 1.0) if adverb else 1.0
-        expected = habit + p.retention * (learner.memory - habit) + min(p.gain * a, 1.0) * learner.perceive(
+        a = 1.0 + p.adverb_response * (1.35 - 1.0) if adverb else 1.0
+        expected = habit + p.retention * (learner.memory - habit) + np.clip(p.gain * a, 0, 1) * learner.perceive(
             (to_phase(demo, learner.channels) - performed) * mask)
         learner.imitate(demo, adverb)
         twin.imitate(demo, adverb)
         assert np.allclose(learner.memory, expected) and np.allclose(twin.memory, learner.memory)
 
 
+@pytest.mark.parametrize("response", [-1.2, 1.2])
+def test_an_error_based_learner_s_adverb_can_hurt_as_well_as_help(squat, response):
+    """The adverb response is drawn per learner in [-1.5, 1.5] (some of each sign in a
+    population); "much more" then leaves a learner with r < 0 further from the target after a
+    trial than no word does, and one with r > 0 closer."""
+    drawn = [q.adverb_response for q in population(40, seed=0, family="error_based")]
+    assert min(drawn) < -0.5 and max(drawn) > 0.5
+    p = population(1, seed=4, family="error_based")[0]
+    p.adverb_response, p.noise = response, 0.0
+    errors = {}
+    for adverb in (None, "much more"):
+        learner = SimulatedLearner("l", squat, p)
+        learner.imitate(squat, adverb)
+        errors[adverb] = learner.error()
+    assert (errors["much more"] > errors[None]) == (response < 0)
+    assert abs(errors["much more"] - errors[None]) > 0.01
+
+
+def test_the_two_rate_family_follows_smith_et_al_2006(squat):
+    """x_f <- 0.59 x_f + 0.21 e, x_s <- 0.992 x_s + 0.02 e, m = m0 + x_f + x_s; words ignored;
+    the fast state survives a save and load of the learner."""
+    from shared.agents.learner import TWO_RATE
+
+    p = population(1, seed=6, family="two_rate")[0]
+    learner = SimulatedLearner("l", squat, p)
+    habit, mask = learner.memory.copy(), learner._imitated
+    xf, xs = np.zeros_like(habit), np.zeros_like(habit)
+    for adverb in (None, "much more", None):
+        e = learner.perceive((to_phase(squat, learner.channels) - learner.performed()) * mask)
+        xf, xs = TWO_RATE["A_f"] * xf + TWO_RATE["B_f"] * e, TWO_RATE["A_s"] * xs + TWO_RATE["B_s"] * e
+        learner.imitate(squat, adverb)
+        assert np.allclose(learner.memory, habit + xf + xs) and np.allclose(learner.fast, xf)
+    assert TWO_RATE == {"A_f": 0.59, "B_f": 0.21, "A_s": 0.992, "B_s": 0.02}
+
+
 def test_the_null_families_copy_or_step_and_ignore_words(squat):
-    """copy: the memory becomes what it saw; fixed_step: a step of ``step`` degrees RMS towards
-    it, however far it is (magnitude-blind); neither hears adverbs."""
+    """copy: the memory becomes what it saw; fixed_step: a step of ``step`` degrees RMS in the
+    direction of the difference, blind to its size: a demonstration m + k (D - m), k >= 1, with
+    a difference that is not uniform over channels (some far below any threshold), moves it
+    exactly as D does; neither hears adverbs."""
     p = population(1, seed=5, family="copy")[0]
     learner = SimulatedLearner("l", squat, p)
     mask = learner._imitated.astype(bool)
@@ -177,22 +214,28 @@ def test_the_null_families_copy_or_step_and_ignore_words(squat):
     learner.imitate(demo, "much more")
     assert np.allclose(learner.memory[:, mask], to_phase(demo, learner.channels)[:, mask])
     q = population(1, seed=5, family="fixed_step")[0]
+    base = SimulatedLearner("l", squat, q)
+    rng = np.random.default_rng(0)
+    # per channel: large, small (1 degree, below the population's thresholds) or none
+    shape = rng.choice([30.0, 1.0, 0.0], size=base.memory.shape[1]) * base._imitated
+    direction = shape * np.sin(np.linspace(0, np.pi, base.memory.shape[0]))[:, None]
     moved = []
-    for scale, adverb in ((20.0, None), (40.0, "much more")):  # twice the difference, and a word
+    for k, adverb in ((1.0, None), (2.5, "much more"), (6.0, "a little more")):
         s = SimulatedLearner("l", squat, q)
         start = s.memory.copy()
-        s.imitate(_phase_clip(s, start + scale * s._imitated), adverb)
+        s.imitate(Clip(start + k * direction, s.channels, 30.0, name="demo"), adverb)  # on the phase axis itself
         moved.append(s.memory - start)
         assert _rms(moved[-1], s._imitated) == pytest.approx(q.step, rel=1e-6)
-    assert np.allclose(moved[0], moved[1], atol=0.1)  # the same step (up to resampling the demonstrations)
+    for m in moved[1:]:  # the same step, channel by channel
+        np.testing.assert_allclose(m, moved[0], atol=1e-9)
     near = SimulatedLearner("l", squat, q)  # a difference shorter than the step: all the way
-    goal = near.memory + 0.5 * q.step * near._imitated + q.threshold * near._imitated
+    goal = near.memory + 0.5 * q.step * near._imitated
     near.imitate(_phase_clip(near, goal))
-    assert _rms(near.memory - goal, near._imitated) < q.threshold + 1e-6
+    assert _rms(near.memory - goal, near._imitated) < 0.05 * q.step
 
 
 def test_families_share_the_population_draws_and_replicates_get_fresh_noise(squat):
-    fams = [population(3, seed=2, family=f) for f in ("thesis", "error_based", "copy", "fixed_step")]
+    fams = [population(3, seed=2, family=f) for f in FAMILIES]
     assert all(a.gain == b.gain and a.deviation == b.deviation and a.seed == b.seed for pop in fams[1:]
                for a, b in zip(fams[0], pop))
     again = population(3, seed=2, replicate=1)
@@ -202,7 +245,6 @@ def test_families_share_the_population_draws_and_replicates_get_fresh_noise(squa
     with pytest.raises(BadInput, match="family"):
         population(2, family="oracle")
     from schemas.simulator import FAMILIES as WIRE
-    from shared.agents.learner import FAMILIES
 
     assert WIRE == FAMILIES
 
@@ -220,3 +262,46 @@ def test_attempts_are_five_seeded_repetitions(squat):
         learner.imitate(squat, "way more")
     with pytest.raises(BadInput, match="lacks"):
         learner.imitate(_arm_motion())
+
+
+def test_no_demonstration_brings_a_fixed_step_learner_closer_than_the_target(squat):
+    """The null world as documented: emphatic demonstrations x_t + alpha (x_t - x_p) (eq. 4.3 on
+    the phase axis, x_p the learner's own performance) never leave a fixed_step learner's
+    memory closer to the target than showing the target does, trial after trial."""
+    for q in population(4, seed=9, family="fixed_step"):
+        q.noise = 0.0
+        errors = {}
+        for alpha in (0.0, 0.5, 1.0, 2.0, 3.0):
+            learner = SimulatedLearner("l", squat, q)
+            target = learner.target_phase
+            errors[alpha] = []
+            for _ in range(4):
+                shown = target + alpha * (target - learner.performed())
+                learner.imitate(Clip(shown, learner.channels, 30.0, name="demo"))
+                errors[alpha].append(learner.error())
+        for alpha in (0.5, 1.0, 2.0, 3.0):
+            assert all(e >= e0 - 1e-6 for e, e0 in zip(errors[alpha], errors[0.0])), (q.step, alpha, errors)
+
+
+def test_the_report_s_word_against_the_target_alone_is_computed_from_the_numbers():
+    """Holm-adjusted paired tests of every condition against case 1: a condition clearly lower
+    is named; in a world where nothing differs, none is."""
+    from shared.reproduce.coaching import against_target, holm, null_sentence
+
+    np.testing.assert_allclose(holm([0.01, 0.04, 0.03, 0.005]), [0.03, 0.06, 0.06, 0.02])
+    rng = np.random.default_rng(0)
+    base = 1.0 + rng.uniform(0, 0.2, size=(12, 4))
+    base[:, 0] = 1.0
+
+    def world(lower: float) -> dict:
+        same = base.tolist()
+        better = (base - lower * np.linspace(0, 1, 4)).tolist()
+        return {"cases": {1: same, 2: same, 3: better, 4: same, 5: same, 6: same, 7: same, 8: same},
+                "sweep": {"0|none": same, "2|none": better}, "subgoal": {"d": same}, "body_part": {"d": same},
+                "nb": {"d": None}, "feasibility": {"d": same}}
+
+    rows = {r["condition"]: r for r in against_target(world(0.3))}
+    assert rows["case 3: alpha 2, no adverb"]["word"] == "holds" and rows["alpha 2"]["word"] == "holds"
+    assert rows["case 2: alpha 0 + 'more like this'"]["word"] == "not lower" and "naive Bayes" not in rows
+    assert "on squat, 2 of 11 conditions ended lower" in null_sentence("thesis", {"squat": world(0.3)})
+    assert "on squat, none of 11 conditions ended lower" in null_sentence("copy", {"squat": world(0.0)})

@@ -55,6 +55,15 @@ def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services,
         time.sleep(0.05)
     assert [p["set"] for p in progress] == [1, 2, 3]
     assert any(x["dialogue"] == "r2" and x["kind"] == "answer" for x in lines)
+    # started again under the same name: the thesis estimator reads no space of the old answers
+    # (it did: set 0 of a rerun gave the end of the last run's numbers)
+    fresh = c.request("estimator", "estimate", {"estimate": "r2", "clip": motion, "method": "thesis"})["g"]
+    c.request("estimator", "start", {"estimate": "r2", "other": "r2", "d": 6, "replace": True})
+    assert "est-r2" not in {s["space"] for s in c.request("pss", "list")["spaces"]}
+    again = c.request("estimator", "estimate", {"estimate": "r2", "clip": motion, "method": "thesis"})["g"]
+    c.request("estimator", "start", {"estimate": "r2x", "other": "r2", "d": 6, "replace": True})
+    first = c.request("estimator", "estimate", {"estimate": "r2x", "clip": motion, "method": "thesis"})["g"]
+    assert again == pytest.approx(first, rel=1e-9) and again != pytest.approx(fresh, rel=1e-3)
 
     # rule identification, applied to later sets
     c.request("simulator", "other_create", {"other": "r4", "params": {"rule": "f3", "joints": list(ALL), "g_max": 1.2},

@@ -593,7 +593,21 @@ def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
     text = (tmp_path / "rep/ch4-6/report.md").read_text()
     row = next(line for line in text.splitlines() if line.startswith("| Emphasis (case 3"))
     assert "holds" not in row and ("reversed" in row or "not lower" in row), row
-    assert "- `copy`: none" in text or "holds" not in text.split("Findings that hold")[1].split("##")[0]
+    # the list of findings that hold is the table's rows whose every cell says holds
+    table = [line for line in text.split("## Which findings hold")[1].split("Findings that hold")[0].splitlines()
+             if line.startswith("| ") and not line.startswith("| finding") and not line.startswith("| Best alpha")]
+    held = [line.split(" | ")[0][2:] for line in table if all(c.strip().startswith("holds")
+                                                              for c in line.strip(" |").split(" | ")[1:])]
+    listed = text.split("Findings that hold on every target, per family:")[1].split("##")[0]
+    assert f"- `copy`: {'; '.join(held) if held else 'none'}" in listed, (held, listed)
+    # the null world against the target alone: the sentence is computed from results.json
+    from shared.reproduce.coaching import null_sentence
+
+    results = json.loads((tmp_path / "rep/ch4-6/results.json").read_text())
+    results["families"]["copy"]["squat"]["cases"] = {int(k): v for k, v in
+                                                     results["families"]["copy"]["squat"]["cases"].items()}
+    sentence = null_sentence("copy", results["families"]["copy"])
+    assert f"- {sentence}" in text and "none of" in sentence, sentence
     rows = read(tmp_path / "rep/ch4-6/tidy.csv")
     cases = {r["condition"] for r in rows}
     assert {f"case {c}" for c in range(1, 9)} <= cases and {"sub-goal", "body part"} <= cases

@@ -209,7 +209,13 @@ def make_service(settings: Settings | None = None) -> Service:
         est = OtherEstimate(lang, [hold(m, lang.missing) for m in shared], probes=req["probes"])
         est.other = req["other"]
         with writing(name):
-            # P_other_hat is built when first needed (converse rebuilds it anyway; estimate builds a missing one)
+            # P_other_hat is built when first needed (converse rebuilds it anyway; estimate builds a missing one),
+            # so a space left by an earlier estimate of this name must go: its answers are not this one's
+            try:
+                bus().request("pss", "delete", {"space": f"est-{name}"}, timeout=30)
+            except RemoteError as e:
+                if e.code != "not_found":
+                    raise
             est.start(BusPorts(bus(), name, req["other"], lang), build=False)
             est.save(path(name))
         return info_of(name, est)

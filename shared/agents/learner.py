@@ -1,9 +1,9 @@
 """Simulated learners (thesis ch. 4-6, SPEC section 6). **A simulation, not a person.**
 
 The thesis coached people. We coach simulated learners whose behaviour is a small, documented
-model; nothing below is fitted to human data. A learner belongs to one of four **families**
-(:data:`FAMILIES`, issue 14), so that a finding of chapters 4-6 can be checked in learner worlds
-that do not assume it:
+model; nothing below is fitted to human data. A learner belongs to one of five **families**
+(:data:`FAMILIES`), so that a finding of chapters 4-6 can be checked in learner worlds that do
+not assume it, two of them null worlds in which no demonstration can beat the target itself:
 
 * ``thesis``: the model described below (perception threshold, gain below 1, overshoot measured
   against the first motion shown). It was built so that emphasis can help: a gain below 1 or a
@@ -12,19 +12,30 @@ that do not assume it:
   literature (Thoroughman & Shadmehr 2000; Smith, Ghazizadeh & Shadmehr 2006, one rate):
   ``m <- m0 + A (m - m0) + B_eff P(D - p)`` where ``p`` is the learner's own last performance
   (what it did, motor noise included; its memory before the first attempt), ``A`` the
-  *retention* (drift back to its habit ``m0``) and ``B_eff = min(gain * a(adverb), 1)`` the
-  error sensitivity. It never knows the target, nor which motion was the target: it corrects
-  towards whatever it is shown;
+  *retention* (drift back to its habit ``m0``) and ``B_eff = clip(gain * a_r(adverb), 0, 1)``
+  the error sensitivity, with ``a_r = 1 + r (A_adverb - 1)`` and ``r`` the learner's
+  *adverb response*, drawn in [-1.5, 1.5]: a word may make this learner take up more of the
+  error (r > 0) or less (r < 0; "much more" then hurts). It never knows the target, nor which
+  motion was the target: it corrects towards whatever it is shown;
+* ``two_rate``: the two-state model of Smith, Ghazizadeh & Shadmehr (2006, PLoS Biology 4(6)
+  e179, "Interacting adaptive processes with different timescales underlie short-term motor
+  learning") with the parameters of their simulations, the same for every learner:
+  ``x_f <- A_f x_f + B_f e``, ``x_s <- A_s x_s + B_s e``, ``m = m0 + x_f + x_s``, with
+  ``A_f = 0.59, B_f = 0.21, A_s = 0.992, B_s = 0.02`` per trial (:data:`TWO_RATE`) and ``e``
+  the perceived error ``P(D - p)`` as in ``error_based``. Words are ignored: the model has none;
 * ``copy`` (null model): the memory becomes the demonstration exactly, with no threshold and
   words ignored. Whatever is shown is what it does next, so an emphatic motion can only leave it
   further from the target than the target itself would;
-* ``fixed_step`` (null model, blind to the demonstration's magnitude): it moves towards what it
-  perceives by a fixed ``step`` (degrees RMS over the imitated channels) or all the way when the
-  difference is smaller, words ignored. Showing more of the same difference changes nothing
-  while the step is shorter than the difference, and near the target an emphatic motion makes
-  it step past.
+* ``fixed_step`` (null model, blind to the size of the difference shown): it moves a fixed
+  ``step`` (degrees RMS over the imitated channels) in the direction of ``D - m`` (every
+  channel, no perception threshold: a threshold per channel would let a larger difference
+  change which channels move, and so the direction), or all the way when the difference is
+  shorter, words ignored. Showing ``m + k (D - m)`` for any ``k >= 1`` moves it exactly as
+  ``D`` does while the step is the shorter; the best direction to step in is towards the
+  target, so no demonstration brings it closer than the target itself, and near the target an
+  emphatic motion makes it step past.
 
-Every family shares the personal deviation, perception threshold (not ``copy``), motor noise,
+Every family shares the personal deviation, perception threshold (not ``copy`` nor ``fixed_step``), motor noise,
 tempo and attempts below; the ``thesis`` family's rules follow.
 
 State. A learner holds its *motor memory* ``m``: its current version of the target motion,
@@ -83,7 +94,9 @@ def _bounded(phase: np.ndarray, what: str) -> np.ndarray:
                        "makes", field=what)
     return phase
 #: the learner families (see the module docstring)
-FAMILIES = ("thesis", "error_based", "copy", "fixed_step")
+FAMILIES = ("thesis", "error_based", "two_rate", "copy", "fixed_step")
+#: Smith, Ghazizadeh & Shadmehr (2006), the parameters of their simulations, per trial
+TWO_RATE = {"A_f": 0.59, "B_f": 0.21, "A_s": 0.992, "B_s": 0.02}
 ADVERB_FACTOR = {None: 1.0, "": 1.0, "a little more": 1.10, "more": 1.20, "much more": 1.35, "more like this": 1.20}
 ADVERBS = tuple(a for a in ADVERB_FACTOR if a)
 
@@ -118,13 +131,14 @@ class LearnerParams:
     family: str = "thesis"  # one of FAMILIES
     retention: float = 0.9  # A of the error_based family
     step: float = 4.0  # fixed_step: degrees RMS per trial
+    adverb_response: float = 1.0  # error_based: r, how a word changes the error taken up (< 0: less)
 
     def check(self) -> "LearnerParams":
         if self.family not in FAMILIES:
             raise BadInput(f"learner family must be one of {', '.join(FAMILIES)}, got {self.family!r}", field="family")
         for name, lo, hi in (("gain", 0.0, 1.0), ("threshold", 0.0, 90.0), ("overshoot", 0.0, 5.0),
                              ("noise", 0.0, 30.0), ("tempo", 0.5, 2.0), ("adverb_sensitivity", 0.0, 5.0),
-                             ("retention", 0.0, 1.0), ("step", 0.0, 90.0)):
+                             ("retention", 0.0, 1.0), ("step", 0.0, 90.0), ("adverb_response", -3.0, 3.0)):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and lo <= v <= hi):
                 raise BadInput(f"learner {name} must be in [{lo}, {hi}], got {v}", field=name)
@@ -144,7 +158,7 @@ def population(n: int, seed: int = 0, family: str = "thesis", replicate: int = 0
     gain U(0.15, 0.45); threshold U(1.5, 6) deg; overshoot U(0.1, 0.6); noise U(0.3, 1.5) deg;
     tempo U(0.9, 1.1); adverb sensitivity U(0.5, 1.5); deviation on 1 or 2 random body parts
     with amplitude scale U(0.5, 0.8) and offset U(-8, 8) deg; retention U(0.8, 1.0); step
-    U(2, 8) deg. The same learner ``i`` has the same draws in every ``family`` (only the rules
+    U(2, 8) deg; adverb response U(-1.5, 1.5). The same learner ``i`` has the same draws in every ``family`` (only the rules
     differ). ``replicate`` > 0 gives the same learners fresh motor noise (a new session that is
     not a replay of an earlier one).
     """
@@ -163,6 +177,7 @@ def population(n: int, seed: int = 0, family: str = "thesis", replicate: int = 0
             deviation={p: {"scale": float(r.uniform(0.5, 0.8)), "offset": float(r.uniform(-8, 8))} for p in parts},
             seed=int(r.integers(0, 2**31 - 1)), family=family))
         out[-1].retention, out[-1].step = float(r.uniform(0.8, 1.0)), float(r.uniform(2.0, 8.0))
+        out[-1].adverb_response = float(r.uniform(-1.5, 1.5))
         if replicate:
             out[-1].seed = int(np.random.default_rng([out[-1].seed, replicate]).integers(0, 2**31 - 1))
     return out
@@ -185,7 +200,7 @@ class SimulatedLearner:
     """A learner of one target motion (see module docstring)."""
 
     def __init__(self, name: str, target: Clip, params: LearnerParams | None = None, memory: np.ndarray | None = None,
-                 trials: int = 0, reference: np.ndarray | None = None):
+                 trials: int = 0, reference: np.ndarray | None = None, fast: np.ndarray | None = None):
         self.name = name
         self.params = (params or LearnerParams()).check()
         self.target = target
@@ -200,6 +215,8 @@ class SimulatedLearner:
         self.memory = self._initial() if memory is None else np.asarray(memory, float)
         self.trials = trials
         self.reference = None if reference is None else np.asarray(reference, float)
+        # two_rate: the fast state x_f (the slow one is m - m0 - x_f)
+        self.fast = np.zeros_like(self.memory) if fast is None else np.asarray(fast, float)
 
     def _initial(self) -> np.ndarray:
         m = self.target_phase.copy()
@@ -237,11 +254,19 @@ class SimulatedLearner:
         elif p.family == "error_based":
             habit = self._initial()
             error = self.perceive((demo - self.performed()) * self._imitated)
-            self.memory = habit + p.retention * (self.memory - habit) + min(p.gain * a, 1.0) * error
+            response = 1.0 + p.adverb_response * (ADVERB_FACTOR[adverb] - 1.0)
+            self.memory = habit + p.retention * (self.memory - habit) + float(np.clip(p.gain * response, 0.0, 1.0)) * error
+        elif p.family == "two_rate":
+            habit = self._initial()
+            error = self.perceive((demo - self.performed()) * self._imitated)
+            k = TWO_RATE
+            slow = self.memory - habit - self.fast
+            self.fast = k["A_f"] * self.fast + k["B_f"] * error
+            self.memory = habit + self.fast + k["A_s"] * slow + k["B_s"] * error
         elif p.family == "copy":
             self.memory = self.memory + (demo - self.memory) * self._imitated
-        else:  # fixed_step
-            diff = self.perceive((demo - self.memory) * self._imitated)
+        else:  # fixed_step: direction only, no threshold (module docstring)
+            diff = (demo - self.memory) * self._imitated
             size = float(np.sqrt(np.mean(diff[:, self._imitated.astype(bool)] ** 2)))
             self.memory = self.memory + diff * (min(1.0, p.step / size) if size > 0 else 0.0)
         self.trials += 1

@@ -135,6 +135,8 @@ class AgentStore:
         arrays = {"target": t.data, "memory": lr.memory, "header": np.array(json.dumps(header))}
         if lr.reference is not None:
             arrays["reference"] = lr.reference
+        if np.any(lr.fast):
+            arrays["fast"] = lr.fast
         self._saving(self.learners, name, self.root / "learners" / f"{_check(name)}.npz", self._load_learner,
                      lambda f: np.savez(f, **arrays))
 
@@ -145,8 +147,9 @@ class AgentStore:
             sk = Skeleton.from_json(h["skeleton"]) if h["skeleton"] else None
             target = Clip(z["target"], h["channels"], h["fps"], sk, h["groups"], name=h["target_name"], label=h["label"])
             ref = z["reference"] if "reference" in z.files else None
+            fast = z["fast"] if "fast" in z.files else None
             return SimulatedLearner(h["name"], target, LearnerParams(**h["params"]), memory=z["memory"],
-                                    trials=int(h["trials"]), reference=ref)
+                                    trials=int(h["trials"]), reference=ref, fast=fast)
 
     # ------------------------------------------------------------------ both
     def delete(self, other: str | None = None, learner: str | None = None) -> str:

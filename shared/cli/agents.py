@@ -361,7 +361,7 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
               hdm05: Optional[Path] = typer.Option(None, help="HDM05 data (ch4-6 targets; default $MIRRORCOACH_HDM05 or ../shared/data/hdm05)."),
               targets: str = typer.Option("squat,throw", help="Targets for ch4-6: squat, throw."),
               families: str = typer.Option("all", help="Learner families for ch4-6, comma-separated: thesis, "
-                                           "error_based, copy, fixed_step (default all; issue 14)."),
+                                           "error_based, two_rate, copy, fixed_step (default all)."),
               sensitivity_learners: int = typer.Option(8, help="Learners per setting of each family's sensitivity "
                                                        "sweep (ch4-6; 0 skips it).")):
     """Rerun the thesis's experiments on the cluster (simulated agents) and write reports with plots."""

@@ -66,7 +66,7 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
                 subgoal: bool = typer.Option(False, "--subgoal", help="Coach through sub-goals, worst body part first "
                                              "(thesis 4.6, 7.3)."),
                 family: str = typer.Option("thesis", help="Simulated learner's family: thesis, error_based, copy, "
-                                           "fixed_step (shared/agents/learner.py)."),
+                                           "two_rate, fixed_step (shared/agents/learner.py)."),
                 policy_file: Optional[Path] = typer.Option(None, help="A fitted policy (JSON)."),
                 mode: str = typer.Option("residual", help="residual (emphasis on the real target) or thesis (F_gen(x_s))."),
                 skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
@@ -142,7 +142,7 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
               policy: str = typer.Option("fixed"), alpha: float = typer.Option(2.0), adverb: str = typer.Option("table"),
               body_part: bool = typer.Option(False, "--body-part"), policy_file: Optional[Path] = typer.Option(None),
               subgoal: bool = typer.Option(False, "--subgoal", help="Coach through sub-goals (thesis 4.6, 7.3)."),
-              family: str = typer.Option("thesis", help="Learner family: thesis, error_based, copy, fixed_step."),
+              family: str = typer.Option("thesis", help="Learner family: thesis, error_based, two_rate, copy, fixed_step."),
               as_json: bool = typer.Option(False, "--json")):
     """Coach a simulated learner for a number of trials (a simulation, not a person)."""
     with _client() as c:
