@@ -59,6 +59,9 @@ TRIAL = Map({
     "adverb": F(Str(max_len=32), "what the coach says", required=False),
     "feasible": F(Bool(), "whether the policy's alpha passed the simulator's check"),
     "alpha_reduced": F(Bool()), "feasibility": F(Str(max_len=1000)),
+    "emphasis_kept": F(Float(0.0), "when the emphatic motion was made feasible (joint angles held at their limits, "
+                       "the emphasis taken out where the balance fails): the RMS share of its difference from the "
+                       "target kept", required=False),
     "part": F(Str(max_len=16), "the body part emphasised (body-part policy)", required=False),
     "goal": F(Str(max_len=64), "the proto-symbol emphasised towards: target, or a sub-goal", required=False),
     "shares": F(AnyMap(), "share of the error per body part"),

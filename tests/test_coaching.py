@@ -161,3 +161,62 @@ def test_sub_goal_coaching_plans_parts_by_error_and_moves_on(squat):
     assert not np.allclose(mid.select(rest), squat.select(rest))
     with pytest.raises(BadInput, match="not both"):
         Policy("fixed", body_part=True, subgoal=True).check()
+
+
+def test_an_infeasible_emphatic_motion_is_made_feasible_where_it_can_be(squat):
+    """Joint angles beyond their limits are held at them, channel by channel; phases where the
+    centre of gravity leaves the support go back to the target, the rest keeps its emphasis;
+    the repaired motion passes the check and the reply says what was changed."""
+    from shared.coaching.session import _outside_frames, _worse, make_feasible
+
+    ports = LocalCoachPorts(squat.skeleton)
+    target_report, _ = ports.perform(squat)
+    perform = lambda c: ports.perform(c)[0]  # noqa: E731
+    # 1. one knee bent 60 degrees past its limit in the middle third
+    k = squat.channels.index("rtibia.rx")
+    data = squat.data.copy()
+    n = squat.n_frames
+    mid = slice(n // 3, 2 * n // 3)
+    report = perform(squat.with_data(data))
+    assert _worse(report, target_report, squat) is None
+    over = max(float(squat.column("rtibia.rx").max()), 170.0) + 60.0
+    data[mid, k] = over
+    bent = squat.with_data(data)
+    report = perform(bent)
+    assert "rtibia.rx" in (_worse(report, target_report, squat) or "")
+    fixed, changes = make_feasible(squat, bent, report, target_report, squat, perform)
+    assert _worse(perform(fixed), target_report, squat) is None and "rtibia.rx" in changes[0]
+    others = [i for i in range(len(squat.channels)) if i != k]
+    np.testing.assert_array_equal(fixed.data[:, others], bent.data[:, others])  # nothing else touched
+    # 2. the whole body leaning over (the root pitched 40 degrees) in the middle third only
+    data = squat.data.copy()
+    r = squat.channels.index(f"{squat.skeleton.root.name}.rx")
+    ramp = np.clip(np.sin(np.linspace(-np.pi / 2, 3 * np.pi / 2, n)), 0, 1)  # 0 at both ends, 1 in the middle
+    data[:, r] += 40.0 * ramp
+    lean = squat.with_data(data)
+    report = perform(lean)
+    assert "centre of gravity" in (_worse(report, target_report, squat) or "")
+    fixed, changes = make_feasible(squat, lean, report, target_report, squat, perform)
+    after = perform(fixed)
+    assert _worse(after, target_report, squat) is None and any("centre of gravity" in c for c in changes)
+    outside = _outside_frames(report, n)
+    kept = ~outside & (np.abs(fixed.data[:, r] - lean.data[:, r]) < 1e-9)
+    assert kept.sum() > 0.3 * n  # the emphasis stays where the balance held
+
+
+def test_a_session_shows_the_repaired_emphasis_instead_of_lowering_alpha(bundled):
+    """The target the issue found alpha 0 on every trial (a squat of actor dg): the policy's
+    alpha is shown, made feasible, and the record says how much of the emphasis was kept."""
+    from shared.io import load_clip
+
+    target = load_clip(sorted((bundled / "amc/squat1Reps").glob("*.amc"))[-1]).resample(30)
+    ports = LocalCoachPorts(target.skeleton)
+    s = Session("f", target, Policy("fixed", alpha=2.0, adverb="table"))
+    start(s, ports)
+    learner = SimulatedLearner("l", target, population(2, 0)[0])
+    demo, adverb = target, None
+    for _ in range(3):
+        rec, demo = trial(s, learner.imitate(demo, adverb), ports)
+        adverb = rec.adverb
+        assert rec.alpha_shown == 2.0 and not rec.alpha_reduced, rec.feasibility
+        assert rec.emphasis_kept is None or (0.0 < rec.emphasis_kept <= 1.0 and "made feasible" in rec.feasibility)

@@ -68,6 +68,7 @@ def trial_reply(session: Session, rec: Trial, demo: Clip) -> dict:
     return {"session": session.name, "trial": rec.number, "d_p": rec.d_p, "d_cop": rec.d_cop, "alpha": rec.alpha,
             "alpha_shown": rec.alpha_shown, "adverb": rec.adverb, "feasible": rec.feasible,
             "alpha_reduced": rec.alpha_reduced, "feasibility": rec.feasibility, "part": rec.part,
+            **({"emphasis_kept": rec.emphasis_kept} if rec.emphasis_kept is not None else {}),
             "shares": rec.shares, "goal": rec.goal, "emphatic": clip_to_wire(demo), "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
             "seconds": rec.seconds}
 

@@ -211,6 +211,7 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
             pts[t, 2 * k + 1] = data.xipos[b] * 2 - data.xpos[b]  # far end of the segment
     ground = pts[..., up].min()
     outside, airborne, worst = 0, 0, 0.0
+    flags = np.zeros(len(q), bool)
     for t in range(len(q)):
         contact = pts[t][pts[t][:, up] < ground + 0.05][:, plane]
         c = cog[t, plane]
@@ -227,9 +228,13 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
             dist = float(np.linalg.norm(c - (a + s * ab)))
         if dist > margin:
             outside += 1
+            flags[t] = True
             worst = max(worst, dist - margin)
+    edges = np.flatnonzero(np.diff(np.r_[0, flags.astype(int), 0]))
     return {"checked": True, "frames_outside_support": outside, "frames_airborne": airborne,
-            "max_distance_outside_m": worst, "margin_m": margin}
+            "max_distance_outside_m": worst, "margin_m": margin,
+            # which frames, as [start, stop) runs: where a demonstration must keep its balance
+            "outside_runs": [[int(a), int(b)] for a, b in zip(edges[::2], edges[1::2])]}
 
 
 def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:

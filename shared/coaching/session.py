@@ -76,6 +76,7 @@ class Trial:
     x_s: list
     seconds: float = 0.0
     goal: str = "target"  # the proto-symbol emphasised towards (a sub-goal, or the target)
+    emphasis_kept: float | None = None  # share of the emphatic motion's difference from the base kept by the repair
 
 
 @dataclass
@@ -143,6 +144,80 @@ def _worse(report: dict, target_report: dict, target: Clip) -> str | None:
     return None
 
 
+def _outside_frames(report: dict, n: int) -> np.ndarray:
+    """Frames (n,) whose centre of gravity the report found outside the support."""
+    out = np.zeros(n, bool)
+    for a, b in (report.get("support") or {}).get("outside_runs") or []:
+        out[max(a, 0):min(b, n)] = True
+    return out
+
+
+def make_feasible(base: Clip, demo: Clip, report: dict, target_report: dict, target: Clip,
+                  perform) -> tuple[Clip, list[str]]:
+    """Repair an emphatic motion the body cannot perform, keeping the emphasis where it is
+    possible instead of lowering alpha for the whole motion (``perform(clip) -> report``):
+
+    1. per channel: each joint angle held within ``LIMIT_TOLERANCE / 2`` of its limit (or of the
+       target's own extreme, when the target goes further);
+    2. per phase: where the centre of gravity leaves the support and the target's does not, the
+       demonstration blends back to the base motion (the target, or the sub-goal), with 0.2 s
+       ramps; widened twice if that is not enough.
+
+    Returns the repaired motion (on ``demo``'s frames) and what was changed, one phrase per
+    change; the caller checks the result (``_worse``) and lowers alpha only if it still fails."""
+    base = base.resample(demo.fps) if base.n_frames != demo.n_frames else base
+    n = min(base.n_frames, demo.n_frames)
+    out = demo.data[:n].copy()
+    ref = base.data[:n]
+    changes = []
+    clamped = []
+    for c, v in report.get("joint_limit_violations", {}).items():
+        if c not in demo.channels:
+            continue
+        lo, hi = v["limits"]
+        if c in target.channels:
+            lo, hi = min(lo, float(target.column(c).min())), max(hi, float(target.column(c).max()))
+        k = demo.channels.index(c)
+        before = out[:, k].copy()
+        out[:, k] = np.clip(out[:, k], lo - LIMIT_TOLERANCE / 2, hi + LIMIT_TOLERANCE / 2)
+        if not np.array_equal(before, out[:, k]):
+            clamped.append(c)
+    if clamped:
+        changes.append(f"{len(clamped)} joint angle(s) held at their limits ({', '.join(clamped[:4])}"
+                       + (", ..." if len(clamped) > 4 else "") + ")")
+    fixed = demo.with_data(np.vstack([out, demo.data[n:]]))
+    t_out = _outside_frames(target_report, target.n_frames)
+    ramp = max(1, int(round(0.2 * demo.fps)))
+    for widen in (1, 2, 3):
+        rep = perform(fixed)
+        if _worse(rep, target_report, target) is None or not (rep.get("support") or {}).get("checked"):
+            break
+        grid = np.linspace(0, target.n_frames - 1, n).round().astype(int)
+        bad = _outside_frames(rep, n) & ~t_out[grid]
+        if not bad.any():
+            break
+        w = np.convolve(bad.astype(float), np.ones(2 * widen * ramp + 1), mode="same") > 0  # widened phases
+        kernel = np.hanning(2 * ramp + 1)
+        w = np.clip(np.convolve(w.astype(float), kernel / kernel.sum(), mode="same"), 0.0, 1.0)
+        out = out - w[:, None] * (out - ref)
+        fixed = demo.with_data(np.vstack([out, demo.data[n:]]))
+        changes = [c for c in changes if not c.startswith("the emphasis taken out")]
+        changes.append(f"the emphasis taken out of {np.mean(w > 0.5):.0%} of the frames, where the centre of gravity "
+                       "left the support")
+    return fixed, changes
+
+
+def _emphasis_kept(base: Clip, demo: Clip, fixed: Clip) -> float:
+    """The RMS of the repaired motion's difference from the base over the emphatic one's."""
+    n = min(base.n_frames, demo.n_frames, fixed.n_frames)
+    chans = [c for c in (base.group("motion") or base.channels) if c in demo.channels]
+    idx = [demo.channels.index(c) for c in chans]
+    b = base.resample(demo.fps).data[:n][:, [base.channels.index(c) for c in chans]] if base.n_frames != demo.n_frames \
+        else base.data[:n][:, [base.channels.index(c) for c in chans]]
+    full = np.sqrt(np.mean((demo.data[:n][:, idx] - b) ** 2))
+    return float(np.sqrt(np.mean((fixed.data[:n][:, idx] - b) ** 2)) / full) if full > 0 else 1.0
+
+
 def _d_cop(target_cog: np.ndarray, attempt_cog: np.ndarray) -> float:
     """6.5: HMM distance between the centre-of-gravity trajectories of target and attempt
     (left-to-right HMMs of 6 states on the CoG in centimetres)."""
@@ -159,10 +234,12 @@ def _wrap(deg: np.ndarray) -> np.ndarray:
     return (deg + 180.0) % 360.0 - 180.0
 
 
-def _root_rotation_residual(target: Clip, gs: np.ndarray, gt: np.ndarray, chans: list[str], seq: str) -> dict:
-    """The root's emphasis as a rotation, not as Euler differences (a root Euler triple can
-    flip to its twin ``(a + 180, 180 - b, c + 180)``): ``M = M_target M_gt^-1 M_gs``, then the
-    Euler triple of ``M`` nearest to the target's, frame by frame."""
+def _rotation_residual(target: Clip, gs: np.ndarray, gt: np.ndarray, chans: list[str], seq: str) -> dict:
+    """A joint's emphasis as a rotation, not as Euler differences (an Euler triple can flip to
+    its twin ``(a + 180, 180 - b, c + 180)``, and the generated motions of two points may sit
+    on different twins: per channel, the difference of a hip's triples reached 200 degrees
+    where the rotations differ by a few): ``M = M_target M_gt^-1 M_gs``, then the Euler triple
+    of ``M`` nearest to the target's, frame by frame."""
     from scipy.spatial.transform import Rotation
 
     axes = [a for a in seq.lower() if f"r{a}" in [c.split(".")[-1] for c in chans]]
@@ -187,8 +264,9 @@ def residual_emphasis(target: Clip, generated_s: Clip, generated_t: Clip) -> Cli
     ``F_gen`` returns motions in a canonical frame (heading 0 and the start at the origin, the
     features being turn-invariant) with generation error; the difference of two generations
     from the same space keeps the emphasis and cancels both, so alpha = 0 shows the target
-    exactly. Angle differences are wrapped to (-180, 180]; the root's orientation is combined
-    as a rotation (see ``_root_rotation_residual``)."""
+    exactly. A joint with three rotation channels (the root's orientation, a hip, a shoulder)
+    is combined as a rotation (:func:`_rotation_residual`); the angles of joints with fewer
+    are differences wrapped to (-180, 180]."""
     grid = np.linspace(0, 1, target.n_frames)
     out = target.data.copy()
     sk = target.skeleton
@@ -199,17 +277,22 @@ def residual_emphasis(target: Clip, generated_s: Clip, generated_t: Clip) -> Cli
     def resampled(clip, c):
         return np.interp(grid, np.linspace(0, 1, clip.n_frames), clip.column(c))
 
-    root_rot = [c for c in chans if root is not None and c.startswith(f"{root}.r")]
+    balls = {}  # joint -> (its three rotation channels, its Euler order)
+    for j in sk.joints if sk is not None else []:
+        rot = [f"{j.name}.r{a}" for a in (j.euler or "xyz").lower()]
+        if all(c in chans for c in rot):
+            balls[j.name] = (rot, j.euler or "xyz")
+    in_balls = {c for rot, _ in balls.values() for c in rot}
     for c in chans:
-        if c in root_rot:
+        if c in in_balls:
             continue
         s, t = resampled(generated_s, c), resampled(generated_t, c)
         diff = s - t if c.split(".")[-1].startswith("t") else _wrap(s - t)
         out[:, target.channels.index(c)] += diff
-    if root_rot:
-        gs = np.column_stack([resampled(generated_s, c) for c in root_rot])
-        gt = np.column_stack([resampled(generated_t, c) for c in root_rot])
-        for c, v in _root_rotation_residual(target, gs, gt, root_rot, sk.root.euler or "xyz").items():
+    for rot, seq in balls.values():
+        gs = np.column_stack([resampled(generated_s, c) for c in rot])
+        gt = np.column_stack([resampled(generated_t, c) for c in rot])
+        for c, v in _rotation_residual(target, gs, gt, rot, seq).items():
             out[:, target.channels.index(c)] = v
     return target.with_data(out, name=generated_s.name)
 
@@ -298,7 +381,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
         report, _ = ports.perform(demo)
         return _worse(report, session.target_report, session.target) if session.target_report else None
 
-    shown, reduced = alpha, False
+    shown, reduced, kept = alpha, False, None
     demo = show(alpha)
     if alpha <= 0:
         reason = "no emphasis"
@@ -311,6 +394,14 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
         if session.target_report is None or (session.target_report.get("feasible") is None and "not_checked" in
                                              session.target_report):
             reason = "not checked: " + ("; ".join(unchecked) or "no simulator body for this target")
+        if first is not None:
+            # made feasible where it is not, the emphasis kept elsewhere (make_feasible)
+            fixed, changes = make_feasible(base, demo, ports.perform(demo)[0], session.target_report, session.target,
+                                           lambda c: ports.perform(c)[0])
+            if changes and why_not(fixed) is None:
+                kept = _emphasis_kept(base, demo, fixed)
+                reason = f"alpha {alpha:g} made feasible ({first}): {'; '.join(changes)}; {kept:.0%} of the emphasis kept"
+                demo, first = fixed, None
         if first is not None:
             # the largest feasible alpha on the grid 0.25, 0.5, ... below the policy's, by
             # bisection (feasibility falls with alpha): log2 checks instead of one per step
@@ -333,7 +424,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
     x_g = pts.get(goal, x_t)
     x_s = x_g + shown * (x_g - x_p)
     rec = Trial(number, float(d_p), float(alpha), float(shown), adverb, not reduced, reduced, reason, part,
-                shares, d_cop, x_t.tolist(), x_p.tolist(), x_s.tolist(), time.perf_counter() - t0, goal)
+                shares, d_cop, x_t.tolist(), x_p.tolist(), x_s.tolist(), time.perf_counter() - t0, goal, kept)
     session.trials.append(rec)
     return rec, demo.with_data(demo.data, name=f"{session.name}_emphatic{number}")
 
