@@ -132,3 +132,33 @@ def test_a_body_from_the_bvh_skeleton_agrees_with_the_asf_one(bundled, tmp_path)
     # joints with the same degrees of freedom feel the same torques
     for ch in ("tau.lowerback.rx", "tau.ltibia.rx"):
         assert np.abs(pa.column(ch)).max() == pytest.approx(np.abs(pb.column(ch)).max(), rel=0.1), ch
+
+
+def test_the_dynamic_balance_check_sees_what_the_static_one_cannot(bundled):
+    """The centre of pressure (zero-moment point) from the free root's inverse dynamics: for a
+    pose held still it is the centre of gravity's ground projection (the weight, straight
+    down); arms swung fast keep the centre of gravity over the feet but need a centre of
+    pressure outside them, more often the faster they swing."""
+    from shared.bodies.body import _centre_of_pressure, _qpos_trajectory, _root_wrench, inverse_dynamics, perform
+    from shared.bodies.human import human_body
+    from shared.io import load_clip
+
+    clip = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc").resample(30)
+    body = human_body(clip.skeleton)
+    still = clip.with_data(np.repeat(clip.data[10:11], 60, axis=0))
+    q = _qpos_trajectory(body, still)
+    _, _, tau, cog = inverse_dynamics(body, q, still.fps)
+    force, moment, origin = _root_wrench(body, q, tau)
+    plane = [i for i in range(3) if i != body.up_axis]
+    np.testing.assert_allclose(force[:, body.up_axis], body.mass * 9.81, rtol=1e-6)
+    np.testing.assert_allclose(_centre_of_pressure(force, moment, origin, body.up_axis, 0.0), cog[:, plane], atol=1e-6)
+    assert perform(body, still)[1]["support"]["frames_dynamic_outside"] == 0
+    counts = []
+    for hz in (0.5, 2.5):
+        data = still.data.copy()
+        for arm in ("lhumerus.rx", "rhumerus.rx"):
+            data[:, clip.channels.index(arm)] += 40.0 * np.sin(2 * np.pi * hz * np.arange(60) / 30.0)
+        s = perform(body, still.with_data(data))[1]["support"]
+        assert s["frames_outside_support"] == 0  # statically balanced throughout
+        counts.append(s["frames_dynamic_outside"])
+    assert counts[1] > counts[0] and counts[1] > 20, counts

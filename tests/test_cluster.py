@@ -207,6 +207,11 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
     for fig in ("fig3_6.png", "fig3_7.png", "fig3_8.png", "fig3_14_15.png"):
         assert fig in report and (tmp_path / "rep/ch3" / fig).stat().st_size > 10_000
     assert "simulated agents" in report and "| 6 |" in report
+    # the same seed again on the same (now used) cluster: the same numbers, bit for bit
+    r = cli(env, "reproduce", "ch3", "--out", tmp_path / "again", "--sets", "1", "--others", "1", "--kinds",
+            "mass,joints", timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert (tmp_path / "again/ch3/results.json").read_bytes() == (tmp_path / "rep/ch3/results.json").read_bytes()
 
 
 def test_coaching_from_the_cli(cluster, bundled, tmp_path):

@@ -191,11 +191,67 @@ def inverse_dynamics(body: Body, q: np.ndarray, fps: float, warnings: dict | Non
     return v, a, tau, cog
 
 
-def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 0.05) -> dict:
-    """Frames whose centre-of-gravity ground projection is outside the support area."""
+def _root_wrench(body: Body, q: np.ndarray, tau: np.ndarray):
+    """The ground reaction the motion needs: the free root's generalised forces from inverse
+    dynamics as a world force ``F`` (T, 3) and a world moment ``M`` (T, 3) about the root's
+    origin ``r`` (T, 3); ``None`` for a body without a free root."""
+    m = body.model
+    free = [j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    if not free:
+        return None
+    qa, da = int(m.jnt_qposadr[free[0]]), int(m.jnt_dofadr[free[0]])
+    rot = np.empty(9)
+    moment = np.empty((len(q), 3))
+    for t in range(len(q)):
+        mujoco.mju_quat2Mat(rot, q[t, qa + 3:qa + 7])
+        moment[t] = rot.reshape(3, 3) @ tau[t, da + 3:da + 6]  # a free joint's rotational forces are in its body's frame
+    return tau[:, da:da + 3], moment, q[:, qa:qa + 3]
+
+
+def _centre_of_pressure(force: np.ndarray, moment: np.ndarray, origin: np.ndarray, up: int, ground: float) -> np.ndarray:
+    """The point ``p`` on the ground plane about which the ground reaction has no horizontal
+    moment (the zero-moment point): ``[M + (origin - p) x F]_horizontal = 0``, solved per frame."""
+    plane = [i for i in range(3) if i != up]
+    out = np.full((len(force), 2), np.nan)
+    for t in range(len(force)):
+        def horizontal(pa, pb, t=t):
+            p = np.empty(3)
+            p[plane[0]], p[plane[1]], p[up] = pa, pb, ground
+            return (moment[t] + np.cross(origin[t] - p, force[t]))[plane]
+        f0 = horizontal(0.0, 0.0)
+        a = np.column_stack([horizontal(1.0, 0.0) - f0, horizontal(0.0, 1.0) - f0])
+        if abs(np.linalg.det(a)) > 1e-9:
+            out[t] = np.linalg.solve(a, -f0)
+    return out
+
+
+def _hull_distance(contact: np.ndarray, c: np.ndarray) -> float:
+    """Signed distance (m) of the ground point ``c`` outside the convex hull of ``contact``
+    (negative inside); a segment's distance when the points do not span an area."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = ConvexHull(contact)
+        return float(np.max(hull.equations[:, :2] @ c + hull.equations[:, 2]))
+    except (QhullError, ValueError):  # fewer than 3 points or collinear: distance to the segment
+        a, b = contact.min(axis=0), contact.max(axis=0)
+        ab = b - a
+        s = np.clip(np.dot(c - a, ab) / max(np.dot(ab, ab), 1e-12), 0, 1)
+        return float(np.linalg.norm(c - (a + s * ab)))
+
+
+def _runs(flags: np.ndarray) -> list[list[int]]:
+    edges = np.flatnonzero(np.diff(np.r_[0, flags.astype(int), 0]))
+    return [[int(a), int(b)] for a, b in zip(edges[::2], edges[1::2])]
+
+
+def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 0.05, wrench=None) -> dict:
+    """Frames whose centre-of-gravity ground projection is outside the support area (static
+    balance) and, with the root's ``wrench`` (:func:`_root_wrench`), frames whose centre of
+    pressure (zero-moment point) is outside it or whose ground would have to pull (dynamic
+    balance: no controller can follow such a frame without tipping, whatever its gains)."""
     if not body.feet:
         return {"checked": False}
-    from scipy.spatial import ConvexHull, QhullError
 
     m = body.model
     data = mujoco.MjData(m)
@@ -212,29 +268,32 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
     ground = pts[..., up].min()
     outside, airborne, worst = 0, 0, 0.0
     flags = np.zeros(len(q), bool)
+    dyn = np.zeros(len(q), bool)
+    cop = None if wrench is None else _centre_of_pressure(*wrench, up, ground)
+    weight = float(body.mass) * 9.81
     for t in range(len(q)):
         contact = pts[t][pts[t][:, up] < ground + 0.05][:, plane]
         c = cog[t, plane]
         if len(contact) == 0:
             airborne += 1
             continue
-        try:
-            hull = ConvexHull(contact)
-            dist = float(np.max(hull.equations[:, :2] @ c + hull.equations[:, 2]))
-        except (QhullError, ValueError):  # fewer than 3 points or collinear: distance to the segment
-            a, b = contact.min(axis=0), contact.max(axis=0)
-            ab = b - a
-            s = np.clip(np.dot(c - a, ab) / max(np.dot(ab, ab), 1e-12), 0, 1)
-            dist = float(np.linalg.norm(c - (a + s * ab)))
+        dist = _hull_distance(contact, c)
         if dist > margin:
             outside += 1
             flags[t] = True
             worst = max(worst, dist - margin)
-    edges = np.flatnonzero(np.diff(np.r_[0, flags.astype(int), 0]))
-    return {"checked": True, "frames_outside_support": outside, "frames_airborne": airborne,
-            "max_distance_outside_m": worst, "margin_m": margin,
-            # which frames, as [start, stop) runs: where a demonstration must keep its balance
-            "outside_runs": [[int(a), int(b)] for a, b in zip(edges[::2], edges[1::2])]}
+        if wrench is not None:
+            push = float(wrench[0][t, up])
+            # the ground pulls (more than a tenth of the weight), or its push acts outside the feet
+            dyn[t] = push < -0.1 * weight or (push > 0.1 * weight and np.all(np.isfinite(cop[t]))
+                                              and _hull_distance(contact, cop[t]) > margin)
+    out = {"checked": True, "frames_outside_support": outside, "frames_airborne": airborne,
+           "max_distance_outside_m": worst, "margin_m": margin,
+           # which frames, as [start, stop) runs: where a demonstration must keep its balance
+           "outside_runs": _runs(flags)}
+    if wrench is not None:
+        out.update(dynamic_checked=True, frames_dynamic_outside=int(dyn.sum()), dynamic_runs=_runs(dyn))
+    return out
 
 
 def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
@@ -253,7 +312,7 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
         bad = int(np.sum((x < lo - 1.0) | (x > hi + 1.0)))
         if bad:
             limits[d.channel] = {"frames": bad, "min": float(x.min()), "max": float(x.max()), "limits": [lo, hi]}
-    support = _support_report(body, q, cog)
+    support = _support_report(body, q, cog, wrench=_root_wrench(body, q, tau))
     not_checked = []
     if not limited:
         not_checked.append("joint limits (the body has none for this clip's channels)")

@@ -116,6 +116,7 @@ def check_attempts(session: Session, attempts: list[Clip]) -> None:
                            "at least 10 frames and 0.3 s", field="clips")
 
 
+MIN_KEPT = 0.5  # a repair that keeps less of the emphasis than this lowers alpha instead
 LIMIT_TOLERANCE = 10.0  # degrees past max(limit, the target's own extreme) before a channel counts
 SUPPORT_TOLERANCE = 0.10  # more frames outside the support than the target's, as a share of the frames
 
@@ -141,13 +142,20 @@ def _worse(report: dict, target_report: dict, target: Clip) -> str | None:
         t_frac = ts["frames_outside_support"] / max(target_report["frames"], 1)
         if frac > t_frac + SUPPORT_TOLERANCE:
             return f"the centre of gravity leaves the support on {frac:.0%} of the frames (target {t_frac:.0%})"
+    if s.get("dynamic_checked") and ts.get("dynamic_checked"):
+        frac = s["frames_dynamic_outside"] / max(report["frames"], 1)
+        t_frac = ts["frames_dynamic_outside"] / max(target_report["frames"], 1)
+        if frac > t_frac + SUPPORT_TOLERANCE:
+            return (f"the ground reaction it needs acts outside the feet (centre of pressure) or pulls on {frac:.0%} "
+                    f"of the frames (target {t_frac:.0%}): it would tip over")
     return None
 
 
-def _outside_frames(report: dict, n: int) -> np.ndarray:
-    """Frames (n,) whose centre of gravity the report found outside the support."""
+def _outside_frames(report: dict, n: int, kind: str = "outside_runs") -> np.ndarray:
+    """Frames (n,) the report found off balance: the centre of gravity outside the support
+    (``outside_runs``, static) or the centre of pressure outside it (``dynamic_runs``)."""
     out = np.zeros(n, bool)
-    for a, b in (report.get("support") or {}).get("outside_runs") or []:
+    for a, b in (report.get("support") or {}).get(kind) or []:
         out[max(a, 0):min(b, n)] = True
     return out
 
@@ -159,8 +167,8 @@ def make_feasible(base: Clip, demo: Clip, report: dict, target_report: dict, tar
 
     1. per channel: each joint angle held within ``LIMIT_TOLERANCE / 2`` of its limit (or of the
        target's own extreme, when the target goes further);
-    2. per phase: where the centre of gravity leaves the support and the target's does not, the
-       demonstration blends back to the base motion (the target, or the sub-goal), with 0.2 s
+    2. per phase: where the balance fails and the target's does not (the centre of gravity, or
+       the centre of pressure the motion needs, outside the support), the demonstration blends back to the base motion (the target, or the sub-goal), with 0.2 s
        ramps; widened twice if that is not enough.
 
     Returns the repaired motion (on ``demo``'s frames) and what was changed, one phrase per
@@ -185,26 +193,73 @@ def make_feasible(base: Clip, demo: Clip, report: dict, target_report: dict, tar
     if clamped:
         changes.append(f"{len(clamped)} joint angle(s) held at their limits ({', '.join(clamped[:4])}"
                        + (", ..." if len(clamped) > 4 else "") + ")")
+    from shared.agents.learner import BODY_PARTS, body_part
+
     fixed = demo.with_data(np.vstack([out, demo.data[n:]]))
-    t_out = _outside_frames(target_report, target.n_frames)
     ramp = max(1, int(round(0.2 * demo.fps)))
-    for widen in (1, 2, 3):
-        rep = perform(fixed)
+    grid = np.linspace(0, target.n_frames - 1, n).round().astype(int)
+    target_bad = {kind: _outside_frames(target_report, target.n_frames, kind)[grid]
+                  for kind in ("outside_runs", "dynamic_runs")}
+    parts = np.array([body_part(c) for c in demo.channels])
+    taken: dict[str, float] = {}  # body part (or "all") -> share of the frames its emphasis was taken from
+
+    def off_balance(report) -> np.ndarray:
+        bad = np.zeros(n, bool)  # off balance where the target is not, by each test
+        for kind, t_bad in target_bad.items():
+            bad |= _outside_frames(report, n, kind) & ~t_bad
+        return bad
+
+    def phases(bad: np.ndarray, widen: int) -> np.ndarray:
+        w = _centred(bad.astype(float), np.ones(2 * widen * ramp + 1)) > 0  # widened phases
+        kernel = np.hanning(2 * ramp + 1)
+        return np.clip(_centred(w.astype(float), kernel / kernel.sum()), 0.0, 1.0)
+
+    rep = perform(fixed)
+    # first the body part whose emphasis, taken out of the phases off balance, helps most (the
+    # others keep theirs); then, if the balance still fails, every part in ever wider phases
+    for step in range(len(BODY_PARTS) + 5):
         if _worse(rep, target_report, target) is None or not (rep.get("support") or {}).get("checked"):
             break
-        grid = np.linspace(0, target.n_frames - 1, n).round().astype(int)
-        bad = _outside_frames(rep, n) & ~t_out[grid]
+        bad = off_balance(rep)
         if not bad.any():
             break
-        w = np.convolve(bad.astype(float), np.ones(2 * widen * ramp + 1), mode="same") > 0  # widened phases
-        kernel = np.hanning(2 * ramp + 1)
-        w = np.clip(np.convolve(w.astype(float), kernel / kernel.sum(), mode="same"), 0.0, 1.0)
-        out = out - w[:, None] * (out - ref)
-        fixed = demo.with_data(np.vstack([out, demo.data[n:]]))
-        changes = [c for c in changes if not c.startswith("the emphasis taken out")]
-        changes.append(f"the emphasis taken out of {np.mean(w > 0.5):.0%} of the frames, where the centre of gravity "
-                       "left the support")
+        if step < len(BODY_PARTS):
+            w = phases(bad, 1)
+            tries = []
+            for part in BODY_PARTS:
+                if part in taken:
+                    continue
+                mask = (parts == part).astype(float)
+                trial_out = out - w[:, None] * mask[None, :] * (out - ref)
+                trial_clip = demo.with_data(np.vstack([trial_out, demo.data[n:]]))
+                trial_rep = perform(trial_clip)
+                tries.append((int(off_balance(trial_rep).sum()), part, trial_out, trial_clip, trial_rep))
+            if not tries:
+                continue
+            count, part, trial_out, trial_clip, trial_rep = min(tries, key=lambda x: x[0])
+            if count >= int(bad.sum()):  # no part alone helps: go on to every part
+                taken.setdefault("parts tried", 0.0)
+                continue
+            out, fixed, rep = trial_out, trial_clip, trial_rep
+            taken[part] = float(np.mean(w > 0.5))
+        else:
+            w = phases(bad, step - len(BODY_PARTS) + 1)
+            out = out - w[:, None] * (out - ref)
+            fixed = demo.with_data(np.vstack([out, demo.data[n:]]))
+            rep = perform(fixed)
+            taken["all"] = max(taken.get("all", 0.0), float(np.mean(w > 0.5)))
+    taken.pop("parts tried", None)
+    if taken:
+        changes.append("the emphasis taken out where the body would lose its balance: " + ", ".join(
+            f"{'every part' if part == 'all' else part} on {share:.0%} of the frames" for part, share in taken.items()))
     return fixed, changes
+
+
+def _centred(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """``x`` convolved with ``kernel``, centred, as long as ``x`` (whichever is longer)."""
+    full = np.convolve(x, kernel, mode="full")
+    start = (len(kernel) - 1) // 2
+    return full[start:start + len(x)]
 
 
 def _emphasis_kept(base: Clip, demo: Clip, fixed: Clip) -> float:
@@ -398,10 +453,13 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
             # made feasible where it is not, the emphasis kept elsewhere (make_feasible)
             fixed, changes = make_feasible(base, demo, ports.perform(demo)[0], session.target_report, session.target,
                                            lambda c: ports.perform(c)[0])
-            if changes and why_not(fixed) is None:
-                kept = _emphasis_kept(base, demo, fixed)
+            share = _emphasis_kept(base, demo, fixed) if changes else 0.0
+            if share >= MIN_KEPT and why_not(fixed) is None:
+                kept = share
                 reason = f"alpha {alpha:g} made feasible ({first}): {'; '.join(changes)}; {kept:.0%} of the emphasis kept"
                 demo, first = fixed, None
+            elif changes:
+                first += f"; a repair kept {share:.0%} of the emphasis"
         if first is not None:
             # the largest feasible alpha on the grid 0.25, 0.5, ... below the policy's, by
             # bisection (feasibility falls with alpha): log2 checks instead of one per step
