@@ -33,8 +33,14 @@ import numpy as np
 
 from shared.errors import BadInput, Conflict
 
-#: the cases a study can run (thesis Table 4.2, 6.1, 6.4) and their policies
-STUDY_CASES = (1, 2, 3, 4, 5, 6, 7, 8)
+#: the per-person alpha sweep of thesis 5.4.1 (figs. 5.7, 5.8): case 10 + k shows alpha
+#: ``SWEEP_ALPHAS[k]`` without adverb, case 30 + k the same alpha with Table 4.1's adverb; each
+#: participant's best alphas then set cases 5 and 6 (EMU-Model 2, :func:`emu2_from_sweep`)
+SWEEP_ALPHAS = (0.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
+SWEEP_CASES = {**{10 + k: (a, None) for k, a in enumerate(SWEEP_ALPHAS)},
+               **{30 + k: (a, "table") for k, a in enumerate(SWEEP_ALPHAS)}}
+#: the cases a study can run (thesis Table 4.2, 6.1, 6.4, and the sweep) and their policies
+STUDY_CASES = (1, 2, 3, 4, 5, 6, 7, 8, *SWEEP_CASES)
 ADVERB_CHOICES = ("a little more", "more", "much more")
 
 
@@ -79,8 +85,60 @@ def plan(participants: int, cases: list[int], seed: int, trials: int = 4, emu2: 
             "design": "Williams balanced Latin square, rows assigned by a seeded permutation"}
 
 
+def case_name(case: int) -> str:
+    """How reports name a case: ``case 3``, or ``sweep alpha 1.5 + adverb``."""
+    if case in SWEEP_CASES:
+        a, adverb = SWEEP_CASES[case]
+        return f"sweep alpha {a:g}" + (" + adverb" if adverb else "")
+    return f"case {case}"
+
+
+def expand_cases(text: str) -> list[int]:
+    """``--cases`` as given: numbers separated by commas, ``sweep`` for the 14 sweep cases."""
+    out: list[int] = []
+    for item in (x.strip() for x in text.split(",")):
+        if not item:
+            continue
+        if item == "sweep":
+            out += list(SWEEP_CASES)
+            continue
+        try:
+            out.append(int(item))
+        except ValueError:
+            raise BadInput(f"--cases takes case numbers and 'sweep' separated by commas, got {item!r}",
+                           field="cases") from None
+    return out
+
+
+def emu2_from_sweep(p: dict, events: list[dict]) -> dict[str, list[float]]:
+    """EMU-Model 2 per participant (thesis 5.4.1, fig. 5.8): of the sweep's alphas, the one whose
+    session ended lowest (``R_l = d_l / d_1`` at the last trial, eq. 4.5), without and with the
+    adverb. A participant needs every trial of at least two alphas on each side."""
+    from shared.coaching.policies import best_alpha
+
+    done = trials_of(events)
+    out = {}
+    for person in p["participants"]:
+        pair = []
+        for adverb in (None, "table"):
+            ratio = {}
+            for case, (a, adv) in SWEEP_CASES.items():
+                rows = sorted(done.get((person, case), []), key=lambda e: e["trial"])
+                if adv == adverb and len(rows) == p["trials"] and rows[0]["d_p"] > 0:
+                    ratio[a] = rows[-1]["d_p"] / rows[0]["d_p"]
+            if len(ratio) < 2:
+                break
+            pair.append(best_alpha(ratio))
+        if len(pair) == 2:
+            out[person] = pair
+    return out
+
+
 def policy(p: dict, participant: str, case: int) -> dict:
-    """The coach's policy for one case (Table 4.2, 6.1, 6.4)."""
+    """The coach's policy for one case (Table 4.2, 6.1, 6.4; the sweep's)."""
+    if case in SWEEP_CASES:
+        a, adverb = SWEEP_CASES[case]
+        return {"kind": "fixed", "alpha": a, "adverb": adverb}
     if case == 1:
         return {"kind": "fixed", "alpha": 0.0, "adverb": None}
     if case == 2:
@@ -176,7 +234,7 @@ def trial_event(participant: str, case: int, t: dict, shown: str | None, recover
 
 def tidy(events: list[dict], target: str) -> list[dict]:
     """The study's trials as :mod:`shared.reproduce.tidy` rows (world ``people``)."""
-    return [{"world": "people", "family": "", "target": target, "condition": f"case {e['case']}",
+    return [{"world": "people", "family": "", "target": target, "condition": case_name(e["case"]),
              "unit": e["participant"], "trial": e["trial"], "d_p": e["d_p"], "alpha": e["alpha"], "adverb": e["adverb"]}
             for e in events if e.get("event") == "trial"]
 
@@ -236,6 +294,50 @@ def seat_report(rows: list[dict], folder: Path) -> list[str]:
         lines += [f"| {c} | {e['n']} | {e['alpha_eq5_5']:.2f} | {e['alpha_eq5_9']:.2f} |" for c, e in st["emu1"].items()]
         lines.append("")
     return lines
+
+
+def sweep_report(p: dict, events: list[dict], folder: Path) -> list[str]:
+    """The alpha sweep's section of a study report (figs. 5.7, 5.8 for people): R at the last
+    trial per participant and alpha, its mean, and each participant's EMU-Model 2 alphas."""
+    from shared.reproduce.coaching import _fig
+
+    done = trials_of(events)
+    people = list(p["participants"])
+    last = f"R_{p['trials']}"
+    series, lines = {}, [f"## Alpha sweep (thesis 5.4.1, figs. 5.7 / 5.8): {last} per participant", "",
+                         "| participant | adverb | " + " | ".join(f"alpha {a:g}" for a in SWEEP_ALPHAS) + " |",
+                         "|---|---|" + "---|" * len(SWEEP_ALPHAS)]
+    for adverb in (None, "table"):
+        cases = [c for c, (_, adv) in SWEEP_CASES.items() if adv == adverb]
+        grid = np.full((len(people), len(cases)), np.nan)
+        for i, person in enumerate(people):
+            for j, case in enumerate(cases):
+                rows = sorted(done.get((person, case), []), key=lambda e: e["trial"])
+                if len(rows) == p["trials"] and rows[0]["d_p"] > 0:
+                    grid[i, j] = rows[-1]["d_p"] / rows[0]["d_p"]
+            lines.append(f"| {person} | {'Table 4.1' if adverb else 'none'} | "
+                         + " | ".join("-" if np.isnan(v) else f"{v:.3f}" for v in grid[i]) + " |")
+        have = ~np.all(np.isnan(grid), axis=0)
+        if have.any():
+            series[f"{'with' if adverb else 'without'} adverb"] = (
+                [a for a, h in zip(SWEEP_ALPHAS, have) if h], np.nanmean(grid[:, have], axis=0), None, "o-")
+    emu2 = emu2_from_sweep(p, events)
+    lines += ["", "EMU-Model 2 (each participant's alpha that ended lowest, without / with the adverb): "
+              + (", ".join(f"{k} {v[0]:g} / {v[1]:g}" for k, v in emu2.items()) or "no participant has finished "
+                 "two alphas on both sides yet") + ". `study init --cases 5,6 --emu2 " + str(folder)
+              + "` coaches them with these alphas.", ""]
+    if series:
+        f57 = _fig(Path(folder) / "fig5_7.png", f"{last} against alpha, mean over participants (fig. 5.7)", "alpha",
+                   last, series, list(SWEEP_ALPHAS))
+        lines.append(f"![fig. 5.7]({f57})")
+    if emu2:
+        f58 = _fig(Path(folder) / "fig5_8.png", "EMU-Model 2's alpha per participant (fig. 5.8)", "participant",
+                   "best alpha of the sweep", {"without adverb": (list(range(len(emu2))), [v[0] for v in emu2.values()],
+                                                                  None, "o"),
+                                               "with adverb": (list(range(len(emu2))), [v[1] for v in emu2.values()],
+                                                               None, "s")}, list(range(len(emu2))))
+        lines.append(f"![fig. 5.8]({f58})")
+    return lines + [""]
 
 
 def check_new(folder: Path) -> None:

@@ -305,3 +305,17 @@ def test_the_report_s_word_against_the_target_alone_is_computed_from_the_numbers
     assert rows["case 2: alpha 0 + 'more like this'"]["word"] == "not lower" and "naive Bayes" not in rows
     assert "on squat, 2 of 11 conditions ended lower" in null_sentence("thesis", {"squat": world(0.3)})
     assert "on squat, none of 11 conditions ended lower" in null_sentence("copy", {"squat": world(0.0)})
+
+
+def test_naive_bayes_across_tasks_is_reported_against_the_own_task():
+    from shared.reproduce.coaching import nb_transfer_lines
+
+    rng = np.random.default_rng(1)
+    own = 1.0 + rng.uniform(0, 0.05, size=(10, 4))
+    own[:, 0] = 1.0
+    worse = own + np.linspace(0, 0.3, 4)
+    results = {"nb_transfer": {"thesis": {"squat>throw": {"d": worse.tolist(), "own_d": own.tolist()},
+                                          "throw>squat": {"d": None, "own_d": own.tolist(), "why": "one adverb"}}}}
+    text = "\n".join(nb_transfer_lines(results))
+    assert "| thesis | squat -> throw |" in text and "+0.300 (own task lower: holds" in text
+    assert "| thesis | throw -> squat | - | - | not run: one adverb |" in text

@@ -621,3 +621,50 @@ def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
         assert (tmp_path / f"rep/ch4-6/copy_squat_{fig}.png").stat().st_size > 5000
     r = cli(env, "reproduce", "ch4", "--out", tmp_path / "rep", "--families", "oracle")
     assert r.returncode == 2 and "oracle" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_path):
+    """Thesis 5.4.1 with people: `--cases sweep` plans each participant's alpha sweep (without
+    and with the adverb, counterbalanced like any case), `study emu2` picks each one's alpha that
+    ended lowest, and a second study's cases 5 and 6 coach with those alphas."""
+    env = cluster
+    squats = sorted((bundled / "amc/squat1Reps").glob("*.amc"))
+    target, mine = squats[0], squats[1:]
+    sweep = tmp_path / "sweep"
+    r = cli(env, "study", "init", sweep, "--target", target, "--participants", "1", "--cases", "sweep", "--seed", "3",
+            "--trials", "2")
+    assert r.returncode == 0, r.stderr
+    k = 0
+    while True:
+        step = json.loads(cli(env, "study", "next", sweep, "--json").stdout)
+        if step.get("done"):
+            break
+        # the second trial's attempt depends on the case: the participant "responds" to some alphas better
+        clip = mine[0] if step["trial"] == 1 else mine[1 + (step["case"] % 3)]
+        r = cli(env, "study", "attempt", sweep, clip, "--participant", step["participant"])
+        assert r.returncode == 0, r.stderr
+        k += 1
+    assert k == 14 * 2
+    from shared.study import SWEEP_CASES, load, read_log, trials_of
+
+    events = read_log(sweep)
+    done = trials_of(events)
+    want = []
+    for adverb in (None, "table"):
+        ratio = {a: done[("P01", c)][1]["d_p"] / done[("P01", c)][0]["d_p"] for c, (a, adv) in SWEEP_CASES.items()
+                 if adv == adverb}
+        want.append(min(ratio, key=ratio.get))
+    got = json.loads(cli(env, "study", "emu2", sweep, "--json").stdout)
+    assert got == {"P01": want}
+    follow = tmp_path / "emu2"
+    r = cli(env, "study", "init", follow, "--target", target, "--participants", "1", "--cases", "5,6", "--seed", "3",
+            "--trials", "2", "--emu2", sweep)
+    assert r.returncode == 0, r.stderr
+    assert load(follow)["emu2"] == {"P01": want}
+    r = cli(env, "study", "report", sweep)
+    assert r.returncode == 0, r.stderr
+    text = (sweep / "report.md").read_text()
+    assert "## Alpha sweep" in text and f"P01 {want[0]:g} / {want[1]:g}" in text and (sweep / "fig5_7.png").exists()
+    r = cli(env, "study", "init", tmp_path / "bad", "--target", target, "--participants", "1", "--cases", "1,swep",
+            "--seed", "3")
+    assert r.returncode == 2 and "'swep'" in r.stderr

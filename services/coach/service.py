@@ -22,7 +22,7 @@ from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
 from shared.clip import Clip
-from shared.coaching.policies import (SWEEP, Calibration, Policy, fit_emu1_corrected, fit_nb,
+from shared.coaching.policies import (SWEEP, Calibration, Policy, best_alpha, fit_emu1_corrected, fit_nb,
                                       simulated_coach_demonstrations)
 from shared.deadline import check_time, completed
 from shared.coaching.session import Session, Trial, session_to_dict, start, trial
@@ -261,7 +261,7 @@ def make_service(settings: Settings | None = None) -> Service:
                                    field="sweep") from None
                 if not all(0.0 <= a <= 5.0 for a in items):
                     raise BadInput(f"sweep of {learner!r}: alphas must be in [0, 5]", field="sweep")
-                per[learner] = min(items, key=items.get)
+                per[learner] = best_alpha(items)
             return {"policy": Policy("emu2", alpha=req["alpha"], adverb=None, per_learner=per).to_dict(),
                     "fit": {"per_learner": per, "sweep_alphas": list(SWEEP)}}
         if not req["features"] or not req["labels"]:

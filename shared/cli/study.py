@@ -58,23 +58,29 @@ def study_init(folder: Path = FOLDER,
                target: Path = typer.Option(..., help="The target motion (a clip file)."),
                participants: int = typer.Option(..., help="How many participants."),
                cases: str = typer.Option("1,2,3,4", help="Cases to run, comma-separated (Table 4.2: 1-4; 6.1: 5, 6; "
-                                         "6.4: 7, 8)."),
+                                         "6.4: 7, 8; 'sweep': each participant's alpha sweep of figs. 5.7 / 5.8, "
+                                         "alpha 0-2.5 without and with the adverb, cases 10-16 and 30-36)."),
                seed: int = typer.Option(..., help="Seed of the assignment of case orders to participants (log it)."),
                trials: int = typer.Option(4, help="Trials per case (the first shows the target)."),
-               emu2: Optional[Path] = typer.Option(None, help="Cases 5, 6: JSON {participant: [alpha without, alpha "
-                                                   "with adverb]} from each participant's own sweep."),
+               emu2: Optional[Path] = typer.Option(None, help="Cases 5, 6: the folder of a study that ran the sweep "
+                                                   "with the same participants (their best alphas, `study emu2`), or a "
+                                                   "JSON file {participant: [alpha without, alpha with adverb]}."),
                aeu_scale: Optional[float] = typer.Option(None, help="Cases 7, 8: thesis units per our distance unit."),
                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Plan a study: counterbalanced, seeded case orders; the target kept in the folder."""
-    from shared.study import append, check_new, plan
+    from shared.study import append, check_new, emu2_from_sweep, expand_cases, plan
 
     check_new(folder)
-    try:
-        case_list = [int(c) for c in cases.split(",") if c.strip()]
-    except ValueError:
-        _fail(f"--cases must be numbers separated by commas, got {cases!r}")
+    case_list = expand_cases(cases)
     table = None
-    if emu2 is not None:
+    if emu2 is not None and emu2.is_dir():
+        sweep_plan, sweep_events = _study(emu2)
+        table = emu2_from_sweep(sweep_plan, sweep_events)
+        if not table:
+            _fail(f"{emu2}: no participant has finished two alphas of the sweep on both sides (without and with the "
+                  "adverb); run it with `--cases sweep`")
+        typer.echo(f"EMU-Model 2 from {emu2}'s sweep: " + ", ".join(f"{k} {v[0]:g} / {v[1]:g}" for k, v in table.items()))
+    elif emu2 is not None:
         try:
             table = json.loads(emu2.read_text())
         except (OSError, ValueError) as e:
@@ -108,6 +114,36 @@ def _reconcile(c, folder: Path, p: dict, events: list[dict]) -> list[dict]:
             for t in missing_trials(events, person, case, info["trials"]):
                 append(folder, trial_event(person, case, t, None, recovered=True))
     return read_log(folder)
+
+
+@study_app.command("emu2")
+def study_emu2(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None, help="Also write the alphas as JSON "
+                                                                      "(what `study init --emu2` reads)."),
+               as_json: bool = typer.Option(False, "--json")):
+    """EMU-Model 2 from a study's alpha sweep (figs. 5.7, 5.8): each participant's alpha whose
+    session ended lowest, without and with the adverb, and R_4 at every alpha."""
+    from shared.study import SWEEP_CASES, emu2_from_sweep, trials_of
+
+    p, events = _study(folder)
+    if not set(SWEEP_CASES) & set(p["cases"]):
+        _fail(f"{folder} did not plan the sweep (study init --cases sweep)")
+    table = emu2_from_sweep(p, events)
+    done = trials_of(events)
+    if out is not None:
+        out.write_text(json.dumps(table, indent=1))
+    if as_json:
+        typer.echo(json.dumps(table))
+        return
+    for person in p["participants"]:
+        cells = []
+        for case, (a, adv) in SWEEP_CASES.items():
+            rows = sorted(done.get((person, case), []), key=lambda e: e["trial"])
+            if len(rows) == p["trials"]:
+                cells.append(f"{a:g}{'+adv' if adv else ''} {rows[-1]['d_p'] / rows[0]['d_p']:.2f}")
+        best = table.get(person)
+        typer.echo(f"{person}: " + (f"alpha {best[0]:g} without, {best[1]:g} with the adverb" if best else
+                                     "not enough of the sweep done") + (f"  (R_{p['trials']}: {', '.join(cells)})"
+                                                                        if cells else ""))
 
 
 @study_app.command("next")
@@ -260,12 +296,14 @@ def study_report(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None,
                                                                                       "FOLDER/report.md).")):
     """The thesis's tables from the study's trials (read like the simulated runs') and the seat's Table 5.1."""
     from shared.reproduce.coaching import case_tables
-    from shared.study import seat_report, seat_rows, tidy
+    from shared.study import SWEEP_CASES, seat_report, seat_rows, sweep_report, tidy
 
     p, events = _study(folder)
     rows = tidy(events, p["target"])
     lines = [f"# Study {p['study']}: {len(p['participants'])} participant(s), cases {p['cases']}", "",
              f"{len(rows)} trials logged. Design: {p['design']} (seed {p['seed']}).", "", *case_tables(rows)]
+    if set(SWEEP_CASES) & set(p["cases"]):
+        lines += sweep_report(p, events, folder)
     seat = seat_rows(events)
     if seat:
         lines += seat_report(seat, folder)

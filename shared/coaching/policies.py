@@ -101,6 +101,13 @@ def _entropy(shares: dict) -> float:
     return float(-(p * np.log(p)).sum())
 
 
+def best_alpha(final_error: dict) -> float:
+    """EMU-Model 2 (fig. 5.8): the alpha of a sweep ``{alpha: final error}`` that ended lowest."""
+    if not final_error:
+        raise BadInput("EMU-Model 2 needs a sweep: {alpha: final error}")
+    return float(min(final_error, key=final_error.get))
+
+
 def fit_emu1(d_p, d_s) -> float:
     """EMU-Model 1: ``alpha = 1 + slope`` of the least-squares line ``d_s = a d_p + b`` (eq. 5.5)."""
     d_p, d_s = np.asarray(d_p, float), np.asarray(d_s, float)

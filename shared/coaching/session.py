@@ -32,7 +32,6 @@ distance to the goal since the goal was set, or after ``SUBGOAL_TRIALS`` trials 
 from __future__ import annotations
 
 import time
-import uuid
 from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
@@ -377,9 +376,12 @@ def _goal(session: Session, attempts: list[Clip], name: str, number: int, ports:
         shares = error_shares(session.target, attempts)
         order = [p for p in sorted(shares, key=shares.get, reverse=True) if shares[p] >= SUBGOAL_MIN_SHARE]
         goals = []
+        # names new on every try (a trial cut short is sent again, its proto-symbols already in the
+        # space) and the same in every run (reports repeat bit for bit): the space's size says which try
+        tries = len(ports.points(session.space))
         for k in range(1, len(order)):
             clip = subgoal_motion(session.target, attempts, order[:k])
-            gname = f"subgoal{k}-{uuid.uuid4().hex[:6]}"  # fresh per try: a trial cut short is sent again
+            gname = f"subgoal{k}-{tries}"
             ports.add_attempt(session.space, gname, [clip])
             goals.append({"name": gname, "parts": order[:k], "data": clip.data.tolist()})
         plan = session.subgoals = {"order": order, "goals": goals, "current": 0, "since": number, "start": None}

@@ -193,9 +193,9 @@ def run_target(client, target, key: str, learners: int, echo=print, family: str 
     try:
         nb = client.request("coach", "policy_fit", {"kind": "nb", "features": feats, "labels": labels, "alpha": 2.0})
         nb_d = Experiment.d(ex.group("nb", lambda i: nb["policy"]))
-        res["nb"] = {"labels": labels, "classes": nb["fit"]["classes"], "d": nb_d.tolist()}
+        res["nb"] = {"labels": labels, "features": feats, "classes": nb["fit"]["classes"], "d": nb_d.tolist()}
     except RemoteError as e:  # one adverb best everywhere: nothing to classify (computed, reported)
-        res["nb"] = {"labels": labels, "classes": sorted(set(labels)), "d": None, "why": e.message}
+        res["nb"] = {"labels": labels, "features": feats, "classes": sorted(set(labels)), "d": None, "why": e.message}
     # ---- EMU-Model 1 and its correction: a recovery check of the estimator on a simulated coach
     res["emu1"] = client.request("coach", "policy_fit", {"kind": "emu1c", "simulated_coach": {"n": 60, "alpha": 1.8,
                                                                                               "off_line": 0.35, "seed": 1}})["fit"]
@@ -533,6 +533,8 @@ def write_report(out: Path, results: dict, seconds: float) -> Path:
                 lines.append(f"| {fam} | {setting} | " + " | ".join(f"{m:.3f}" for m in means)
                              + f" | {SENSITIVITY_ALPHAS[int(np.argmin(means))]:g} | {_cell(f)} |")
         lines.append("")
+    if results.get("nb_transfer"):
+        lines += nb_transfer_lines(results)
     e1 = next(iter(next(iter(results["families"].values())).values()))["emu1"]
     err_c, err_u = abs(e1["alpha_eq5_5_corrected"] - 2.8), abs(e1["alpha_eq5_5_uncorrected"] - 2.8)
     lines += ["## EMU-Model 1 and its correction (eq. 5.5, 5.9): a recovery check", "",
@@ -570,6 +572,49 @@ def rewrite(out: Path) -> Path:
     return write_report(out, results, float(m.group(1)) if m else 0.0)
 
 
+def nb_across_tasks(client, clips: dict, per_target: dict, learners: int, family: str, echo=print) -> dict:
+    """Thesis 6.5 / 6.6: the naive Bayes adverb trained on one task's trials (its ``nb``
+    training logs) and used on another task's learners, beside the same learners coached by the
+    classifier trained on their own task. Keys ``"A>B"``: trained on A, used on B."""
+    out = {}
+    for a in per_target:
+        for b in per_target:
+            if a == b:
+                continue
+            src, own = per_target[a]["nb"], per_target[b]["nb"]
+            row = {"trained_on": a, "used_on": b, "own_d": own["d"]}
+            try:
+                nb = client.request("coach", "policy_fit", {"kind": "nb", "features": src["features"],
+                                                            "labels": src["labels"], "alpha": 2.0})
+                ex = Experiment(client, clips[b], f"{family}-{b}".replace("_", ""), learners, echo=echo, family=family)
+                row["d"] = Experiment.d(ex.group(f"nbx-{a}", lambda i: nb["policy"])).tolist()
+            except RemoteError as e:
+                row["d"], row["why"] = None, e.message
+            out[f"{a}>{b}"] = row
+    echo(f"  {family}: naive Bayes across tasks done")
+    return out
+
+
+def nb_transfer_lines(results: dict) -> list[str]:
+    """The report's lines on naive Bayes across tasks (computed)."""
+    lines = ["## Naive Bayes across tasks (thesis 6.5, 6.6)", "",
+             "The adverb classifier trained on one task's trials and used on another task's learners, against the same "
+             "learners coached by the classifier trained on their own task (paired t-test on R_4; the word as above).",
+             "", "| family | trained on -> used on | R_4 across tasks | R_4 own task | difference (across - own) |",
+             "|---|---|---|---|---|"]
+    for fam, pairs in (results.get("nb_transfer") or {}).items():
+        for key, row in pairs.items():
+            a, b = key.split(">")
+            if row.get("d") is None or row.get("own_d") is None:
+                lines.append(f"| {fam} | {a} -> {b} | - | - | not run: {row.get('why') or 'the own-task classifier was not trained'} |")
+                continue
+            x, y = _r4(row["d"]), _r4(row["own_d"])
+            f = compare(y, x)  # is the own task's classifier lower than the transferred one?
+            lines.append(f"| {fam} | {a} -> {b} | {x.mean():.3f} | {y.mean():.3f} | {x.mean() - y.mean():+.3f} "
+                         f"(own task lower: {f['word']}, p = {f['p']:.3f}) |")
+    return lines + [""]
+
+
 def run(client, hdm05: Path, out: Path, learners: int = 12, targets=("squat", "throw"), families=None,
         sensitivity_learners: int = 8, echo=print) -> Path:
     """Every family on every target, then each family's sensitivity sweep on the first target."""
@@ -587,6 +632,9 @@ def run(client, hdm05: Path, out: Path, learners: int = 12, targets=("squat", "t
         for key in targets:
             echo(f"family {fam}, target {key}")
             results["families"][fam][key] = run_target(client, clips[key], key, learners, echo, fam)
+        if len(targets) > 1:
+            results.setdefault("nb_transfer", {})[fam] = nb_across_tasks(client, clips, results["families"][fam],
+                                                                         learners, fam, echo)
     if sensitivity_learners:
         for fam in families:
             results["sensitivity"][fam] = sensitivity(client, clips[targets[0]], targets[0], sensitivity_learners, fam,
