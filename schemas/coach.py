@@ -43,6 +43,8 @@ POLICY = Map({
     "alpha": F(Float(0.0, 5.0), "emphasis alpha (eq. 4.3)", required=False, default=2.0),
     "adverb": F(ADVERB, "none, a fixed adverb, or 'table' (Table 4.1 for the alpha)", required=False),
     "calibration": F(Float(1e-9, 1e9), "AEU: thesis distance units per ours", required=False, default=1.0),
+    "thresholds": F(List(Float(0.0), max_len=2), "AEU: the two d_p thresholds in our units, fitted from human "
+                    "coaches (`study aeu`); replaces the thesis's thresholds and the calibration", required=False),
     "per_learner": F(MapOf(Str(max_len=64), Float(0.0, 5.0), max_len=10_000), "EMU-2: learner -> alpha",
                      required=False, default=dict),
     "nb": F(NB, "naive Bayes parameters (from policy_fit)", required=False),

@@ -57,10 +57,13 @@ def williams(n: int) -> list[list[int]]:
 
 
 def plan(participants: int, cases: list[int], seed: int, trials: int = 4, emu2: dict | None = None,
-         aeu_scale: float | None = None) -> dict:
+         aeu_scale: float | None = None, aeu_thresholds: dict | None = None) -> dict:
     """The counterbalanced, seeded plan (module docstring). ``emu2`` maps participant id to
     EMU-Model 2's alpha without / with adverb (cases 5 and 6); ``aeu_scale`` converts our
-    distances to the thesis's units for AEU-Models 1 and 2 (cases 7 and 8)."""
+    distances to the thesis's units for AEU-Models 1 and 2 (cases 7 and 8); ``aeu_thresholds``
+    ``{7: [t1, t2], 8: [...]}`` replaces a case's thesis thresholds by ones fitted from human
+    coaches (:func:`shared.coaching.policies.fit_aeu`, ``study aeu``)."""
+    aeu_thresholds = {int(k): [float(t) for t in v] for k, v in (aeu_thresholds or {}).items()}
     if not 1 <= participants <= 500:
         raise BadInput(f"participants must be 1 to 500, got {participants}", field="participants")
     if not cases or len(set(cases)) != len(cases) or any(c not in STUDY_CASES for c in cases):
@@ -73,15 +76,16 @@ def plan(participants: int, cases: list[int], seed: int, trials: int = 4, emu2: 
         if missing:
             raise BadInput(f"cases 5 and 6 need EMU-Model 2's alpha per participant (from their own alpha sweep); "
                            f"missing for {', '.join(missing[:5])}", field="emu2")
-    if {7, 8} & set(cases) and not aeu_scale:
+    if any(c in cases and c not in aeu_thresholds for c in (7, 8)) and not aeu_scale:
         raise BadInput("cases 7 and 8 need the AEU calibration (thesis units per our distance unit, "
-                       "`reproduce` reports one)", field="aeu_scale")
+                       "`reproduce` reports one) or thresholds fitted from human coaches (`study aeu`)", field="aeu_scale")
     square = williams(len(cases))
     rng = np.random.default_rng(seed)
     rows = [square[k % len(square)] for k in range(participants)]
     order = rng.permutation(participants)  # which participant takes which row: seeded, random
     return {"participants": {ids[j]: [cases[x] for x in rows[int(k)]] for j, k in zip(range(participants), order)},
             "cases": list(cases), "trials": trials, "seed": seed, "emu2": emu2 or {}, "aeu_scale": aeu_scale,
+            "aeu_thresholds": {str(k): v for k, v in aeu_thresholds.items()},
             "design": "Williams balanced Latin square, rows assigned by a seeded permutation"}
 
 
@@ -149,6 +153,9 @@ def policy(p: dict, participant: str, case: int) -> dict:
         alphas = p["emu2"][participant]
         a = float(alphas[case - 5] if isinstance(alphas, (list, tuple)) else alphas)
         return {"kind": "fixed", "alpha": a, "adverb": None if case == 5 else "table"}
+    fitted = (p.get("aeu_thresholds") or {}).get(str(case))
+    if fitted:
+        return {"kind": "aeu1" if case == 7 else "aeu2", "alpha": 2.0, "thresholds": fitted}
     return {"kind": "aeu1" if case == 7 else "aeu2", "alpha": 2.0, "calibration": float(p["aeu_scale"])}
 
 

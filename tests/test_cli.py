@@ -105,3 +105,33 @@ def test_the_dashboard_opens_the_viewer_on_loopback_only(tmp_path):
     first, second = (tmp_path / "argv").read_text().splitlines()
     assert first == "analytics disable"
     assert second.startswith("--bind 127.0.0.1 --port auto ") and second.endswith("recordings/x.rrd")
+
+
+def test_study_aeu_fits_thresholds_from_a_coach_seat_and_a_study_uses_them(bundled, tmp_path):
+    """A coach-seat log (as `study seat` appends it): `study aeu` fits the thresholds and names
+    the coach left out; `study init --aeu1 FOLDER` plans case 7 with them, no scale needed."""
+    from shared.study import append, load, policy
+
+    seat = tmp_path / "seat"
+    seat.mkdir()
+    append(seat, {"event": "plan", "plan": {"participants": {}, "cases": [], "trials": 2, "seed": 0, "study": "s",
+                                            "target": "t", "design": "-"}})
+    words = ("a little more", "more", "much more")
+    for k, d in enumerate(np.linspace(10, 100, 24)):
+        append(seat, {"event": "seat", "coach": "c1", "d_p": float(d), "adverb": words[int(d > 40) + int(d > 70)]})
+        append(seat, {"event": "seat", "coach": "back", "d_p": float(d), "adverb": words[2 - int(d > 40) - int(d > 70)]})
+    r = run("study", "aeu", seat, "--json")
+    assert r.returncode == 0, r.stderr
+    fit = json.loads(r.stdout)
+    assert fit["coaches"] == ["c1"] and "back" in fit["excluded"] and fit["agreement"] == 1.0
+    r = run("study", "aeu", seat)
+    assert "left out back: adverbs run backwards" in r.stdout
+    study = tmp_path / "study"
+    r = run("study", "init", study, "--target", bundled / SQUAT, "--participants", "2", "--cases", "3,7", "--seed", "1",
+            "--aeu1", seat)
+    assert r.returncode == 0, r.stderr
+    p = load(study)
+    assert policy(p, "P01", 7) == {"kind": "aeu1", "alpha": 2.0, "thresholds": fit["thresholds"]}
+    r = run("study", "init", tmp_path / "s8", "--target", bundled / SQUAT, "--participants", "2", "--cases", "8",
+            "--seed", "1")
+    assert r.returncode == 2 and "study aeu" in r.stderr

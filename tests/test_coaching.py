@@ -220,3 +220,27 @@ def test_a_session_shows_the_repaired_emphasis_instead_of_lowering_alpha(bundled
         adverb = rec.adverb
         assert rec.alpha_shown == 2.0 and not rec.alpha_reduced, rec.feasibility
         assert rec.emphasis_kept is None or (0.0 < rec.emphasis_kept <= 1.0 and "made feasible" in rec.feasibility)
+
+
+def test_aeu_thresholds_are_fitted_from_coaches_and_backward_coaches_left_out():
+    from shared.coaching.policies import ADVERBS, fit_aeu
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for coach in ("c1", "c2"):  # adverbs rise with the error: cuts at 40 and 70
+        for d in rng.uniform(10, 100, 30):
+            rows.append({"coach": coach, "d_p": float(d), "adverb": ADVERBS[int(d > 40) + int(d > 70)]})
+    for d in rng.uniform(10, 100, 30):  # c3 says "much more" for small errors
+        rows.append({"coach": "c3", "d_p": float(d), "adverb": ADVERBS[2 - int(d > 40) - int(d > 70)]})
+    rows += [{"coach": "c4", "d_p": 50.0, "adverb": "more"}] * 3  # one adverb only
+    fit = fit_aeu(rows)
+    assert fit["coaches"] == ["c1", "c2"] and set(fit["excluded"]) == {"c3", "c4"}
+    assert "backwards" in fit["excluded"]["c3"] and fit["agreement"] == 1.0
+    t1, t2 = fit["thresholds"]
+    assert 30 < t1 <= 41 and 65 < t2 <= 71
+    p = Policy.from_dict({"kind": "aeu1", "alpha": 2.0, "thresholds": [t1, t2]})
+    assert [p.choose(d)[1] for d in (20.0, 55.0, 90.0)] == list(ADVERBS)
+    with pytest.raises(BadInput, match="at least 3 answers"):
+        fit_aeu([r for r in rows if r["coach"] in ("c3", "c4")])
+    with pytest.raises(BadInput, match="thresholds"):
+        Policy.from_dict({"kind": "aeu1", "thresholds": [50.0, 10.0]})

@@ -66,6 +66,10 @@ def study_init(folder: Path = FOLDER,
                                                    "with the same participants (their best alphas, `study emu2`), or a "
                                                    "JSON file {participant: [alpha without, alpha with adverb]}."),
                aeu_scale: Optional[float] = typer.Option(None, help="Cases 7, 8: thesis units per our distance unit."),
+               aeu1: Optional[Path] = typer.Option(None, help="Case 7 with AEU thresholds fitted from human coaches: "
+                                                   "a study folder whose coach seat they answered (e.g. beginners), "
+                                                   "or the JSON `study aeu --out` wrote."),
+               aeu2: Optional[Path] = typer.Option(None, help="Case 8 likewise (e.g. experienced coaches)."),
                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Plan a study: counterbalanced, seeded case orders; the target kept in the folder."""
     from shared.study import append, check_new, emu2_from_sweep, expand_cases, plan
@@ -85,7 +89,14 @@ def study_init(folder: Path = FOLDER,
             table = json.loads(emu2.read_text())
         except (OSError, ValueError) as e:
             _fail(f"{emu2}: cannot read EMU-Model 2's alphas ({e})")
-    p = plan(participants, case_list, seed, trials, table, aeu_scale)
+    fitted = {}
+    for case, source in ((7, aeu1), (8, aeu2)):
+        if source is not None:
+            fit = _aeu_fit(source)
+            fitted[case] = fit["thresholds"]
+            typer.echo(f"case {case}: AEU thresholds {fit['thresholds'][0]:.1f} / {fit['thresholds'][1]:.1f} from "
+                       f"{source}")
+    p = plan(participants, case_list, seed, trials, table, aeu_scale, fitted)
     clip = read_clip(target, skeleton=skeleton)
     folder.mkdir(parents=True, exist_ok=True)
     from shared.io import save_clip
@@ -114,6 +125,48 @@ def _reconcile(c, folder: Path, p: dict, events: list[dict]) -> list[dict]:
             for t in missing_trials(events, person, case, info["trials"]):
                 append(folder, trial_event(person, case, t, None, recovered=True))
     return read_log(folder)
+
+
+def _aeu_fit(source: Path, coaches: list[str] | None = None) -> dict:
+    """AEU thresholds from a study folder's coach seat, or the JSON `study aeu --out` wrote."""
+    from shared.coaching.policies import fit_aeu
+    from shared.study import seat_rows
+
+    if source.is_dir():
+        rows = seat_rows(_study(source)[1])
+        if coaches:
+            rows = [r for r in rows if r["coach"] in coaches]
+        if not rows:
+            _fail(f"{source}: no coach-seat answers" + (f" by {', '.join(coaches)}" if coaches else ""))
+        return fit_aeu(rows)
+    try:
+        fit = json.loads(source.read_text())
+        t = [float(x) for x in fit["thresholds"]]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        _fail(f"{source}: not AEU thresholds ({type(e).__name__}: {e}); give a study folder or `study aeu --out`'s file")
+    if len(t) != 2 or not 0 <= t[0] <= t[1]:
+        _fail(f"{source}: AEU thresholds must be two increasing distances, got {t}")
+    return {**fit, "thresholds": t}
+
+
+@study_app.command("aeu")
+def study_aeu(folder: Path = FOLDER, coaches: Optional[str] = typer.Option(None, help="Only these coaches "
+                                                                           "(comma-separated), e.g. one group."),
+              out: Optional[Path] = typer.Option(None, help="Also write the fit as JSON (what `study init --aeu1` reads)."),
+              as_json: bool = typer.Option(False, "--json")):
+    """AEU thresholds fitted from the coach seat's answers (thesis 5.3.3, table 5.2): coaches
+    whose adverbs run backwards are left out and named; the two d_p cuts most answers agree with."""
+    fit = _aeu_fit(folder, [c.strip() for c in coaches.split(",") if c.strip()] if coaches else None)
+    if out is not None:
+        out.write_text(json.dumps(fit, indent=1))
+    if as_json:
+        typer.echo(json.dumps(fit))
+        return
+    t1, t2 = fit["thresholds"]
+    typer.echo(f"AEU thresholds (our d_p units): 'a little more' up to {t1:.1f}, 'more' up to {t2:.1f}, 'much more' "
+               f"above; {fit['agreement']:.0%} of {fit['answers']} answers agree (coaches {', '.join(fit['coaches'])})")
+    for coach, why in fit["excluded"].items():
+        typer.echo(f"  left out {coach}: {why}")
 
 
 @study_app.command("emu2")

@@ -108,6 +108,49 @@ def best_alpha(final_error: dict) -> float:
     return float(min(final_error, key=final_error.get))
 
 
+def fit_aeu(rows) -> dict:
+    """AEU thresholds from human coaches (thesis 5.3.3, table 5.2, fitted instead of assumed):
+    ``rows`` are coach-seat answers ``{"coach", "d_p", "adverb"}``. A coach is left out when
+    their adverbs run backwards or carry no order: the Spearman correlation (scipy.stats) between
+    the ``d_p`` they judged and the adverb's rank ("a little more" < "more" < "much more") is not
+    above 0, or they said fewer than two different adverbs. The thresholds ``t1 <= t2`` (our
+    units) are the cuts between the included answers' ``d_p`` that the most answers agree with
+    ("a little more" for ``d_p <= t1``, "more" up to ``t2``, "much more" above; a cut halfway
+    between two neighbouring answers)."""
+    from scipy.stats import spearmanr
+
+    rank = {a: i for i, a in enumerate(ADVERBS)}
+    rows = [r for r in rows if r.get("adverb") in rank and np.isfinite(r.get("d_p", np.nan))]
+    included, excluded = [], {}
+    for coach in sorted({r["coach"] for r in rows}):
+        mine = [r for r in rows if r["coach"] == coach]
+        said = {r["adverb"] for r in mine}
+        if len(said) < 2:
+            excluded[coach] = f"said only {', '.join(sorted(said))}"
+            continue
+        rho = float(spearmanr([r["d_p"] for r in mine], [rank[r["adverb"]] for r in mine]).statistic)
+        if not rho > 0:
+            excluded[coach] = f"adverbs run backwards or carry no order (Spearman rho {rho:+.2f})"
+            continue
+        included.append(coach)
+    use = [r for r in rows if r["coach"] in included]
+    if len(use) < 3:
+        raise BadInput("AEU thresholds need at least 3 answers from coaches whose adverbs rise with the error"
+                       + (f" (left out: {'; '.join(f'{c}: {w}' for c, w in excluded.items())})" if excluded else ""))
+    d = np.array([r["d_p"] for r in use], float)
+    y = np.array([rank[r["adverb"]] for r in use])
+    values = np.unique(d)
+    cuts = np.concatenate([[values[0] - 1.0], (values[:-1] + values[1:]) / 2, [values[-1] + 1.0]])
+    best = (-1, 0.0, 0.0)
+    for i, t1 in enumerate(cuts):
+        for t2 in cuts[i:]:
+            agree = int(np.sum(np.where(d <= t1, 0, np.where(d <= t2, 1, 2)) == y))
+            if agree > best[0]:
+                best = (agree, float(t1), float(t2))
+    return {"thresholds": [max(best[1], 0.0), max(best[2], 0.0)], "agreement": best[0] / len(use), "answers": len(use),
+            "coaches": included, "excluded": excluded}
+
+
 def fit_emu1(d_p, d_s) -> float:
     """EMU-Model 1: ``alpha = 1 + slope`` of the least-squares line ``d_s = a d_p + b`` (eq. 5.5)."""
     d_p, d_s = np.asarray(d_p, float), np.asarray(d_s, float)
@@ -166,6 +209,7 @@ class Policy:
     calibration: float = 1.0  # aeu: thesis units per our unit
     per_learner: dict = field(default_factory=dict)  # emu2: learner -> alpha
     nb: dict | None = None  # nb: GaussianNB parameters
+    thresholds: list | None = None  # aeu: (t1, t2) in our units fitted from human coaches (fit_aeu)
     body_part: bool = False  # emphasise the worst body part only
     subgoal: bool = False  # coach through intermediate proto-symbols, worst body part first (session.py)
 
@@ -178,6 +222,8 @@ class Policy:
             raise BadInput(f"adverb must be none, 'table' or one of {', '.join(ADVERBS)}, 'more like this'", field="adverb")
         if self.body_part and self.subgoal:
             raise BadInput("choose body_part or subgoal, not both", field="subgoal")
+        if self.thresholds is not None and (len(self.thresholds) != 2 or not 0 <= self.thresholds[0] <= self.thresholds[1]):
+            raise BadInput(f"AEU thresholds must be two increasing distances, got {self.thresholds}", field="thresholds")
         if self.kind == "nb" and not self.nb:
             raise BadInput("a naive Bayes policy needs a trained classifier (policy_fit)", field="nb")
         return self
@@ -188,8 +234,8 @@ class Policy:
             adverb = table_adverb(self.alpha) if self.adverb == "table" else self.adverb
             return self.alpha, adverb
         if k in AEU_THRESHOLDS:
-            lo, hi = AEU_THRESHOLDS[k]
-            t = self.calibration * d_p
+            lo, hi = AEU_THRESHOLDS[k] if self.thresholds is None else self.thresholds
+            t = self.calibration * d_p if self.thresholds is None else d_p
             return self.alpha, ADVERBS[0] if t <= lo else ADVERBS[1] if t <= hi else ADVERBS[2]
         if k in ("emu1", "emu1c"):
             return self.alpha, table_adverb(self.alpha) if self.adverb == "table" else self.adverb
@@ -205,7 +251,7 @@ class Policy:
     @classmethod
     def from_dict(cls, d: dict) -> "Policy":
         known = {k: v for k, v in d.items()
-                 if k in cls.__dataclass_fields__ and (v is not None or k in ("adverb", "nb"))}
+                 if k in cls.__dataclass_fields__ and (v is not None or k in ("adverb", "nb", "thresholds"))}
         return cls(**known).check()
 
 
