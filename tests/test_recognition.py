@@ -513,3 +513,76 @@ def test_a_loaded_space_adds_a_clip_by_one_row_with_the_same_result(dev_space, d
     ra, rb = a.recognize(new[0]), b.recognize(new[0])
     assert (ra.label, ra.nearest_label) == (rb.label, rb.nearest_label)
     assert rb.confidence == pytest.approx(ra.confidence, abs=1e-9)
+
+
+def test_a_clip_added_to_a_stored_space_is_a_journal_entry_read_back_the_same(dev_space, dev_split, tmp_path):
+    """The store keeps an added clip as a small journal entry beside the space's file (the file
+    is not rewritten); a new store reads file + entries as the same space; a rewrite folds the
+    journal in, and an entry of an older file generation is skipped, never applied."""
+    from shared.pss import store as store_module
+    from shared.pss.store import SpaceStore
+
+    st = SpaceStore(tmp_path)
+    st.commit("s", dev_space)
+    base = st.path("s").read_bytes()
+    new = dev_split[1][3:5]
+    one = st.get("s").added(new[:1])
+    st.append("s", one, len(dev_space.symbols))
+    two = one.added(new[1:])
+    st.append("s", two, len(one.symbols))
+    assert st.path("s").read_bytes() == base and [p.name for p in st.journal("s")] == ["s.0001.add", "s.0002.add"]
+    with np.load(st.journal("s")[1]) as z:  # one row of distances and the decision, not the N x N matrices
+        assert z["distances"].shape == (1, len(two.symbols)) and z["recognition_matrix"].shape == (1, len(two.symbols))
+    assert all(p.stat().st_size < len(base) / 5 for p in st.journal("s"))
+    again = SpaceStore(tmp_path).get("s")
+    assert [x.name for x in again.symbols] == [x.name for x in two.symbols]
+    np.testing.assert_array_equal(again.distances, two.distances)
+    np.testing.assert_array_equal(again.points, two.points)
+    np.testing.assert_array_equal(again.recognition_matrix, two.recognition_matrix)
+    for clip in dev_split[1][:4]:
+        a, b = again.recognize(clip), two.recognize(clip)
+        assert (a.label, a.nearest_label) == (b.label, b.nearest_label) and a.confidence == pytest.approx(b.confidence)
+    stale = tmp_path / "stale.add"
+    stale.write_bytes(st.journal("s")[0].read_bytes())
+    st.commit("s", two)  # a rewrite: the file holds everything, the journal goes
+    assert st.journal("s") == []
+    stale.rename(tmp_path / "s.0001.add")  # as a crash between the rename and the removal would leave it
+    assert len(SpaceStore(tmp_path).get("s").symbols) == len(two.symbols)
+    # a long journal is folded into the file
+    old_max = store_module.JOURNAL_MAX
+    try:
+        store_module.JOURNAL_MAX = 1
+        st2 = SpaceStore(tmp_path / "b")
+        st2.commit("t", dev_space)
+        one = st2.get("t").added(new[:1])
+        st2.append("t", one, len(dev_space.symbols))
+        st2.append("t", one.added(new[1:]), len(one.symbols))
+        assert st2.journal("t") == [] and len(SpaceStore(tmp_path / "b").get("t").symbols) == len(dev_space.symbols) + 2
+    finally:
+        store_module.JOURNAL_MAX = old_max
+    st.delete("s")
+    assert not list(tmp_path.glob("s.*"))
+
+
+def test_the_calibration_s_vectorised_steps_equal_their_plain_loops(dev_space):
+    """calibrate's class distances per proto-symbol (blocks of rows, every class at once) and its
+    leave-one-out class spreads (order statistics) against the plain loops they replaced."""
+    from shared.pss.recognition import _class_spread, _class_spreads_without_each, calibrate, class_distances
+
+    d = dev_space.recognition_matrix
+    labels, perf = np.asarray(dev_space.labels), np.asarray(dev_space.performers)
+    classes = sorted(set(labels))
+    near, truth = [], []
+    for i in range(len(labels)):
+        cand = (np.arange(len(labels)) != i) & (perf != perf[i])
+        if (cand & (labels == labels[i])).any():
+            dc = class_distances(d[i, cand], labels[cand], classes)
+            truth.append(classes.index(labels[i]))
+            near.append(dc[truth[-1]])
+    cal = calibrate(d, list(labels), list(perf))
+    assert cal.n_calibration == len(near)
+    near, truth = np.array(near), np.array(truth)
+    np.testing.assert_allclose(cal.class_scales, [_class_spread(near, truth, k) for k in range(len(classes))])
+    np.testing.assert_allclose(_class_spreads_without_each(near, truth),
+                               [_class_spread(near, truth, truth[j], skip=j) for j in range(len(near))])
+    assert cal == dev_space.calibration  # the space's own, fitted the same way

@@ -71,8 +71,12 @@ def make_service(settings: Settings | None = None) -> Service:
         clips = [clip_from_wire(c, old.features.skeleton) for c in req["clips"]]
         if not req["rebuild"] and req["as_one"] is not None:
             raise BadInput("as_one needs rebuild: a proto-symbol of several repetitions is placed by a rebuild")
-        space = write(name, "add", lambda: old.rebuilt(add=clips, as_one=req["as_one"]) if req["rebuild"]
-                      else old.added(clips))
+        if req["rebuild"]:
+            space = write(name, "add", lambda: old.rebuilt(add=clips, as_one=req["as_one"]))
+        else:  # placed among the fixed points: a journal entry of the new proto-symbols, not the whole file
+            with store.writing(name, "add"):
+                space = old.added(clips)
+                store.append(name, space, len(old.symbols))
         changed(name, "added", space)
         return space_info(name, space)
 

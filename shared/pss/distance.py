@@ -125,6 +125,21 @@ class ModelBank:
                 raise ModelError(f"{self.weights.size} channel weights for HMMs of {n_features} channels")
             self._kernel_weights = np.ones(n_features) if self.weights is None else self.weights
 
+    def extended(self, models: list[LeftToRightHMM]) -> "ModelBank":
+        """This bank with ``models`` after its own (the stacked arrays concatenated, not rebuilt)."""
+        if not self.diag or not models:
+            return ModelBank(self.models + list(models), self.weights)
+        out = ModelBank.__new__(ModelBank)
+        out.models, out.weights, out.diag = self.models + list(models), self.weights, True
+        more = ModelBank(list(models))
+        if not more.diag or more.means.shape[1:] != self.means.shape[1:]:
+            return ModelBank(out.models, self.weights)
+        out.means = np.concatenate([self.means, more.means])
+        out.vars = np.concatenate([self.vars, more.vars])
+        out.logdet = np.concatenate([self.logdet, more.logdet])
+        out._kernel_weights = self._kernel_weights
+        return out
+
     def distances(self, model: LeftToRightHMM, start: int = 0) -> np.ndarray:
         """Eq. 2.4 from ``model`` to the bank's HMMs from ``start`` on."""
         if start:

@@ -173,21 +173,28 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     perf = np.asarray(performers) if performers and len(performers) == len(labels) else None
     classes = sorted(set(labels))
     across = perf is not None and len(set(perf)) > 1
-    rows, truth, nearest_same, ratios = [], [], [], []
-    for i in range(len(labels_a)):
-        cand = np.ones(len(labels_a), bool)
-        cand[i] = False
+    # per proto-symbol, its class distances to the others (not itself; across performers: not
+    # its own performer's), in blocks of rows so that no second N x N matrix is held
+    label_id = np.array([classes.index(x) for x in labels_a])
+    all_dc = np.empty((len(labels_a), len(classes)))
+    for lo in range(0, len(labels_a), 512):
+        block = d[lo:lo + 512].copy()
+        rows_i = np.arange(lo, min(lo + 512, len(labels_a)))
+        block[rows_i - lo, rows_i] = np.inf
         if across:
-            cand &= perf != perf[i]
-        if not (cand & (labels_a == labels_a[i])).any():
-            continue
-        dc = class_distances(d[i, cand], labels_a[cand], classes)
-        rows.append(dc)
-        truth.append(classes.index(labels_a[i]))
-        nearest_same.append(dc[truth[-1]])
-        other = np.delete(dc, truth[-1])
+            block[perf[rows_i][:, None] == perf[None, :]] = np.inf
+        for k in range(len(classes)):
+            cols = label_id == k
+            all_dc[lo:lo + 512, k] = block[:, cols].min(axis=1) if cols.any() else np.inf
+    keep = np.isfinite(all_dc[np.arange(len(labels_a)), label_id])
+    rows = list(all_dc[keep])
+    truth = list(label_id[keep])
+    nearest_same = [dc[t] for dc, t in zip(rows, truth)]
+    ratios = []
+    for dc, t in zip(rows, truth):
+        other = np.delete(dc, t)
         if np.isfinite(other).any():
-            ratios.append(dc[truth[-1]] / max(float(np.min(other)), 1e-12))
+            ratios.append(dc[t] / max(float(np.min(other)), 1e-12))
     scheme = "across performers" if across else "leave one out"
     if not rows:  # one proto-symbol per class: nothing to calibrate against
         scale = float(np.median(d[np.triu_indices(len(d), 1)])) if len(d) > 1 else 1.0
@@ -207,11 +214,42 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     res = minimize_scalar(nll, bounds=(np.log(scale) - 8, np.log(scale) + 8), method="bounded")
     # each calibration score divided by its class's spread without itself, as a new motion's is
     # divided by a spread it had no part in
-    own = np.array([_class_spread(near, y, y[j], skip=j) for j in range(len(near))])
+    own = _class_spreads_without_each(near, y)
     threshold = conformal_threshold(near / own, known_quantile)
     ratio_threshold = conformal_threshold(ratios, known_quantile) if ratios else np.inf
     return Calibration(classes, float(np.exp(res.x)), threshold, ratio_threshold, len(rows), scheme,
                        [_class_spread(near, y, k) for k in range(len(classes))])
+
+
+def _class_spreads_without_each(nearest_same: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """:func:`_class_spread` of each row's class without that row, for every row at once: the
+    median of a sorted pool with one value taken out is one of its middle order statistics."""
+    out = np.empty(len(nearest_same))
+
+    def medians_without(values: np.ndarray) -> np.ndarray:  # median of values without each one
+        order = np.argsort(values, kind="stable")
+        srt = values[order]
+        m = len(values) - 1  # the pool left
+        rank = np.empty(len(values), int)
+        rank[order] = np.arange(len(values))
+
+        def at(j):  # the j-th smallest of the pool without the value of rank r
+            return np.where(j < rank, srt[np.minimum(j, len(srt) - 1)], srt[np.minimum(j + 1, len(srt) - 1)])
+
+        if m % 2:
+            res = at(np.full(len(values), m // 2))
+        else:
+            res = 0.5 * (at(np.full(len(values), m // 2 - 1)) + at(np.full(len(values), m // 2)))
+        return res
+
+    everyone = medians_without(nearest_same) if len(nearest_same) > 1 else np.array([np.nan])
+    for k in np.unique(truth):
+        rows = np.flatnonzero(truth == k)
+        if len(rows) > 1:
+            out[rows] = medians_without(nearest_same[rows])
+        else:  # the class's only row: the median over every other row
+            out[rows] = everyone[rows] if len(nearest_same) > 1 else 1.0
+    return np.maximum(out, 1e-12)
 
 
 def _class_spread(nearest_same: np.ndarray, truth: np.ndarray, k: int, skip: int | None = None) -> float:

@@ -2,7 +2,13 @@
 
 Every space is one ``<name>.npz`` in the store's folder, written atomically (temporary file,
 fsync, rename) by :meth:`ProtoSymbolSpace.save`, so a crash at any moment leaves either the
-old file or the new one. A build or add first writes ``<name>.pending.json``; the marker is
+old file or the new one. A clip added without a rebuild is a **journal entry** beside it,
+``<name>.<k>.add`` (:meth:`ProtoSymbolSpace.save_added`: the new proto-symbols, their rows of
+distances, their points and the refitted decision, also atomic), so adding to a space of
+thousands writes kilobytes, not the whole file; a space is read as its file and its entries
+in order. An entry names the generation of the file it extends: one left by a rewrite (a crash
+between the new file and the removal of the old entries) is skipped. The journal is folded
+into the file when it reaches ``JOURNAL_MAX`` entries or a quarter of the space. A build or add first writes ``<name>.pending.json``; the marker is
 removed once the new space is on disk, or at once when the operation fails or is refused (the
 old file is intact). A marker found when the store opens belongs to an
 operation the previous process never finished: :meth:`interrupted` reports it until the space
@@ -21,6 +27,7 @@ import re
 import threading
 import time
 from contextlib import contextmanager
+from glob import escape as glob_escape
 from pathlib import Path
 
 from shared.errors import BadInput, Conflict, NotFound
@@ -28,6 +35,7 @@ from shared.io.atomic import atomic_write
 from shared.pss.space import ProtoSymbolSpace
 
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+JOURNAL_MAX = 32  # entries beside a space's file before the next change rewrites it whole
 
 
 def check_name(name: str) -> str:
@@ -46,8 +54,9 @@ class SpaceStore:
         self._cache: dict[str, ProtoSymbolSpace] = {}
         self._busy: set[str] = set()
         self._lock = threading.Lock()
-        for tmp in self.root.glob(".*.npz.*"):  # half-written temporary files of a killed process
-            tmp.unlink(missing_ok=True)
+        for pattern in (".*.npz.*", ".*.add.*"):  # half-written temporary files of a killed process
+            for tmp in self.root.glob(pattern):
+                tmp.unlink(missing_ok=True)
         for m in self.root.glob("*.pending.json"):  # a marker an older version could not finish writing
             if m.stat().st_size == 0:  # (a full disk): written before any work, so no operation began
                 m.unlink(missing_ok=True)
@@ -61,6 +70,16 @@ class SpaceStore:
     # ------------------------------------------------------------------ paths
     def path(self, name: str) -> Path:
         return self.root / f"{check_name(name)}.npz"
+
+    def journal(self, name: str) -> list[Path]:
+        """The space's journal entries, in the order written."""
+        check_name(name)
+        entries = []
+        for p in self.root.glob(f"{glob_escape(name)}.*.add"):
+            k = p.name[len(name) + 1:-len(".add")]
+            if k.isdigit():
+                entries.append((int(k), p))
+        return [p for _, p in sorted(entries)]
 
     def _marker(self, name: str) -> Path:
         return self.root / f"{check_name(name)}.pending.json"
@@ -80,7 +99,7 @@ class SpaceStore:
         p = self.path(name)
         if not p.exists():
             raise NotFound(f"no space named {name!r} (spaces: {', '.join(self.names()) or 'none'})", space=name)
-        sp = ProtoSymbolSpace.load(p)
+        sp = ProtoSymbolSpace.load(p, added=self.journal(name))
         sp.name = name
         with self._lock:
             return self._cache.setdefault(name, sp)
@@ -130,9 +149,28 @@ class SpaceStore:
                 self._busy.discard(name)
 
     def commit(self, name: str, space: ProtoSymbolSpace) -> None:
-        """Write the space atomically, then publish it to readers and drop the marker."""
+        """Write the space atomically, then publish it to readers and drop the marker (and the
+        journal, which the new file holds: its entries name the old file's generation)."""
         space.name = name
         space.save(self.path(name))
+        for entry in self.journal(name):
+            entry.unlink(missing_ok=True)
+        with self._lock:
+            self._cache[name] = space
+        self._marker(name).unlink(missing_ok=True)
+
+    def append(self, name: str, space: ProtoSymbolSpace, first: int) -> None:
+        """Keep ``space``, made by :meth:`ProtoSymbolSpace.added` from the stored space of
+        ``first`` proto-symbols, as a journal entry; the whole file instead when the journal is
+        long (``JOURNAL_MAX`` entries or a quarter of the proto-symbols in it)."""
+        entries = self.journal(name)
+        in_journal = len(space.symbols) - space.base_count
+        if space.generation is None or len(entries) >= JOURNAL_MAX or in_journal > max(len(space.symbols) // 4, 1):
+            self.commit(name, space)
+            return
+        space.name = name
+        k = int(entries[-1].name[len(name) + 1:-len(".add")]) + 1 if entries else 1
+        space.save_added(self.root / f"{name}.{k:04d}.add", first)
         with self._lock:
             self._cache[name] = space
         self._marker(name).unlink(missing_ok=True)
@@ -147,5 +185,7 @@ class SpaceStore:
         if not existed and not marker.exists():
             raise NotFound(f"no space named {name!r}", space=name)
         self.path(name).unlink(missing_ok=True)
+        for entry in self.journal(name):
+            entry.unlink(missing_ok=True)
         marker.unlink(missing_ok=True)
         return existed
