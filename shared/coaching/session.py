@@ -438,6 +438,14 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
         report, _ = ports.perform(demo)
         return _worse(report, session.target_report, session.target) if session.target_report else None
 
+    def repair(demo: Clip) -> tuple[Clip, float, list[str]] | None:
+        """``demo`` made feasible (:func:`make_feasible`) with the share of its emphasis kept and
+        what changed, or None when it still fails or keeps less than ``MIN_KEPT``."""
+        fixed, changes = make_feasible(base, demo, ports.perform(demo)[0], session.target_report, session.target,
+                                       lambda c: ports.perform(c)[0])
+        share = _emphasis_kept(base, demo, fixed) if changes else 0.0
+        return (fixed, share, changes) if share >= MIN_KEPT and why_not(fixed) is None else None
+
     shown, reduced, kept = alpha, False, None
     demo = show(alpha)
     if alpha <= 0:
@@ -453,18 +461,15 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
             reason = "not checked: " + ("; ".join(unchecked) or "no simulator body for this target")
         if first is not None:
             # made feasible where it is not, the emphasis kept elsewhere (make_feasible)
-            fixed, changes = make_feasible(base, demo, ports.perform(demo)[0], session.target_report, session.target,
-                                           lambda c: ports.perform(c)[0])
-            share = _emphasis_kept(base, demo, fixed) if changes else 0.0
-            if share >= MIN_KEPT and why_not(fixed) is None:
-                kept = share
+            repaired = repair(demo)
+            if repaired is not None:
+                demo, kept, changes = repaired
                 reason = f"alpha {alpha:g} made feasible ({first}): {'; '.join(changes)}; {kept:.0%} of the emphasis kept"
-                demo, first = fixed, None
-            elif changes:
-                first += f"; a repair kept {share:.0%} of the emphasis"
+                first = None
         if first is not None:
-            # the largest feasible alpha on the grid 0.25, 0.5, ... below the policy's, by
-            # bisection (feasibility falls with alpha): log2 checks instead of one per step
+            # the largest alpha on the grid 0.25, 0.5, ... below the policy's that is feasible,
+            # or made feasible keeping at least MIN_KEPT of its emphasis, by bisection
+            # (feasibility falls with alpha): log2 checks instead of one per step
             reduced = True
             grid = [round(ALPHA_STEP * k, 6) for k in range(1, int(np.ceil(alpha / ALPHA_STEP - 1e-9)))]
             lo, hi, best = 0, len(grid) - 1, None
@@ -472,11 +477,16 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
                 mid = (lo + hi) // 2
                 candidate = show(grid[mid])
                 if why_not(candidate) is None:
-                    best, lo = (grid[mid], candidate), mid + 1
+                    best, lo = (grid[mid], candidate, None, []), mid + 1
+                    continue
+                fixed = repair(candidate)
+                if fixed is not None:
+                    best, lo = (grid[mid], *fixed), mid + 1
                 else:
                     hi = mid - 1
-            shown, demo = best if best is not None else (0.0, base)
-            reason = f"alpha {alpha:g} infeasible ({first}); lowered to {shown:g}"
+            shown, demo, kept, changes = best if best is not None else (0.0, base, None, [])
+            reason = f"alpha {alpha:g} infeasible ({first}); lowered to {shown:g}" + (
+                f", made feasible: {'; '.join(changes)}; {kept:.0%} of its emphasis kept" if changes else "")
     if reduced and adverb is not None and session.policy.adverb == "table":
         adverb = table_adverb(shown)
     pts = ports.points(session.space)
