@@ -5,14 +5,15 @@ fsync, rename) by :meth:`ProtoSymbolSpace.save`, so a crash at any moment leaves
 old file or the new one. A clip added without a rebuild is a **journal entry** beside it,
 ``<name>.<k>.add`` (:meth:`ProtoSymbolSpace.save_added`: the new proto-symbols, their rows of
 distances, their points and the refitted decision, also atomic), so adding to a space of
-thousands writes kilobytes, not the whole file; a space is read as its file and its entries
-in order. An entry names the generation of the file it extends: one left by a rewrite (a crash
+thousands writes the new rows and the decision (about 0.6 MB, whatever the space's size), not
+the whole file; a space is read as its file and its entries in order. An entry names the generation of the file it extends: one left by a rewrite (a crash
 between the new file and the removal of the old entries) is skipped. The journal is folded
-into the file when it reaches ``JOURNAL_MAX`` entries or a quarter of the space. A build or add first writes ``<name>.pending.json``; the marker is
-removed once the new space is on disk, or at once when the operation fails or is refused (the
-old file is intact). A marker found when the store opens belongs to an
-operation the previous process never finished: :meth:`interrupted` reports it until the space
-is built again or deleted.
+into the file when it reaches ``JOURNAL_MAX`` entries or a quarter of the space.
+
+A build or add first writes ``<name>.pending.json``; the marker is removed once the new space
+is on disk, or at once when the operation fails or is refused (the old file is intact). A
+marker found when the store opens belongs to an operation the previous process never finished:
+:meth:`interrupted` reports it until the space is built again or deleted.
 
 Readers never wait for writers: a space object is never modified in place, a write replaces
 it. Two writes to the same space at once are refused (``conflict``); writes to different
