@@ -319,3 +319,14 @@ def test_naive_bayes_across_tasks_is_reported_against_the_own_task():
     text = "\n".join(nb_transfer_lines(results))
     assert "| thesis | squat -> throw |" in text and "+0.300 (own task lower: holds" in text
     assert "| thesis | throw -> squat | - | - | not run: one adverb |" in text
+
+
+def test_every_learner_family_has_a_sensitivity_sweep_of_its_own_parameters():
+    from dataclasses import fields
+
+    from shared.agents.learner import LearnerParams
+    from shared.reproduce.coaching import SENSITIVITY
+
+    assert set(SENSITIVITY) == set(FAMILIES)
+    names = {f.name for f in fields(LearnerParams)}
+    assert all(set(params) <= names for params in SENSITIVITY.values())

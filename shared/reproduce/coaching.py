@@ -218,6 +218,8 @@ def run_target(client, target, key: str, learners: int, echo=print, family: str 
 #: the sensitivity sweep: per family, each parameter at three values (the others as drawn)
 SENSITIVITY = {"thesis": {"gain": (0.15, 0.3, 0.6), "threshold": (0.0, 3.0, 6.0), "overshoot": (0.0, 0.3, 0.9)},
                "error_based": {"retention": (0.7, 0.9, 1.0), "gain": (0.15, 0.3, 0.6), "threshold": (0.0, 3.0, 6.0)},
+               # its rates are the published ones (not varied): what the learner perceives and does is
+               "two_rate": {"threshold": (0.0, 3.0, 6.0), "noise": (0.3, 1.0, 3.0)},
                "copy": {"noise": (0.3, 1.0, 3.0)},
                "fixed_step": {"step": (2.0, 4.0, 8.0), "threshold": (0.0, 3.0, 6.0)}}
 SENSITIVITY_ALPHAS = (0.0, 1.0, 2.0, 3.0)
@@ -615,6 +617,14 @@ def nb_transfer_lines(results: dict) -> list[str]:
     return lines + [""]
 
 
+def _keep(out: Path, results: dict) -> None:
+    """``results.json`` as it stands (written again after every family and sensitivity sweep)."""
+    from shared.io.atomic import atomic_write
+
+    text = json.dumps(results, indent=1, default=str).encode()
+    atomic_write(out / "results.json", lambda f: f.write(text))
+
+
 def run(client, hdm05: Path, out: Path, learners: int = 12, targets=("squat", "throw"), families=None,
         sensitivity_learners: int = 8, echo=print) -> Path:
     """Every family on every target, then each family's sensitivity sweep on the first target."""
@@ -635,10 +645,12 @@ def run(client, hdm05: Path, out: Path, learners: int = 12, targets=("squat", "t
         if len(targets) > 1:
             results.setdefault("nb_transfer", {})[fam] = nb_across_tasks(client, clips, results["families"][fam],
                                                                          learners, fam, echo)
+        _keep(out, results)  # a run stopped later keeps every family done so far
     if sensitivity_learners:
         for fam in families:
             results["sensitivity"][fam] = sensitivity(client, clips[targets[0]], targets[0], sensitivity_learners, fam,
                                                       echo)
+            _keep(out, results)
     (out / "results.json").write_text(json.dumps(results, indent=1, default=str))
     write(tidy_rows(_int_keys(json.loads((out / "results.json").read_text()))), out / "tidy.csv")
     path = write_report(out, _int_keys(json.loads((out / "results.json").read_text())), time.perf_counter() - t0)
