@@ -51,6 +51,8 @@ POLICY = Map({
     "body_part": F(Bool(), "emphasise the worst body part only", required=False, default=False),
     "subgoal": F(Bool(), "coach through sub-goals, worst body part first (thesis 4.6, 7.3)", required=False,
                  default=False),
+    "effort": F(Bool(), "ask the learner how heavy each demonstration felt and keep the emphasis within what its "
+                "body can give (thesis 6.5.1, chapter 3's interval estimator)", required=False, default=False),
 })
 
 TRIAL = Map({
@@ -66,6 +68,9 @@ TRIAL = Map({
                        "target kept", required=False),
     "part": F(Str(max_len=16), "the body part emphasised (body-part policy)", required=False),
     "goal": F(Str(max_len=64), "the proto-symbol emphasised towards: target, or a sub-goal", required=False),
+    "felt": F(Int(1, 4), "the learner's word for the last demonstration's effort (effort policy)", required=False),
+    "felt_predicted": F(Float(0.0), "the effort the learner is estimated to feel for the motion shown next, as a "
+                        "share of its strength (effort policy, once it has answered)", required=False),
     "shares": F(AnyMap(), "share of the error per body part"),
     "emphatic": F(CLIP, "the motion to show next (the target when alpha is 0)"),
     "x_t": F(List(Float(), max_len=20)), "x_p": F(List(Float(), max_len=20)), "x_s": F(List(Float(), max_len=20)),
@@ -111,7 +116,9 @@ START = Endpoint(
 ATTEMPT = Endpoint(
     "attempt",
     Message("coach.attempt", Map({"session": SESSION, "clips": F(List(CLIP, min_len=1, max_len=20),
-                                                                 "the attempt: its repetitions (5 in the thesis)")})),
+                                                                 "the attempt: its repetitions (5 in the thesis)"),
+                                  "felt": F(Int(1, 4), "how heavy the last demonstration felt to the learner, "
+                                            "1 light .. 4 at the limit (effort policy)", required=False)})),
     Message("coach.attempt.reply", TRIAL),
     "One trial: recognise the attempt, choose alpha and adverb, generate and check the emphatic motion.",
 )

@@ -168,6 +168,8 @@ LEARNER_PARAMS = Map({
     "step": F(Float(0.0, 90.0), "fixed_step: degrees RMS moved per trial", required=False),
     "adverb_response": F(Float(-3.0, 3.0), "error_based: r, a word's effect on the error taken up (< 0: less)",
                          required=False),
+    "strength": F(Float(0.1, 100.0), "effort its body can give, in multiples of the target's (thesis 6.5.1); "
+                  "absent: unlimited", required=False),
 })
 
 LEARNER_CREATE = Endpoint(
@@ -198,6 +200,8 @@ LEARNER_IMITATE = Endpoint(
     Message("simulator.learner_imitate.reply", Map({
         "learner": LEARNER, "trial": F(Int(1)),
         "attempts": F(List(CLIP, min_len=1, max_len=20), "the next attempt: 5 repetitions"),
+        "felt": F(Int(1, 4), "how heavy the demonstration felt, a word 1..4 (learners with a strength only; "
+                  "shared/coaching/effort.py)", required=False),
     })),
     "The learner watches a demonstration and answers with its next attempt (5 repetitions).",
 )

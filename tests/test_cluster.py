@@ -617,6 +617,11 @@ def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
     cases = {r["condition"] for r in rows}
     assert {f"case {c}" for c in range(1, 9)} <= cases and {"sub-goal", "body part"} <= cases
     assert len([r for r in rows if r["condition"] == "case 3"]) == 3 * 4
+    # the estimator in the loop (6.5.1): the strength-limited learners said how heavy each motion felt
+    assert {"effort with", "effort without"} <= cases and "The estimator in the loop (6.5.1)" in text
+    effort = results["families"]["copy"]["squat"]["effort"]
+    assert all(1 <= k <= 4 for row in effort["felt"] for k in row) and effort["trials"] == 3 * 4
+    assert any(p is not None for row in effort["predicted"] for p in row)
     for fig in ("fig6_1", "fig6_2", "fig6_5", "fig6_6", "fig6_7"):
         assert (tmp_path / f"rep/ch4-6/copy_squat_{fig}.png").stat().st_size > 5000
     r = cli(env, "reproduce", "ch4", "--out", tmp_path / "rep", "--families", "oracle")

@@ -244,3 +244,73 @@ def test_aeu_thresholds_are_fitted_from_coaches_and_backward_coaches_left_out():
         fit_aeu([r for r in rows if r["coach"] in ("c3", "c4")])
     with pytest.raises(BadInput, match="thresholds"):
         Policy.from_dict({"kind": "aeu1", "thresholds": [50.0, 10.0]})
+
+
+def test_a_learner_feels_effort_and_a_demonstration_beyond_its_strength_is_taken_in_part(squat):
+    """Thesis 6.5.1 (shared/coaching/effort.py): a learner with a strength feels the target at
+    1/strength, answers a word for it, and follows a motion beyond its strength only in part."""
+    from shared.coaching.effort import word
+
+    p = population(2, 0)[1]
+    strong, weak = (SimulatedLearner(n, squat, LearnerParams(**{**p.__dict__, "strength": s}))
+                    for n, s in (("strong", 10.0), ("weak", 1.2)))
+    assert strong.felt_effort(squat) == pytest.approx(0.1) and weak.felt_effort(squat) == pytest.approx(1 / 1.2)
+    strong.imitate(squat, None)
+    weak.imitate(squat, None)
+    assert (strong.felt, weak.felt) == (word(0.1), word(1 / 1.2)) == (1, 4)
+    # a motion twice as far from the learner as the target: the weak body feels it beyond its strength
+    big = squat.with_data(squat.data.copy())
+    idx = [squat.channels.index(c) for c in strong.channels]
+    big.data[:, idx] = squat.data[:, idx] + 1.5 * (squat.data[:, idx] - squat.data[:, idx].mean(axis=0))
+    g = weak.felt_effort(big)
+    assert g > 1.0 > strong.felt_effort(big)
+    before = weak.memory.copy()
+    unlimited = SimulatedLearner("u", squat, LearnerParams(**{**p.__dict__, "strength": None}), memory=before.copy(),
+                                 trials=weak.trials, reference=weak.reference)
+    weak.imitate(big, None)
+    unlimited.imitate(big, None)
+    step_weak = np.linalg.norm(weak.memory - before)
+    step_free = np.linalg.norm(unlimited.memory - before)
+    assert 0 < step_weak < step_free and unlimited.felt is None
+    with pytest.raises(BadInput, match="skeleton"):
+        SimulatedLearner("n", squat.with_data(squat.data, skeleton=None), LearnerParams(strength=2.0))
+
+
+def test_the_effort_policy_keeps_the_emphasis_within_what_the_learner_says_it_can_give(squat):
+    """Thesis 6.5.1: with the effort policy the coach asks the learner's word after each trial
+    (chapter 3's interval estimator) and lowers alpha where the predicted felt effort is beyond
+    its strength; the answers it got bound the learner's true scale."""
+    from shared.coaching.effort import LANGUAGE
+
+    ports = LocalCoachPorts(squat.skeleton)
+    params = LearnerParams(**{**population(2, 0)[1].__dict__, "strength": 1.6})
+    runs = {}
+    for effort in (False, True):
+        s = Session(f"e{effort}", squat, Policy("fixed", alpha=3.0, adverb="table", effort=effort), check=False)
+        start(s, ports)
+        learner = SimulatedLearner("l", squat, params)
+        demo, adverb, felt, truth = squat, None, [], []
+        for _ in range(3):
+            attempts = learner.imitate(demo, adverb)
+            felt.append(learner.felt)
+            rec, demo = trial(s, attempts, ports, learner.felt if effort else None)
+            adverb = rec.adverb
+            truth.append(learner.felt_effort(demo))
+        runs[effort] = (s, felt, truth)
+    plain, aware = runs[False][0], runs[True][0]
+    assert all(t.alpha_shown == 3.0 for t in plain.trials) and all(t.felt is None for t in plain.trials)
+    assert [t.felt for t in aware.trials] == runs[True][1]
+    lo, hi = aware.effort.interval()
+    assert lo <= 1 / 1.6 <= hi  # the learner's true scale is inside what its answers allow
+    # where the coach lowered alpha it said why, and what it predicted is within the learner's strength
+    for t in aware.trials:
+        if t.alpha_reduced:
+            assert "of its strength" in t.feasibility and t.alpha_shown < 3.0
+        if t.felt_predicted is not None:
+            assert t.felt_predicted <= LANGUAGE.g_max or t.alpha_shown == 0.0
+    assert any(t.alpha_reduced for t in aware.trials)
+    # the coach's prediction of how heavy the next motion will feel is within one word of the truth
+    assert all(abs(t.felt_predicted - g) < 1 / LANGUAGE.d for t, g in zip(aware.trials, runs[True][2]))
+    assert max(runs[False][2]) > LANGUAGE.g_max  # without the policy, a motion beyond its strength was shown
+    with pytest.raises(BadInput, match="does not ask for felt effort"):
+        trial(plain, attempts, ports, 2)

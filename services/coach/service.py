@@ -22,11 +22,13 @@ from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
 from shared.clip import Clip
+from shared.coaching.effort import EffortEstimate, effort
 from shared.coaching.policies import (SWEEP, Calibration, Policy, best_alpha, fit_emu1_corrected, fit_nb,
                                       simulated_coach_demonstrations)
 from shared.deadline import check_time, completed
 from shared.coaching.session import Session, Trial, session_to_dict, start, trial
 from shared.errors import BadInput, Conflict, NotFound
+from shared.estimation.conversation import TORQUE_PREFIX
 from shared.io import load_clip, save_clip
 from shared.io.atomic import atomic_write
 from shared.pss.store import check_name
@@ -63,12 +65,21 @@ class BusCoachPorts:
         out = clip_from_wire(r["clip"])
         return r["report"], out.select(["cog.x", "cog.y", "cog.z"])
 
+    def effort(self, clip):
+        if self.skeleton is None:
+            return None
+        r = self.c.request("simulator", "perform", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False)})
+        out = clip_from_wire(r["clip"])
+        return effort(out.select([c for c in out.channels if c.startswith(TORQUE_PREFIX)]))
+
 
 def trial_reply(session: Session, rec: Trial, demo: Clip) -> dict:
     return {"session": session.name, "trial": rec.number, "d_p": rec.d_p, "d_cop": rec.d_cop, "alpha": rec.alpha,
             "alpha_shown": rec.alpha_shown, "adverb": rec.adverb, "feasible": rec.feasible,
             "alpha_reduced": rec.alpha_reduced, "feasibility": rec.feasibility, "part": rec.part,
             **({"emphasis_kept": rec.emphasis_kept} if rec.emphasis_kept is not None else {}),
+            **({"felt": rec.felt} if rec.felt is not None else {}),
+            **({"felt_predicted": rec.felt_predicted} if rec.felt_predicted is not None else {}),
             "shares": rec.shares, "goal": rec.goal, "emphatic": clip_to_wire(demo), "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
             "seconds": rec.seconds}
 
@@ -101,7 +112,8 @@ def make_service(settings: Settings | None = None) -> Service:
         return Session(name, load_clip(target), Policy.from_dict(d["policy"]), d.get("learner"),
                        trials=[Trial(**t) for t in d["trials"]], mode=d.get("mode", "residual"),
                        check=d.get("check", True), target_report=d.get("target_report"),
-                       target_cog=None if cog is None else np.asarray(cog), subgoals=d.get("subgoals"))
+                       target_cog=None if cog is None else np.asarray(cog), subgoals=d.get("subgoals"),
+                       effort=EffortEstimate.from_dict(d.get("effort")))
 
     def info(s: Session) -> dict:
         d = s.d()
@@ -112,10 +124,10 @@ def make_service(settings: Settings | None = None) -> Service:
     def ports_of(s: Session) -> BusCoachPorts:
         return BusCoachPorts(bus(), None if s.target.skeleton is None else s.target.skeleton.to_json())
 
-    def run_trial(s: Session, attempts: list[Clip]) -> tuple[Trial, Clip]:
+    def run_trial(s: Session, attempts: list[Clip], felt: int | None = None) -> tuple[Trial, Clip]:
         ports = ports_of(s)
         # a fresh proto-symbol name per try: a trial cut short by a crash is simply sent again
-        rec, demo = trial(s, attempts, _Renamed(ports, f"-{uuid.uuid4().hex[:6]}"))
+        rec, demo = trial(s, attempts, _Renamed(ports, f"-{uuid.uuid4().hex[:6]}"), felt)
         save_clip(demo, root / f"{s.name}.last.npz")  # what to show next, for run to continue from
         save(s)
         svc.publish("trial", {"session": s.name, "trial": rec.number, "d_p": rec.d_p, "alpha": rec.alpha_shown,
@@ -196,7 +208,7 @@ def make_service(settings: Settings | None = None) -> Service:
     def attempt(req):
         with writing(req["session"]):
             s = load(req["session"])
-            rec, demo = run_trial(s, [clip_from_wire(c, s.target.skeleton) for c in req["clips"]])
+            rec, demo = run_trial(s, [clip_from_wire(c, s.target.skeleton) for c in req["clips"]], req["felt"])
         return trial_reply(s, rec, demo)
 
     @svc.handler("run")
@@ -215,7 +227,10 @@ def make_service(settings: Settings | None = None) -> Service:
                 r = bus().request("simulator", "learner_imitate", {"learner": s.learner, "demonstration": clip_to_wire(demo),
                                                                    **({"adverb": adverb} if adverb else {})})
                 attempts = [clip_from_wire(a, s.target.skeleton) for a in r["attempts"]]
-                rec, demo = run_trial(s, attempts)
+                if s.effort is not None and r.get("felt") is None:
+                    raise BadInput(f"session {s.name!r} asks for felt effort, and learner {s.learner!r} has no strength "
+                                   "to feel it with (create it with learner_params.strength)", field="policy")
+                rec, demo = run_trial(s, attempts, r.get("felt") if s.effort is not None else None)
                 adverb = rec.adverb
         return info(s)
 
@@ -331,3 +346,6 @@ class _Renamed:
 
     def perform(self, clip):
         return self.p.perform(clip)
+
+    def effort(self, clip):
+        return self.p.effort(clip)

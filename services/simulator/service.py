@@ -181,10 +181,11 @@ def make_service(settings: Settings | None = None) -> Service:
         with lock_of(f"learner:{req['learner']}"):
             attempts = learner.imitate(demo, req["adverb"])
             store.save_learner(req["learner"])
-            trial = learner.trials
+            trial, felt = learner.trials, learner.felt
         svc.publish("imitated", {"learner": req["learner"], "trial": trial})
         return {"learner": req["learner"], "trial": trial,
-                "attempts": [clip_to_wire(a, with_skeleton=False) for a in attempts]}
+                "attempts": [clip_to_wire(a, with_skeleton=False) for a in attempts],
+                **({"felt": felt} if felt is not None else {})}
 
     @svc.handler("learner_reveal")
     def learner_reveal(req):

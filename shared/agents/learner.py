@@ -66,6 +66,14 @@ Attempts. Each trial returns 5 repetitions: the memory played at the learner's t
 (duration factor ``tempo``) plus smooth motor noise on the joint angles (Gaussian, ``sigma`` degrees, low-passed
 over ~0.2 s), at the target's frame rate.
 
+Strength (any family; thesis 6.5.1). A learner may have a body of limited ``strength``: the
+effort (:func:`shared.coaching.effort.effort`, eq. 3.8 on the inverse-dynamics torques of a
+body built from the target's skeleton) it can give, in multiples of the target's. It feels a
+demonstration at ``g = E(D) / (E(target) strength)``; beyond its strength (``g > 1``) it takes in
+only the part it can follow, ``m + (D - m) / g``, before its family's rule. After each
+demonstration it can say how heavy it felt (:attr:`SimulatedLearner.felt`, a word of
+:data:`shared.coaching.effort.LANGUAGE`). Without ``strength`` (the default) none of this applies.
+
 Every learner is drawn from :func:`population` with a seed; its parameters are documented in
 :class:`LearnerParams` and readable through :meth:`SimulatedLearner.reveal`.
 """
@@ -78,6 +86,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from shared.clip import Clip
+from shared.coaching.effort import effort, word
 from shared.errors import BadInput
 
 N_PHASE = 100
@@ -132,6 +141,7 @@ class LearnerParams:
     retention: float = 0.9  # A of the error_based family
     step: float = 4.0  # fixed_step: degrees RMS per trial
     adverb_response: float = 1.0  # error_based: r, how a word changes the error taken up (< 0: less)
+    strength: float | None = None  # effort its body can give, in multiples of the target's (None: unlimited)
 
     def check(self) -> "LearnerParams":
         if self.family not in FAMILIES:
@@ -142,6 +152,9 @@ class LearnerParams:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and lo <= v <= hi):
                 raise BadInput(f"learner {name} must be in [{lo}, {hi}], got {v}", field=name)
+        if self.strength is not None and not (isinstance(self.strength, (int, float)) and not isinstance(self.strength, bool)
+                                              and np.isfinite(self.strength) and 0.1 <= self.strength <= 100.0):
+            raise BadInput(f"learner strength must be in [0.1, 100] (or none), got {self.strength!r}", field="strength")
         for part, dev in self.deviation.items():
             if part not in BODY_PARTS or not isinstance(dev, dict) or not {"scale", "offset"} <= set(dev):
                 raise BadInput(f"deviation must map arms/legs/trunk to {{scale, offset}}, got {part!r}", field="deviation")
@@ -217,6 +230,11 @@ class SimulatedLearner:
         self.reference = None if reference is None else np.asarray(reference, float)
         # two_rate: the fast state x_f (the slow one is m - m0 - x_f)
         self.fast = np.zeros_like(self.memory) if fast is None else np.asarray(fast, float)
+        if self.params.strength is not None and target.skeleton is None:
+            raise BadInput("a learner with a strength needs a target with a skeleton (its body is built from it)",
+                           field="strength")
+        self.felt: int | None = None  # its word for the last demonstration's effort (strength only)
+        self._body, self._target_effort = None, None
 
     def _initial(self) -> np.ndarray:
         m = self.target_phase.copy()
@@ -241,6 +259,12 @@ class SimulatedLearner:
             raise BadInput(f"unknown adverb {adverb!r}; one of: {', '.join(ADVERBS)} (or none)", field="adverb")
         p = self.params
         demo = _bounded(to_phase(demonstration, self.channels), "demonstration")
+        self.felt = None
+        if p.strength is not None:
+            g = self.felt_effort(demonstration)
+            self.felt = word(g)
+            if g > 1.0:  # beyond its strength: it follows only the part it can (module docstring)
+                demo = self.memory + (demo - self.memory) / g
         a = 1.0 + p.adverb_sensitivity * (ADVERB_FACTOR[adverb] - 1.0)
         if p.family == "thesis":
             if self.reference is None:  # the first motion shown is taken to be the target
@@ -271,6 +295,21 @@ class SimulatedLearner:
             self.memory = self.memory + diff * (min(1.0, p.step / size) if size > 0 else 0.0)
         self.trials += 1
         return self.attempts()
+
+    def felt_effort(self, clip: Clip) -> float:
+        """How heavy ``clip`` feels to this learner's body: ``E(clip) / (E(target) strength)``."""
+        if self._body is None:
+            from shared.bodies.human import human_body  # MuJoCo: loaded only for learners with a strength
+
+            self._body = human_body(self.target.skeleton)
+            self._target_effort = self._effort(self.target)
+        return self._effort(clip) / (self._target_effort * float(self.params.strength))
+
+    def _effort(self, clip: Clip) -> float:
+        from shared.bodies.body import perform
+
+        out, _ = perform(self._body, clip)
+        return effort(out.select([c for c in out.channels if c.startswith("tau.")]))
 
     def performed(self) -> np.ndarray:
         """The learner's own last performance on the phase axis (its attempts' mean, motor

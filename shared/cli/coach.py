@@ -27,19 +27,28 @@ def _target_request(target: str, skeleton: Optional[Path]) -> dict:
 
 
 def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: Optional[Path],
-            subgoal: bool = False) -> dict:
+            subgoal: bool = False, effort: bool = False) -> dict:
     if policy_file is not None:
         try:
             d = json.loads(policy_file.read_text())
         except (OSError, ValueError) as e:
             _fail(f"{policy_file}: cannot read a policy ({e})")
-        return d.get("policy", d)
+        d = dict(d.get("policy", d))
+        if effort:
+            d["effort"] = True
+        return d
     if kind in ("aeu1", "aeu2", "emu2", "nb"):
         _fail(f"policy {kind} is fitted from data: pass --policy-file (from the coach's policy_fit)")
     if body_part and subgoal:
         _fail("give --body-part or --subgoal, not both")
     return {"kind": kind, "alpha": alpha, "adverb": None if adverb == "none" else adverb, "body_part": body_part,
-            "subgoal": subgoal}
+            "subgoal": subgoal, "effort": effort}
+
+
+EFFORT_HELP = ("Ask the learner how heavy each demonstration felt (1 light .. 4 at its limit) and keep the emphasis "
+               "within what its body can give (thesis 6.5.1; chapter 3's interval estimator).")
+STRENGTH_HELP = ("The simulated learner's strength: the effort its body can give, in multiples of the target's "
+                 "(default: unlimited). Needed for --effort with a simulated learner.")
 
 
 def _print_trial(r: dict, file: Path | None) -> None:
@@ -47,6 +56,7 @@ def _print_trial(r: dict, file: Path | None) -> None:
     extra = f"; alpha lowered from {r['alpha']:g}: {r['feasibility']}" if r["alpha_reduced"] else ""
     part = f"; emphasised: {r['part']}" if r.get("part") else ""
     part += f"; towards {r['goal']}" if r.get("goal", "target") != "target" else ""
+    part += f"; it will feel it at {r['felt_predicted']:.0%} of its strength" if r.get("felt_predicted") is not None else ""
     typer.echo(f"trial {r['trial']}: d_p {r['d_p']:.1f}, alpha {r['alpha_shown']:g}, \"{adverb}\"{part}{extra}")
     if file is not None:
         typer.echo(f"  next motion to imitate: {file}")
@@ -67,6 +77,8 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
                                              "(thesis 4.6, 7.3)."),
                 family: str = typer.Option("thesis", help="Simulated learner's family: thesis, error_based, copy, "
                                            "two_rate, fixed_step (shared/agents/learner.py)."),
+                effort: bool = typer.Option(False, "--effort", help=EFFORT_HELP),
+                strength: Optional[float] = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
                 policy_file: Optional[Path] = typer.Option(None, help="A fitted policy (JSON)."),
                 mode: str = typer.Option("residual", help="residual (emphasis on the real target) or thesis (F_gen(x_s))."),
                 skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
@@ -77,10 +89,15 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
     if not person and not learner:
         _fail("give --learner ID (a simulated learner) or --person")
     name = session or f"s{uuid.uuid4().hex[:8]}"
-    req = {"session": name, **_target_request(target, skeleton), "policy": _policy(policy, alpha, adverb, body_part, policy_file, subgoal),
+    if strength is not None and not learner:
+        _fail("--strength is a simulated learner's; a person says how heavy it felt with `coach attempt --felt`")
+    req = {"session": name, **_target_request(target, skeleton),
+           "policy": _policy(policy, alpha, adverb, body_part, policy_file, subgoal, effort),
            "mode": mode, "index": index, "population_seed": population_seed, "family": family}
     if learner:
         req["learner"] = learner
+        if strength is not None:
+            req["learner_params"] = {"strength": strength}
     with _client() as c:
         r = c.request("coach", "start", req)
     typer.echo(json.dumps(_jsonable(r)) if as_json else name)
@@ -91,6 +108,9 @@ def coach_attempt(session: str = typer.Argument(...),
                   clips: list[Path] = typer.Argument(..., help="The attempt: its repetitions (5 in the thesis)."),
                   skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                   out: Path = typer.Option(Path("."), help="Folder for the emphatic motion (BVH)."),
+                  felt: Optional[int] = typer.Option(None, min=1, max=4, help="How heavy the last motion shown felt: "
+                                                     "1 light, 2, 3, 4 at your limit or beyond (sessions started "
+                                                     "with --effort)."),
                   as_json: bool = typer.Option(False, "--json", help="alpha, adverb, d_p and the file, as JSON.")):
     """One trial with your own attempt: prints alpha, the adverb and d_p; writes the emphatic motion as BVH."""
     from schemas.common import clip_from_wire
@@ -98,7 +118,8 @@ def coach_attempt(session: str = typer.Argument(...),
 
     attempts = [read_clip(p, skeleton=skeleton) for p in clips]
     with _client() as c:
-        r = c.request("coach", "attempt", {"session": session, "clips": [_wire(a) for a in attempts]})
+        r = c.request("coach", "attempt", {"session": session, "clips": [_wire(a) for a in attempts],
+                                           **({"felt": felt} if felt is not None else {})})
     # the emphatic motion comes at the space's rate; it is written at the rate the person recorded at
     demo = clip_from_wire(r["emphatic"]).resample(attempts[0].fps)
     out.mkdir(parents=True, exist_ok=True)
@@ -143,6 +164,8 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
               body_part: bool = typer.Option(False, "--body-part"), policy_file: Optional[Path] = typer.Option(None),
               subgoal: bool = typer.Option(False, "--subgoal", help="Coach through sub-goals (thesis 4.6, 7.3)."),
               family: str = typer.Option("thesis", help="Learner family: thesis, error_based, two_rate, copy, fixed_step."),
+              effort: bool = typer.Option(False, "--effort", help=EFFORT_HELP),
+              strength: Optional[float] = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
               as_json: bool = typer.Option(False, "--json")):
     """Coach a simulated learner for a number of trials (a simulation, not a person)."""
     with _client() as c:
@@ -152,7 +175,11 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
             session = f"s{uuid.uuid4().hex[:8]}"
             c.request("coach", "start", {"session": session, **_target_request(target, None), "learner": learner,
                                          "index": index, "family": family,
-                                         "policy": _policy(policy, alpha, adverb, body_part, policy_file, subgoal)})
+                                         **({"learner_params": {"strength": strength}} if strength is not None else {}),
+                                         "policy": _policy(policy, alpha, adverb, body_part, policy_file, subgoal,
+                                                           effort)})
+        elif strength is not None or effort:
+            _fail("--strength and --effort choose a new session's learner and policy; give --target instead of --session")
         r = c.request("coach", "run", {"session": session, "trials": trials}, timeout=60 + 30 * trials)
     typer.echo(json.dumps(_jsonable(r)) if as_json else _print_session(r))
 

@@ -9,6 +9,7 @@ import numpy as np
 from shared.bodies.body import perform
 from shared.bodies.human import human_body
 from shared.clip import Clip
+from shared.coaching.effort import effort
 from shared.pss.space import ProtoSymbolSpace
 
 
@@ -43,3 +44,9 @@ class LocalCoachPorts:
                     "not_checked": ["joint limits and balance (no body for this target)"], "feasible": None}, None
         out, report = perform(self.body, clip)
         return report, out.select(["cog.x", "cog.y", "cog.z"])
+
+    def effort(self, clip):
+        if self.body is None:
+            return None
+        out, _ = perform(self.body, clip)
+        return effort(out.select([c for c in out.channels if c.startswith("tau.")]))

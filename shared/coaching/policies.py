@@ -212,6 +212,7 @@ class Policy:
     thresholds: list | None = None  # aeu: (t1, t2) in our units fitted from human coaches (fit_aeu)
     body_part: bool = False  # emphasise the worst body part only
     subgoal: bool = False  # coach through intermediate proto-symbols, worst body part first (session.py)
+    effort: bool = False  # ask the learner's felt effort and keep emphasis within its strength (effort.py, 6.5.1)
 
     def check(self) -> "Policy":
         if self.kind not in KINDS:

@@ -8,7 +8,14 @@ Ports (the coach service wires them to the bus; tests can wire them to local obj
 * ``points(space)`` every proto-symbol's point;
 * ``generate(space, mix)`` the motion of a weighted mix of proto-symbols;
 * ``perform(clip)`` the simulator's feasibility report and centre-of-gravity trajectory on a
-  body built from the target's skeleton.
+  body built from the target's skeleton;
+* ``effort(clip)`` the clip's effort on that body (:func:`shared.coaching.effort.effort`), or
+  None without a body.
+
+**Felt effort** (thesis 6.5.1; policy ``effort``, :mod:`shared.coaching.effort`): the learner's
+word for how heavy the last demonstration felt comes with its attempt; chapter 3's interval
+estimator turns the answers into the learner's scale, and an emphatic motion it would feel
+beyond its strength is lowered like an infeasible one (with or without the simulator's check).
 
 One trial: the attempt (5 repetitions) becomes ``x_p``; ``d_p = |x_t - x_p|`` (eq. 4.4, the
 HMM distance); the policy picks alpha and the adverb; the emphatic motion is generated from
@@ -38,6 +45,7 @@ from typing import Protocol
 import numpy as np
 
 from shared.clip import Clip
+from shared.coaching.effort import EffortEstimate
 from shared.coaching.parts import error_shares, partial_emphasis
 from shared.coaching.policies import Policy, table_adverb
 from shared.errors import BadInput
@@ -55,6 +63,7 @@ class CoachPorts(Protocol):
     def points(self, space: str) -> dict[str, np.ndarray]: ...
     def generate(self, space: str, mix: dict[str, float]) -> Clip: ...
     def perform(self, clip: Clip) -> tuple[dict, np.ndarray]: ...
+    def effort(self, clip: Clip) -> float | None: ...
 
 
 @dataclass
@@ -76,6 +85,8 @@ class Trial:
     seconds: float = 0.0
     goal: str = "target"  # the proto-symbol emphasised towards (a sub-goal, or the target)
     emphasis_kept: float | None = None  # share of the emphatic motion's difference from the base kept by the repair
+    felt: int | None = None  # the learner's word for the last demonstration's effort (effort policy)
+    felt_predicted: float | None = None  # estimated felt effort of the motion shown next (share of its strength)
 
 
 @dataclass
@@ -90,6 +101,7 @@ class Session:
     target_report: dict | None = None
     target_cog: np.ndarray | None = None
     subgoals: dict | None = None  # sub-goal coaching's plan (see module docstring)
+    effort: EffortEstimate | None = None  # what the coach knows of the learner's felt effort (effort policy)
 
     @property
     def space(self) -> str:
@@ -404,12 +416,24 @@ def start(session: Session, ports: CoachPorts) -> None:
     """Build the session's space and the target's reference report."""
     ports.build(session.space, session.target)
     session.target_report, session.target_cog = ports.perform(session.target)
+    if session.policy.effort:
+        e = ports.effort(session.target)
+        if e is None or not e > 0:
+            raise BadInput("the effort policy feels motions on a body built from the target's skeleton, and this "
+                           "target has none (or no effort on it)", field="policy")
+        session.effort = EffortEstimate(float(e), last=1.0)  # the first motion shown is the target
 
 
-def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Trial, Clip]:
-    """One trial (see module docstring). Returns the record and the motion to show next."""
+def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int | None = None) -> tuple[Trial, Clip]:
+    """One trial (see module docstring). Returns the record and the motion to show next.
+    ``felt``: the learner's word for the last demonstration's effort (effort policy)."""
     t0 = time.perf_counter()
     check_attempts(session, attempts)
+    if felt is not None:
+        if session.effort is None:
+            raise BadInput(f"session {session.name!r} does not ask for felt effort (start it with the effort policy)",
+                           field="felt")
+        session.effort.add(felt)
     number = len(session.trials) + 1
     name = f"attempt{number}"
     ports.add_attempt(session.space, name, attempts)
@@ -434,13 +458,26 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
             demo = partial_emphasis(base.resample(demo.fps), demo, part)
         return demo
 
+    efforts: dict[int, float] = {}
+
+    def effort_of(demo: Clip) -> float:
+        if id(demo) not in efforts:
+            efforts[id(demo)] = float(ports.effort(demo))
+        return efforts[id(demo)]
+
     def why_not(demo: Clip) -> str | None:
-        report, _ = ports.perform(demo)
-        return _worse(report, session.target_report, session.target) if session.target_report else None
+        if session.check and session.target_report:
+            report, _ = ports.perform(demo)
+            worse = _worse(report, session.target_report, session.target)
+            if worse is not None:
+                return worse
+        return session.effort.beyond(effort_of(demo)) if session.effort is not None else None
 
     def repair(demo: Clip) -> tuple[Clip, float, list[str]] | None:
         """``demo`` made feasible (:func:`make_feasible`) with the share of its emphasis kept and
         what changed, or None when it still fails or keeps less than ``MIN_KEPT``."""
+        if not session.check or not session.target_report:
+            return None  # only the simulator's check is repaired; felt effort is met by a lower alpha
         fixed, changes = make_feasible(base, demo, ports.perform(demo)[0], session.target_report, session.target,
                                        lambda c: ports.perform(c)[0])
         share = _emphasis_kept(base, demo, fixed) if changes else 0.0
@@ -450,14 +487,17 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
     demo = show(alpha)
     if alpha <= 0:
         reason = "no emphasis"
-    elif not session.check:
+    elif not session.check and session.effort is None:
         reason = "not checked (the session was started without the check)"
     else:
         first = why_not(demo)
         unchecked = (session.target_report or {}).get("not_checked") or []
         reason = "feasible" + (f" (not checked: {'; '.join(unchecked)})" if unchecked else "")
-        if session.target_report is None or (session.target_report.get("feasible") is None and "not_checked" in
-                                             session.target_report):
+        if not session.check:
+            reason = "within the learner's strength (balance and joint limits not checked: the session was started " \
+                     "without the check)"
+        elif session.target_report is None or (session.target_report.get("feasible") is None and "not_checked" in
+                                               session.target_report):
             reason = "not checked: " + ("; ".join(unchecked) or "no simulator body for this target")
         if first is not None:
             # made feasible where it is not, the emphasis kept elsewhere (make_feasible)
@@ -489,12 +529,18 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
                 f", made feasible: {'; '.join(changes)}; {kept:.0%} of its emphasis kept" if changes else "")
     if reduced and adverb is not None and session.policy.adverb == "table":
         adverb = table_adverb(shown)
+    predicted = None
+    if session.effort is not None:
+        e = effort_of(demo)
+        predicted = session.effort.predicted(e) if session.effort.answers else None
+        session.effort.last = session.effort.g_self(e)  # what the learner's next answer is about
     pts = ports.points(session.space)
     x_t, x_p = pts["target"], pts[name]
     x_g = pts.get(goal, x_t)
     x_s = x_g + shown * (x_g - x_p)
     rec = Trial(number, float(d_p), float(alpha), float(shown), adverb, not reduced, reduced, reason, part,
-                shares, d_cop, x_t.tolist(), x_p.tolist(), x_s.tolist(), time.perf_counter() - t0, goal, kept)
+                shares, d_cop, x_t.tolist(), x_p.tolist(), x_s.tolist(), time.perf_counter() - t0, goal, kept,
+                felt, predicted)
     session.trials.append(rec)
     return rec, demo.with_data(demo.data, name=f"{session.name}_emphatic{number}")
 
@@ -502,7 +548,8 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts) -> tuple[Tr
 def session_to_dict(s: Session) -> dict:
     return {"name": s.name, "policy": s.policy.to_dict(), "learner": s.learner, "mode": s.mode, "check": s.check,
             "trials": [asdict(t) for t in s.trials], "target_report": s.target_report, "subgoals": s.subgoals,
-            "target_cog": None if s.target_cog is None else np.asarray(s.target_cog).tolist()}
+            "target_cog": None if s.target_cog is None else np.asarray(s.target_cog).tolist(),
+            "effort": None if s.effort is None else s.effort.to_dict()}
 
 
 def ratio(sessions_d: list[list[float]]) -> np.ndarray:

@@ -322,44 +322,17 @@ class OtherEstimate:
         return self._saved_body
 
     # ------------------------------------------------------------------ the interval method
-    def _bounds(self) -> tuple[list[float], list[float]]:
-        lows, highs = [], []
-        for g_self, k in self.answers:
-            lo, hi = self.language.bounds(k)
-            g = max(g_self, 1e-12)
-            lows.append(lo / g)
-            highs.append(hi / g)
-        return lows, highs
-
     def interval(self) -> tuple[float, float]:
         """The values of ``s`` every answer so far allows (empty when answers contradict)."""
-        if not self.answers:
-            return 0.0, np.inf
-        lows, highs = self._bounds()
-        return max(lows), min(highs)
+        return scale_interval(self.answers, self.language)
 
     def consistent(self) -> bool:
         lo, hi = self.interval()
         return lo <= hi
 
     def scale(self) -> float:
-        """``s`` with ``S_other ~ s * S_self``, from every answer so far (see module docstring).
-        Needs a rule homogeneous of degree 1 in the torques (eq. 3.8, f1-f4 all are)."""
-        if not self.answers:
-            return 1.0
-        lows, highs = self._bounds()
-        lo, hi = max(lows), min(highs)
-        if lo <= hi:
-            if np.isinf(hi):  # only "heavier than" bounds: the tightest lower bound plus half a bin
-                return lo + 0.5 * self.language.g_max / self.language.d / max(max(g for g, _ in self.answers), 1e-12)
-            return 0.5 * (lo + hi)
-        # contradictory answers (noise): the s that violates the bounds least (sum of distances)
-        cands = np.unique(np.r_[lows, [h for h in highs if np.isfinite(h)]])
-
-        def violation(x):
-            return sum(max(0.0, a - x) + max(0.0, x - b) for a, b in zip(lows, highs))
-
-        return float(min(cands, key=violation))
+        """``s`` with ``S_other ~ s * S_self``, from every answer so far (:func:`scale_of`)."""
+        return scale_of(self.answers, self.language)
 
     def estimate(self, motion: Clip, ports: Ports, method: str = "thesis") -> np.ndarray:
         """The other's torques for any motion: ``associate`` in ``P_other_hat`` (thesis),
@@ -371,6 +344,47 @@ class OtherEstimate:
         if method == "body":
             return self.body(ports).torques(np.asarray(ports.regressor(motion), float))
         raise BadInput(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+
+
+# ---------------------------------------------------------------------------- the interval method
+def _scale_bounds(answers, language: Language) -> tuple[list[float], list[float]]:
+    lows, highs = [], []
+    for g_self, k in answers:
+        lo, hi = language.bounds(k)
+        g = max(g_self, 1e-12)
+        lows.append(lo / g)
+        highs.append(hi / g)
+    return lows, highs
+
+
+def scale_interval(answers, language: Language) -> tuple[float, float]:
+    """The values of ``s`` (``g_other = s g_self``) that every answer ``(g_self, k)`` allows: the
+    other's word ``k`` puts ``s g_self`` in bin ``k`` (eq. 3.4). Empty (lo > hi) when they contradict."""
+    if not answers:
+        return 0.0, np.inf
+    lows, highs = _scale_bounds(answers, language)
+    return max(lows), min(highs)
+
+
+def scale_of(answers, language: Language) -> float:
+    """The interval estimator's ``s`` (module docstring) from answers ``(g_self, k)``: the middle
+    of :func:`scale_interval`; with only "heavier than" bounds the tightest plus half a bin; with
+    contradictory answers (noise) the ``s`` that violates the bounds least. Needs a rule
+    homogeneous of degree 1 in the torques (eq. 3.8, f1-f4 all are)."""
+    if not answers:
+        return 1.0
+    lows, highs = _scale_bounds(answers, language)
+    lo, hi = max(lows), min(highs)
+    if lo <= hi:
+        if np.isinf(hi):
+            return lo + 0.5 * language.g_max / language.d / max(max(g for g, _ in answers), 1e-12)
+        return 0.5 * (lo + hi)
+    cands = np.unique(np.r_[lows, [h for h in highs if np.isfinite(h)]])
+
+    def violation(x):
+        return sum(max(0.0, a - x) + max(0.0, x - b) for a, b in zip(lows, highs))
+
+    return float(min(cands, key=violation))
 
 
 # ---------------------------------------------------------------------------- evaluation

@@ -73,10 +73,13 @@ class Experiment:
         self.count += self.trials
         return info
 
-    def group(self, tag: str, policy_of, check: bool = False, **kw) -> list[dict]:
-        """One session per learner of the population (``policy_of(i)`` -> policy)."""
+    def group(self, tag: str, policy_of, check: bool = False, params_of=None, **kw) -> list[dict]:
+        """One session per learner of the population (``policy_of(i)`` -> policy; ``params_of(i)``
+        -> parameters set on learner ``i``, see ``learner_params``)."""
         with ThreadPoolExecutor(self.workers) as pool:
-            return list(pool.map(lambda i: self.session(tag, i, policy_of(i), check, **kw), range(self.learners)))
+            return list(pool.map(lambda i: self.session(tag, i, policy_of(i), check,
+                                                        **({"params": params_of(i)} if params_of else {}), **kw),
+                                 range(self.learners)))
 
     @staticmethod
     def d(infos: list[dict]) -> np.ndarray:
@@ -210,6 +213,17 @@ def run_target(client, target, key: str, learners: int, echo=print, family: str 
     res["body_part"] = {"d": Experiment.d(part).tolist(), "parts": [t["part"] for s in part for t in s["trials"]]}
     sub = ex.group("subgoal", lambda i: {**CASES[3][1], "subgoal": True})
     res["subgoal"] = {"d": Experiment.d(sub).tolist(), "goals": [[t["goal"] for t in s["trials"]] for s in sub]}
+    # ---- the estimator in the loop (6.5.1): learners of limited strength, alpha 2 + adverb, the coach asking
+    # their felt effort or not (the same learners, the same motor noise)
+    strength = [learner_strength(i) for i in range(learners)]
+    groups = {w: ex.group(f"effort{w}", lambda i, w=w: {**CASES[4][1], "effort": w == "with"},
+                          params_of=lambda i: {"strength": strength[i]}) for w in ("without", "with")}
+    asked = [t for s in groups["with"] for t in s["trials"]]
+    res["effort"] = {"strength": strength, **{w: Experiment.d(g).tolist() for w, g in groups.items()},
+                     "lowered": sum(t["alpha_reduced"] for t in asked), "trials": len(asked),
+                     "alpha_shown": [t["alpha_shown"] for t in asked],
+                     "felt": [[t.get("felt") for t in s["trials"]] for s in groups["with"]],
+                     "predicted": [[t.get("felt_predicted") for t in s["trials"]] for s in groups["with"]]}
     res["trials_run"] = ex.count
     echo(f"  {family} {key}: done, {ex.count} coaching trials")
     return res
@@ -224,6 +238,13 @@ SENSITIVITY = {"thesis": {"gain": (0.15, 0.3, 0.6), "threshold": (0.0, 3.0, 6.0)
                "fixed_step": {"step": (2.0, 4.0, 8.0), "threshold": (0.0, 3.0, 6.0)}}
 SENSITIVITY_ALPHAS = (0.0, 1.0, 2.0, 3.0)
 NB_TRAIN_SEED = 1
+#: the felt-effort experiment's learners: strength U(STRENGTH) x the target's effort, seeded per learner
+STRENGTH, STRENGTH_SEED = (1.2, 2.5), 651
+
+
+def learner_strength(i: int) -> float:
+    """Learner ``i``'s strength in the felt-effort experiment (6.5.1), the same in every family."""
+    return round(float(np.random.default_rng([STRENGTH_SEED, i]).uniform(*STRENGTH)), 4)
 
 
 def sensitivity(client, target, key: str, learners: int, family: str, echo=print) -> dict:
@@ -250,6 +271,7 @@ def tidy_rows(results: dict) -> list[dict]:
             groups.update({"nb": res["nb"]["d"], "body part": res["body_part"]["d"], "sub-goal": res["subgoal"]["d"],
                            "checked": res["feasibility"]["d"]})
             groups.update({f"sweep {k}": d for k, d in res["sweep"].items()})
+            groups.update({f"effort {w}": (res.get("effort") or {}).get(w) for w in ("without", "with")})
             for cond, d in groups.items():
                 if d is None:
                     continue
@@ -333,14 +355,22 @@ FINDINGS = {
     "subgoal": ("Sub-goal coaching ends lower than whole-body emphasis (case 3)", "sub-goal", 3),
     "part": ("Body-part emphasis ends lower than whole-body emphasis (case 3)", "body part", 3),
     "nb": ("The naive Bayes adverb (trained on another population) ends lower than the best fixed case", "nb", "best"),
+    "effort": ("Asking the learner's felt effort (6.5.1) ends lower than not asking, learners of limited strength",
+               "effort", "not asking"),
 }
 
 
 def _finding(res: dict, key: str) -> dict | None:
     _, a, b = FINDINGS[key]
     cases = {int(c): _r4(d) for c, d in res["cases"].items()}
-    other = {"sub-goal": res["subgoal"]["d"], "body part": res["body_part"]["d"], "nb": res["nb"]["d"]}
-    x = cases[a] if isinstance(a, int) else (None if other[a] is None else _r4(other[a]))
+    effort = res.get("effort") or {}  # absent from runs before the experiment existed
+    other = {"sub-goal": res["subgoal"]["d"], "body part": res["body_part"]["d"], "nb": res["nb"]["d"],
+             "effort": effort.get("with"), "not asking": effort.get("without")}
+
+    def r4(k):
+        return cases[k] if isinstance(k, int) else (None if other[k] is None else _r4(other[k]))
+
+    x = r4(a)
     if x is None:
         return None
     if b == "best":
@@ -348,7 +378,8 @@ def _finding(res: dict, key: str) -> dict | None:
         out = compare(x, cases[best])
         out["against"] = f"case {best}"
         return out
-    return compare(x, cases[b])
+    y = r4(b)
+    return None if y is None else compare(x, y)
 
 
 def holm(pvalues) -> np.ndarray:
@@ -468,6 +499,14 @@ def _section(out: Path, family: str, key: str, res: dict) -> list[str]:
     fz = res["feasibility"]
     lines += [f"Feasibility check (alpha 2 + adverb): alpha lowered in {fz['lowered']} of {fz['trials']} trials; R_4 "
               f"{_r4(fz['d']).mean():.3f} with the check, {_r4(cases[4]).mean():.3f} without.", ""]
+    if res.get("effort"):
+        ef, f = res["effort"], _finding(res, "effort")
+        lo, hi = min(ef["strength"]), max(ef["strength"])
+        lines += [f"The estimator in the loop (6.5.1): learners whose bodies give {lo:.2f}-{hi:.2f} times the target's "
+                  "effort, alpha 2 + adverb; the coach asks each learner how heavy the last demonstration felt "
+                  f"(chapter 3's interval estimator) and lowers alpha where it predicts more than the learner's strength "
+                  f"(in {ef['lowered']} of {ef['trials']} trials). R_4 {_r4(ef['with']).mean():.3f} asking, "
+                  f"{_r4(ef['without']).mean():.3f} not asking: {_cell(f)}.", ""]
     parts = res["body_part"]["parts"]
     goals = res["subgoal"]["goals"]
     n_goals = [len(set(g)) for g in goals]
