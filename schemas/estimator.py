@@ -57,7 +57,11 @@ CONVERSE = Endpoint(
     })),
     Message("estimator.converse.reply", Map({
         "info": F(INFO), "completed": F(Int(0), "sets completed by this request"),
-        "stopped": F(Str(max_len=1000), "why the conversation stopped early", required=False),
+        "stopped": F(Str(max_len=1000), "why the conversation stopped early (a silent or senseless other; never "
+                     "contradiction alone)", required=False),
+        "model": F(AnyMap(), "how far the answers agree with the estimated body: agreement, repeat_disagreement, "
+                   "misfits, p, outside (the other is beyond what the self can model) and a verdict sentence",
+                   required=False),
     })),
     "Run conversation sets (eq. 3.2-3.6); each completed set is saved before the next starts.",
     waits=True,

@@ -94,8 +94,12 @@ OTHER_PARAMS = Map({
                    "fault injection for robustness tests", required=False, default="honest"),
     "body": F(AnyMap(), "how its body differs unevenly: lengths {upper, fore, thigh, shin} (m), shares {link: share "
                         "of the mass}, payload (kg in the hand), damping / friction {joint: N m s/rad / N m}, missing "
-                        "[joints] (shared.bodies.robot.BodySpec)", required=False),
+                        "[joints], stiffness {joint: N m/rad} with rest {joint: degrees}, armature {joint: kg m^2} "
+                        "(shared.bodies.robot.BodySpec)", required=False),
     "kind": F(Str(max_len=32), "the population kind it was drawn from, for reports", required=False, default=""),
+    "transmission": F(AnyMap(), "how its torques become what it feels: gear {joint: ratio}, efficiency, coupling "
+                      "{'src>dst': c}, stribeck {joint: [F_c, F_s, v_s]}, fatigue per question "
+                      "(shared.agents.other.transmitted)", required=False),
 })
 
 OTHER_CREATE = Endpoint(

@@ -116,6 +116,66 @@ def test_the_population_replays_and_each_kind_is_what_it_says():
             assert np.ptp(ratios) > 0.01 * np.mean(ratios), kind
 
 
+def test_others_outside_the_estimators_model_are_what_they_say():
+    """Issue 31: springs pull towards their rest angle, rotor inertia adds torque where the joint
+    accelerates, a lossy gear makes driving heavier than being driven, a tendon carries the
+    elbow's torque to the shoulder, static friction exceeds sliding near rest, and a tiring other
+    feels the same motion heavier after more questions. None is a scaled self."""
+    from shared.agents.other import transmitted
+    from shared.agents.population import OUTSIDE_KINDS
+
+    m = basic_motions(ARM)
+    assert set(OUTSIDE_KINDS).isdisjoint(KINDS)
+    for kind in OUTSIDE_KINDS:
+        p = population(kind, 1)[0]
+        assert p["kind"] == kind and population(kind, 2) == population(kind, 2)
+        other = SimulatedOther("x", OtherParams(**p))
+        plain = SimulatedOther("y", OtherParams(**{**p, "body": {}, "transmission": None}))
+        if kind == "fatigue":
+            before = other.feel(m[0])
+            other.asked = 20
+            assert np.allclose(other.feel(m[0]), before * (1 + 20 * p["transmission"]["fatigue"]))
+            continue
+        ratios = [np.abs(other.feel(x)).sum() / max(np.abs(plain.feel(x)).sum(), 1e-12) for x in m
+                  if np.abs(plain.feel(x)).sum() > 0]
+        assert np.ptp(ratios) > 0.01 * np.mean(ratios), kind  # no single factor maps one onto the other
+    # the transmission's terms, one at a time, on a known torque pattern
+    clip = m[0]
+    tau = plain.feel(clip)
+    joints = list(ARM)
+    qd = np.gradient(np.radians(clip.column("shoulder_pitch")), 1 / clip.fps)
+    lossy = transmitted(tau, clip, joints, {"efficiency": 0.5})
+    driving = tau[:, 0] * qd > 0
+    assert np.allclose(lossy[driving, 0], 2 * tau[driving, 0]) and np.allclose(lossy[~driving, 0], 0.5 * tau[~driving, 0])
+    coupled = transmitted(tau, clip, joints, {"coupling": {"elbow>shoulder_pitch": 0.5}})
+    assert np.allclose(coupled[:, 0], tau[:, 0] + 0.5 * tau[:, 2]) and np.allclose(coupled[:, 2], tau[:, 2])
+    still = clip.with_data(np.zeros_like(clip.data))
+    sticky = transmitted(np.zeros((still.n_frames, 3)), still, joints, {"stribeck": {"shoulder_pitch": [0.01, 0.03, 0.1]}})
+    assert np.allclose(sticky, 0.0)  # at rest no friction is felt (tanh(0) = 0)
+    with pytest.raises(BadInput, match="efficiency"):
+        OtherParams(transmission={"efficiency": 1.5}).check()
+    with pytest.raises(BadInput, match="coupling"):
+        OtherParams(transmission={"coupling": {"elbow>elbow": 0.3}}).check()
+    spring = small_humanoid(BodySpec(4.8, stiffness={"elbow": 0.5}, rest={"elbow": -30.0}))
+    held = still.with_data(np.zeros_like(still.data))  # every joint at 0: the spring pulls back to -30 degrees
+    assert abs(_tau(spring, held, ["elbow"])[:, 0].mean() - 0.5 * np.radians(30.0)) < 1e-3
+
+
+def test_the_model_check_tells_an_inconsistent_other_from_one_outside_the_model():
+    """Issue 31: an other of a body like the self's answering with 20 % noise is inconsistent, not
+    outside the model; a consistent other with a lossy gear whose answers no body the self can
+    write down explains is said to be outside what it can model."""
+    noisy = population("mass", 1, d=6, g_max=0.6, joints=list(ARM), noise=0.2)[0]
+    est, ports, _, _ = _converse(noisy, 6)
+    check = est.model_check(ports)
+    assert not check["outside"] and check["repeat_disagreement"] > 0 and check["answers"] == 48
+    geared = population("gears", 2, d=6, g_max=0.6, joints=list(ARM))[1]
+    est, ports, _, _ = _converse(geared, 6)
+    check = est.model_check(ports)
+    assert check["outside"] and check["repeat_disagreement"] == 0.0 and check["p"] < 0.01, check
+    assert check["misfits"] / check["answers"] > 0.1
+
+
 # ---------------------------------------------------------------------------- the body estimator
 def _converse(params: dict, sets: int, language: Language | None = None):
     other = SimulatedOther("o", OtherParams(**params))

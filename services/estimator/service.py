@@ -130,6 +130,20 @@ def info_of(name: str, est: OtherEstimate) -> dict:
     return out
 
 
+def model_reply(check: dict) -> dict:
+    """The model check (:meth:`OtherEstimate.model_check`) with a sentence a person reads."""
+    if not check["answers"]:
+        return {**check, "verdict": "no answers yet"}
+    if check["outside"]:
+        verdict = (f"outside what I can model: {check['misfits']} of {check['answers']} answers disagree with every body "
+                   f"I can write down, while the other's repeated answers differ {check['repeat_disagreement']:.0%} of "
+                   f"the time (binomial p = {check['p']:.2g})")
+    else:
+        verdict = (f"{check['agreement']:.0%} of {check['answers']} answers agree with the estimated body; the other's "
+                   f"repeated answers differ {check['repeat_disagreement']:.0%} of the time")
+    return {**check, "verdict": verdict}
+
+
 _REGRESSORS: dict = {}  # (motion, joints, missing) -> a future of the self's regressor Y
 _REGRESSORS_LOCK = threading.Lock()
 _DESIGN: dict = {}  # the self's designed pairs: they depend on the self's body only
@@ -232,16 +246,15 @@ def make_service(settings: Settings | None = None) -> Service:
                 completed(f"{done} of {req['sets']} conversation set(s) completed and kept")
                 check_time()
                 work = copy.deepcopy(est)
-                was_consistent = work.explained(ports)
                 try:
                     rec = work.conversation_set(ports)
                 except Stopped as e:
                     stopped = e.message
                     break
                 est = work
-                if was_consistent and not est.explained(ports):
-                    stopped = ("the other's answers contradict each other (no body like the self's explains them "
-                               "all); the estimate so far is kept")
+                # contradiction alone never stops the conversation (issue 31): the least squares weighs
+                # every answer, and the model check says how sure it is, or that the other is outside
+                # what the self can model
                 est.save(path(name))
                 done += 1
                 svc.publish("progress", {"estimate": name, "set": len(est.sets), "scale": float(est.scale()),
@@ -253,7 +266,7 @@ def make_service(settings: Settings | None = None) -> Service:
                 est.notes.append(f"stopped after {len(est.sets)} set(s): {stopped}")
                 est.save(path(name))
                 ports.build(est.database())
-        out = {"info": info_of(name, est), "completed": done}
+        out = {"info": info_of(name, est), "completed": done, "model": model_reply(est.model_check(ports))}
         if stopped:
             out["stopped"] = stopped
         return out

@@ -50,6 +50,9 @@ class OtherParams:
     behaviour: str = "honest"  # fault injection for robustness tests: honest | nonsense | contradict | silent
     body: dict | None = None  # how its body differs unevenly (BodySpec fields but mass; issue 13), None: even
     kind: str = ""  # the population kind it was drawn from (shared.agents.population), for reports
+    # how its torques become what it feels, beyond a rigid body (issue 31; None: the torques themselves):
+    # gear {joint: ratio}, efficiency (0-1], coupling {"src>dst": c}, stribeck {joint: [F_c, F_s, v_s]}, fatigue
+    transmission: dict | None = None
 
     def body_spec(self) -> BodySpec:
         extra = dict(self.body or {})
@@ -71,6 +74,7 @@ class OtherParams:
         lacking = [j for j in self.joints if j in self.body_spec().missing]
         if lacking:
             raise BadInput(f"the other cannot feel joints its body lacks: {lacking}", field="joints")
+        check_transmission(self.transmission, self.joints)
         if self.behaviour not in BEHAVIOURS:
             raise BadInput(f"behaviour must be one of {', '.join(BEHAVIOURS)}, got {self.behaviour!r}", field="behaviour")
         if self.weights is not None and len(self.weights) != len(self.joints):
@@ -80,6 +84,69 @@ class OtherParams:
             if not (np.isfinite(v) and lo <= v <= hi):
                 raise BadInput(f"{name} must be in [{lo}, {hi}], got {v}", field=name)
         return self
+
+
+TRANSMISSION_KEYS = ("gear", "efficiency", "coupling", "stribeck", "fatigue")
+
+
+def check_transmission(t: dict | None, joints) -> None:
+    if t is None:
+        return
+    if not isinstance(t, dict) or not set(t) <= set(TRANSMISSION_KEYS):
+        raise BadInput(f"transmission must be a map of {', '.join(TRANSMISSION_KEYS)}", field="transmission")
+    for j, v in (t.get("gear") or {}).items():
+        if j not in JOINTS or not (isinstance(v, (int, float)) and 0.05 <= v <= 20):
+            raise BadInput(f"transmission gear[{j}] must be a joint's ratio in [0.05, 20], got {v!r}", field="transmission")
+    eff = t.get("efficiency", 1.0)
+    if not (isinstance(eff, (int, float)) and 0.2 <= eff <= 1.0):
+        raise BadInput(f"transmission efficiency must be in [0.2, 1], got {eff!r}", field="transmission")
+    for key, c in (t.get("coupling") or {}).items():
+        src, _, dst = key.partition(">")
+        if src not in JOINTS or dst not in JOINTS or src == dst or not (isinstance(c, (int, float)) and -2 <= c <= 2):
+            raise BadInput(f"transmission coupling {key!r}: 'joint>joint' with a factor in [-2, 2]", field="transmission")
+    for j, v in (t.get("stribeck") or {}).items():
+        if j not in JOINTS or not (isinstance(v, (list, tuple)) and len(v) == 3 and all(
+                isinstance(x, (int, float)) and 0 <= x <= 100 for x in v) and v[2] > 0):
+            raise BadInput(f"transmission stribeck[{j}] must be [F_c, F_s, v_s] (N m, N m, rad/s > 0)",
+                           field="transmission")
+    f = t.get("fatigue", 0.0)
+    if not (isinstance(f, (int, float)) and 0 <= f <= 1):
+        raise BadInput(f"transmission fatigue must be in [0, 1] per question, got {f!r}", field="transmission")
+
+
+def transmitted(tau: np.ndarray, motion: Clip, joints, t: dict | None, asked: int = 0) -> np.ndarray:
+    """What an other feels of its joint torques ``tau`` (T x joints) through a transmission
+    (issue 31; none of it is in the body estimator's model):
+
+    * ``stribeck``: friction ``(F_c + (F_s - F_c) exp(-(qd / v_s)^2)) tanh(qd / 0.05)`` added
+      (static friction above the sliding one near rest; the estimator's is Coulomb's alone);
+    * ``gear``: each joint's torque felt times its ratio, and ``efficiency`` eta: driving
+      (``tau qd > 0``) the motor feels ``tau / eta``, back-driven ``tau eta``;
+    * ``coupling`` ``{"src>dst": c}``: a tendon-like share of joint src's torque felt at dst;
+    * ``fatigue``: everything felt ``(1 + fatigue * asked)`` times as heavy after ``asked`` questions.
+    """
+    if not t:
+        return tau
+    out = np.array(tau, float)
+    names = list(joints)
+    if t.get("stribeck") or t.get("efficiency", 1.0) < 1.0:
+        qd = np.column_stack([np.gradient(np.radians(motion.column(j)), 1.0 / motion.fps) if j in motion.channels
+                              else np.zeros(len(out)) for j in names])
+        for j, (fc, fs, vs) in (t.get("stribeck") or {}).items():
+            if j in names:
+                v = qd[:, names.index(j)]
+                out[:, names.index(j)] += (fc + (fs - fc) * np.exp(-(v / vs) ** 2)) * np.tanh(v / 0.05)
+        eta = float(t.get("efficiency", 1.0))
+        out = np.where(out * qd > 0, out / eta, out * eta)
+    for j, ratio in (t.get("gear") or {}).items():
+        if j in names:
+            out[:, names.index(j)] *= ratio
+    felt = out.copy()
+    for key, c in (t.get("coupling") or {}).items():
+        src, _, dst = key.partition(">")
+        if src in names and dst in names:
+            felt[:, names.index(dst)] += c * out[:, names.index(src)]
+    return felt * (1.0 + float(t.get("fatigue", 0.0)) * asked)
 
 
 class SimulatedOther:
@@ -92,9 +159,11 @@ class SimulatedOther:
         self.asked = asked
 
     def feel(self, motion: Clip) -> np.ndarray:
-        """The torques (T x joints) this other's body produces performing ``motion``."""
+        """The torques (T x joints) this other's body produces performing ``motion``, as it
+        feels them (:func:`transmitted`, after ``asked`` questions so far)."""
         performed, _ = perform(self.body, motion)
-        return performed.select([f"tau.{j}" for j in self.params.joints])
+        tau = performed.select([f"tau.{j}" for j in self.params.joints])
+        return transmitted(tau, motion, self.params.joints, self.params.transmission, self.asked)
 
     def g(self, motion: Clip) -> float:
         p = self.params

@@ -9,7 +9,9 @@ inertial alike, scales exactly with the mass. Motion channels are the joint name
 Real bodies differ unevenly (issue 13; thesis 3.3.5 and 7.2), so a :class:`BodySpec` can also
 change the link lengths, the links' shares of the mass, add a payload held in the right hand
 (a point mass at the end of the forearm), viscous damping (MuJoCo joint damping, in the
-torques ``mj_inverse`` reports) and Coulomb friction (``friction * tanh(qdot / 0.05 rad/s)``,
+torques ``mj_inverse`` reports), joint springs with a rest angle and rotor inertia (MuJoCo
+``stiffness``/``springref`` and ``armature``, in those torques too; outside the body estimator's
+model, issue 31) and Coulomb friction (``friction * tanh(qdot / 0.05 rad/s)``,
 added to the torques by :func:`shared.bodies.body.perform`) per joint, and leave joints out (a
 missing joint is welded at 0: the body cannot move it and feels nothing there).
 """
@@ -45,16 +47,22 @@ class BodySpec:
     damping: dict[str, float] = field(default_factory=dict)  # joint -> viscous damping, N m s / rad
     friction: dict[str, float] = field(default_factory=dict)  # joint -> Coulomb friction, N m
     missing: list[str] = field(default_factory=list)  # joints the body does not have
+    # beyond the body estimator's model (issue 31): joint springs, their rest angles, rotor inertia
+    stiffness: dict[str, float] = field(default_factory=dict)  # joint -> spring, N m / rad (MuJoCo stiffness)
+    rest: dict[str, float] = field(default_factory=dict)  # joint -> the spring's rest angle, degrees (springref)
+    armature: dict[str, float] = field(default_factory=dict)  # joint -> rotor inertia, kg m^2 (MuJoCo armature)
 
     def check(self) -> "BodySpec":
         check_mass(self.mass)
-        for group in ("lengths", "shares", "damping", "friction"):
+        for group in ("lengths", "shares", "damping", "friction", "stiffness", "rest", "armature"):
             if not isinstance(getattr(self, group), dict):
                 raise BadInput(f"body {group} must be a map, got {type(getattr(self, group)).__name__}", field=group)
         if not isinstance(self.missing, list):
             raise BadInput(f"body missing must be a list of joints, got {type(self.missing).__name__}", field="missing")
         for group, table, lo, hi in (("lengths", self.lengths, 0.02, 1.0), ("shares", self.shares, 0.0, 1.0),
-                                     ("damping", self.damping, 0.0, 100.0), ("friction", self.friction, 0.0, 100.0)):
+                                     ("damping", self.damping, 0.0, 100.0), ("friction", self.friction, 0.0, 100.0),
+                                     ("stiffness", self.stiffness, 0.0, 100.0), ("rest", self.rest, -180.0, 180.0),
+                                     ("armature", self.armature, 0.0, 1.0)):
             known = LENGTHS if group == "lengths" else LINK_SHARE if group == "shares" else JOINTS
             for k, v in table.items():
                 if k not in known:
@@ -90,7 +98,9 @@ def small_humanoid(mass: float | BodySpec = 2.4, name: str = "robot", link_masse
 
     def joint(parent, jname: str, axis):
         if jname not in b.missing:
-            parent.add_joint(name=jname, type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis, damping=b.damping.get(jname, 0.0))
+            parent.add_joint(name=jname, type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis, damping=b.damping.get(jname, 0.0),
+                             stiffness=b.stiffness.get(jname, 0.0), springref=np.radians(b.rest.get(jname, 0.0)),
+                             armature=b.armature.get(jname, 0.0))
 
     def link(parent, lname: str, pos, length_key: str, radius: float, joints=()):
         """A capsule link hanging down from ``pos`` in its parent, with its hinges."""

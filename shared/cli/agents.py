@@ -306,6 +306,8 @@ def estimator_converse(name: str = typer.Argument(...), sets: int = typer.Option
         r = c.request("estimator", "converse", {"estimate": name, "sets": sets, "timeout": timeout},
                       timeout=sets * 20 * (timeout + 10))
     _print_estimate(r["info"])
+    if r.get("model"):
+        typer.echo(f"model check: {r['model']['verdict']}")
     if r.get("stopped"):
         typer.echo(f"stopped: {r['stopped']}")
 
@@ -357,6 +359,9 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
               others: int = typer.Option(10, help="Simulated others per kind of body (ch3; issue 13)."),
               kinds: str = typer.Option("all", help="Kinds of body for ch3, comma-separated: mass, links, payload, "
                                         "shares, damping, friction, joints, legs, mixed (default all)."),
+              outside: bool = typer.Option(True, "--outside/--no-outside", help="Also others outside the estimators' "
+                                           "model, reported apart and never tuned on (ch3): springs, armature, gears, "
+                                           "coupling, stribeck, fatigue."),
               learners: int = typer.Option(12, help="Simulated learners per experiment group (ch4-6)."),
               hdm05: Optional[Path] = typer.Option(None, help="HDM05 data (ch4-6 targets; default $MIRRORCOACH_HDM05 or ../shared/data/hdm05)."),
               targets: str = typer.Option("squat,throw", help="Targets for ch4-6: squat, throw."),
@@ -392,7 +397,7 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                     _fail(f"unknown kind(s) {bad}; choose from {', '.join(KINDS)}")
                 if not 1 <= others <= 1000:
                     _fail(f"--others must be 1 to 1000, got {others}")
-                run(c, out / "ch3", sets=sets, echo=typer.echo, others=others, kinds=chosen_kinds)
+                run(c, out / "ch3", sets=sets, echo=typer.echo, others=others, kinds=chosen_kinds, outside=outside)
             if {"ch4", "ch5", "ch6"} & set(chapters):
                 import os
 
