@@ -23,6 +23,7 @@ LINE = Map({
     "k": F(Int(1, 8), "the answer's symbol index (open questions)", required=False),
     "answer": F(Str(max_len=16), "the parsed comparison (comparative questions)", required=False),
     "understood": F(Bool(), "whether the answer parsed", required=False),
+    "dont_know": F(Bool(), "the other said it does not know (understood; no k)", required=False),
 })
 
 ASK_OPEN = Endpoint(
@@ -40,6 +41,8 @@ ASK_OPEN = Endpoint(
         "word": F(Str(max_len=64), "the parsed word", required=False),
         "k": F(Int(1, 8), "its symbol index k (1 = lightest)", required=False),
         "problem": F(Str(max_len=500), "why it was not understood", required=False),
+        "dont_know": F(Bool(), "the other said it does not know (understood; no word, no k)", required=False,
+                       default=False),
     })),
     "Ask how heavy a motion felt; parse the word into k (Table 3.1).",
     waits=True,

@@ -23,6 +23,8 @@ INFO = Map({
     "consistent": F(Bool(), "whether every answer so far can be true together"),
     "answers": F(Int(0), "answers used by the interval estimator"),
     "probes_asked": F(Int(0), "probe questions asked"),
+    "dont_know": F(Int(0), "questions the other answered \"I don't know\" (unanswered, not a stop)", required=False,
+                   default=0),
     "last_set": F(AnyMap(), "k_other, k_self and ratio per shared motion of the last set", required=False),
     "notes": F(List(Str(max_len=1000), max_len=10_000), "rule identification, stops"),
     "body": F(AnyMap(), "the body estimate (issue 13): columns of the self's regressor, theta, the proportional "

@@ -97,6 +97,11 @@ OTHER_PARAMS = Map({
                         "[joints], stiffness {joint: N m/rad} with rest {joint: degrees}, armature {joint: kg m^2} "
                         "(shared.bodies.robot.BodySpec)", required=False),
     "kind": F(Str(max_len=32), "the population kind it was drawn from, for reports", required=False, default=""),
+    "gamma": F(Float(0.25, 4.0), "its own word boundaries: it words g_max (g / g_max)^gamma", required=False,
+               default=1.0),
+    "drift": F(Float(-0.05, 0.05), "its boundaries drift: g worded (1 + drift * questions asked) times as heavy",
+               required=False, default=0.0),
+    "dont_know": F(Float(0.0, 1.0), "probability it answers \"I don't know\"", required=False, default=0.0),
     "transmission": F(AnyMap(), "how its torques become what it feels: gear {joint: ratio}, efficiency, coupling "
                       "{'src>dst': c}, stribeck {joint: [F_c, F_s, v_s]}, fatigue per question "
                       "(shared.agents.other.transmitted)", required=False),

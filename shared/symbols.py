@@ -92,6 +92,10 @@ def compare(g1: float, g2: float, jnd: float = 0.05) -> str:
     return ">" if g1 > g2 else "<"
 
 
+#: the parsed answer "I don't know" to an open question (a person may not know; issue 31)
+DONT_KNOW = "don't know"
+_DONT_KNOW = {"i don t know", "i dont know", "don t know", "dont know", "not sure", "i m not sure", "no idea",
+              "i can t tell", "cannot tell", "can t tell", "i don t know really", "hard to say"}
 _FILLERS = ("it felt ", "it was ", "felt ", "that was ", "it's ", "its ", "quite ")
 _SYNONYMS = {"a bit ": "bit ", "a little ": "bit ", "slightly ": "bit ", "little bit ": "bit ", "a little bit ": "bit ",
              "bit of a ": "bit ", "really ": "very ", "super ": "extremely "}
@@ -102,7 +106,7 @@ _COMPARE = {">": ">", "<": "<", "=": "equal", "equal": "equal", "same": "equal",
 
 def parse_answer(text: str, kind: str, d: int = 4) -> str:
     """The canonical answer in a person's (or agent's) words: a Table 3.1 word at density ``d``
-    for an open question, ``'>'``, ``'<'`` or ``'equal'`` for a comparative one. Accepts case,
+    for an open question (:data:`DONT_KNOW` for "I don't know", "not sure", ...), ``'>'``, ``'<'`` or ``'equal'`` for a comparative one. Accepts case,
     spacing and punctuation variants and a few phrasings ("a bit heavy", "it felt light",
     "the first", "same"); anything else is a :class:`BadInput` listing the accepted answers."""
     if not isinstance(text, str):
@@ -115,6 +119,8 @@ def parse_answer(text: str, kind: str, d: int = 4) -> str:
                        "equal (the same)", field="answer")
     if kind != "open":
         raise BadInput(f"unknown question kind {kind!r}")
+    if t in _DONT_KNOW:
+        return DONT_KNOW
     if d not in WORDS:
         raise BadInput(f"density d must be one of {sorted(WORDS)}, got {d}")
     t = t + " "

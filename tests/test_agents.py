@@ -88,6 +88,31 @@ def test_answer_noise_is_one_bin_off_at_the_set_rate():
     assert [index_of(again.answer_open(m), 8) for _ in range(200)] == got
 
 
+def test_an_other_can_answer_like_a_person():
+    """Issue 31: its own word boundaries (gamma), drifting with the questions, and "I don't know",
+    which the dialogue's parser understands as no word."""
+    from shared.symbols import DONT_KNOW, parse_answer
+
+    m = _arm_motion(45)
+    plain = SimulatedOther("p", OtherParams(d=8, g_max=1.0))
+    g = plain.g(m)
+    assert 0 < g < 1
+    for gamma in (0.5, 2.0):
+        own = SimulatedOther("o", OtherParams(d=8, g_max=1.0, gamma=gamma))
+        assert index_of(own.answer_open(m), 8) == f_div(g ** gamma, 8, 1.0)
+    drifting = SimulatedOther("d", OtherParams(d=8, g_max=1.0, drift=0.05))
+    words = [index_of(drifting.answer_open(m), 8) for _ in range(30)]
+    assert words[0] == f_div(g, 8, 1.0) and words[-1] > words[0] and words == sorted(words)
+    unsure = SimulatedOther("u", OtherParams(d=8, dont_know=0.5, seed=2))
+    said = [unsure.answer_open(m) for _ in range(200)]
+    assert 0.35 < np.mean([a == "I don't know" for a in said]) < 0.65
+    assert {parse_answer(a, "open", 8) for a in said} - set(WORDS[8]) == {DONT_KNOW}
+    for text in ("I don't know", "not sure", "No idea!", "hard to say"):
+        assert parse_answer(text, "open", 4) == DONT_KNOW
+    with pytest.raises(BadInput):
+        OtherParams(gamma=9.0).check()
+
+
 def test_bad_other_parameters_are_refused():
     for bad in ({"rule": "f7"}, {"d": 3}, {"joints": ["tail"]}, {"noise": 1.5}, {"tau_max": 0.0},
                 {"weights": [1.0, 2.0]}, {"mass": 1e5}):

@@ -154,16 +154,22 @@ def test_contradiction_alone_never_stops_a_conversation_and_the_reply_says_how_s
     doubted nor called outside what the estimator can model."""
     env, _ = chapter3_services
     c = client_of(env)
-    for name, behaviour in (("liar", "contradict"), ("honest", "honest")):
+    for name, behaviour in (("liar", "contradict"), ("honest", "honest"), ("unsure", "honest")):
+        extra = {"dont_know": 0.4} if name == "unsure" else {}
         c.request("simulator", "other_create", {"other": name, "params": {"d": 6, "g_max": 0.6, "seed": 3,
-                                                                          "behaviour": behaviour}, "replace": True})
+                                                                          "behaviour": behaviour, **extra},
+                                                "replace": True})
         c.request("estimator", "start", {"estimate": name, "other": name, "d": 6, "replace": True})
         r = c.request("estimator", "converse", {"estimate": name, "sets": 3}, timeout=300)
         assert r.get("stopped") is None and r["completed"] == 3, r.get("stopped")
         m = r["model"]
-        assert m["answers"] == r["info"]["answers"] > 12 and m["verdict"]
+        assert m["answers"] == r["info"]["answers"] > (6 if name == "unsure" else 12) and m["verdict"]
         if behaviour == "contradict":
             assert m["repeat_disagreement"] > 0.3 and m["agreement"] < 0.9, m
+        elif name == "unsure":  # "I don't know" is understood: unanswered, counted, never a stop
+            assert r["info"]["dont_know"] > 0 and not m["outside"]
+            lines = c.request("dialogue", "transcript", {"dialogue": name})["lines"]
+            assert sum(bool(x.get("dont_know")) for x in lines) == r["info"]["dont_know"]
         else:
             assert m["repeat_disagreement"] == 0.0 and m["agreement"] == 1.0 and not m["outside"], m
 

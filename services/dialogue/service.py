@@ -19,7 +19,7 @@ from shared.bus.config import Settings
 from shared.bus.runtime import Service
 from shared.errors import BadInput, MirrorcoachError, NotFound
 from shared.io.atomic import append_line, read_lines
-from shared.symbols import WORDS, index_of, parse_answer
+from shared.symbols import DONT_KNOW, WORDS, index_of, parse_answer
 
 #: the simulator's refusals: the question was never put to the other
 REFUSED = ("bad_request", "not_found", "conflict")
@@ -70,11 +70,12 @@ def make_service(settings: Settings | None = None) -> Service:
         if req["d"] not in WORDS:
             raise BadInput(f"density d must be one of {sorted(WORDS)}, got {req['d']}", field="d")
         asked, raw, word, problem = ask(req, "open", OPEN_QUESTION, [req["clip"]], req["d"])
-        k = None if word is None else index_of(word, req["d"])
+        unsure = word == DONT_KNOW  # understood, and no word: the question is simply not answered
+        k = None if word is None or unsure else index_of(word, req["d"])
         write(asked, {"dialogue": req["dialogue"], "speaker": req["other"], "kind": "answer", "text": raw,
-               "understood": word is not None, **({"k": k} if k else {})})
+               "understood": word is not None, **({"k": k} if k else {}), **({"dont_know": True} if unsure else {})})
         return {"dialogue": req["dialogue"], "question": OPEN_QUESTION, "understood": word is not None, "raw": raw,
-                "word": word, "k": k, "problem": problem}
+                "word": word, "k": k, "problem": problem, "dont_know": unsure}
 
     @svc.handler("ask_compare")
     def ask_compare(req):

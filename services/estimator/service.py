@@ -81,7 +81,7 @@ class BusPorts:
                 raise
         return fut.result(timeout=self.timeout + 60)
 
-    def ask_open(self, motion) -> int:
+    def ask_open(self, motion) -> int | None:
         try:
             r = self.c.request("dialogue", "ask_open", {"dialogue": self.name, "other": self.other, "d": self.language.d,
                                                         "clip": clip_to_wire(motion), "timeout": self.timeout},
@@ -90,6 +90,8 @@ class BusPorts:
             raise Stopped(f"no answer about {motion.name}: {e.message}") from None
         if not r["understood"]:
             raise Stopped(f"the other's answer {r['raw']!r} about {motion.name} is not one of the words ({r['problem']})")
+        if r.get("dont_know"):
+            return None  # "I don't know": the question goes unanswered, the conversation goes on
         return int(r["k"])
 
     def ask_compare(self, first, second) -> str:
@@ -118,6 +120,7 @@ def info_of(name: str, est: OtherEstimate) -> dict:
     out = {"estimate": name, "other": est.other, "language": asdict(est.language), "sets_done": len(est.sets),
            "scale": float(est.scale()), "scale_low": float(lo), "scale_high": None if not np.isfinite(hi) else float(hi),
            "consistent": bool(est.consistent()), "answers": len(est.answers), "probes_asked": len(est.probes_asked),
+           "dont_know": est.dont_know,
            "notes": list(est.notes)}
     if est.sets:
         out["last_set"] = asdict(est.sets[-1])

@@ -9,6 +9,9 @@ the torques of its ``joints`` and
   with answer noise ``p``, an answer is one bin off (up or down, at random) with probability ``p``;
 * for robustness tests it can misbehave (``behaviour``): answer ``nonsense``, ``contradict``
   itself (a random word each time), or stay ``silent`` (the simulator never answers for it);
+* may answer **like a person** (issue 31): with its own word boundaries (it words ``g`` as
+  ``g_max (g / g_max)^gamma``), drifting over the conversation (``drift`` per question asked),
+  and "I don't know" with probability ``dont_know``;
 * answers a **comparative question** about two motions with ``'>'``, ``'<'`` or ``'equal'``
   (eq. 3.11-3.12), equal within its just-noticeable difference ``jnd``.
 
@@ -53,6 +56,11 @@ class OtherParams:
     # how its torques become what it feels, beyond a rigid body (issue 31; None: the torques themselves):
     # gear {joint: ratio}, efficiency (0-1], coupling {"src>dst": c}, stribeck {joint: [F_c, F_s, v_s]}, fatigue
     transmission: dict | None = None
+    # answers like people's (issue 31): its own word boundaries g' = g_max (g / g_max)^gamma, drifting by
+    # `drift` per question (g' times 1 + drift * asked), and "I don't know" with probability dont_know
+    gamma: float = 1.0
+    drift: float = 0.0
+    dont_know: float = 0.0
 
     def body_spec(self) -> BodySpec:
         extra = dict(self.body or {})
@@ -80,6 +88,8 @@ class OtherParams:
         if self.weights is not None and len(self.weights) != len(self.joints):
             raise BadInput(f"need one weight per joint ({len(self.joints)}), got {len(self.weights)}", field="weights")
         for name, v, lo, hi in (("noise", self.noise, 0.0, 1.0), ("jnd", self.jnd, 0.0, 1.0),
+                                ("gamma", self.gamma, 0.25, 4.0), ("drift", self.drift, -0.05, 0.05),
+                                ("dont_know", self.dont_know, 0.0, 1.0),
                                 ("tau_max", self.tau_max, 1e-6, 1e6), ("g_max", self.g_max, 1e-6, 1e6)):
             if not (np.isfinite(v) and lo <= v <= hi):
                 raise BadInput(f"{name} must be in [{lo}, {hi}], got {v}", field=name)
@@ -176,10 +186,15 @@ class SimulatedOther:
     def answer_open(self, motion: Clip) -> str:
         """A word of Table 3.1 for how heavy ``motion`` felt."""
         p = self.params
-        k = f_div(self.g(motion), p.d, p.g_max)
+        g = self.g(motion)
+        if p.gamma != 1.0 or p.drift:  # its own word boundaries, drifting (answers like people's, issue 31)
+            g = p.g_max * (max(g, 0.0) / p.g_max) ** p.gamma * (1.0 + p.drift * self.asked)
+        k = f_div(g, p.d, p.g_max)
         rng = self._rng()
         if p.behaviour == "nonsense":
-            return str(rng.choice(["purple", "I don't know", "banana", "42"]))
+            return str(rng.choice(["purple", "banana", "42", "the moon"]))
+        if p.dont_know > 0 and rng.random() < p.dont_know:
+            return "I don't know"
         if p.behaviour == "contradict":  # a random word each time: its answers cannot all be true
             return word(int(rng.integers(1, p.d + 1)), p.d)
         if p.noise > 0 and rng.random() < p.noise:

@@ -94,6 +94,21 @@ def _transmission(kind: str, r: np.random.Generator) -> dict | None:
     return None
 
 
+#: answers like people's (issue 31; :func:`people_answers`)
+PEOPLE = {"gamma": (0.7, 1.4), "drift": (-0.005, 0.005), "noise": (0.1, 0.3), "dont_know": (0.05, 0.15)}
+
+
+def people_answers(n: int, seed: int = 2026) -> list[dict]:
+    """``n`` ways of answering like people (``OtherParams`` fields), drawn per other: own word
+    boundaries ``gamma`` U(0.7, 1.4) (the same g worded ``g_max (g / g_max)^gamma``), drifting by
+    U(-0.5, 0.5) % per question, 10-30 % of answers one word off, 5-15 % "I don't know"."""
+    out = []
+    for i in range(n):
+        r = np.random.default_rng([seed, 99, i])
+        out.append({k: float(r.uniform(lo, hi)) for k, (lo, hi) in PEOPLE.items()})
+    return out
+
+
 def population(kind: str, n: int = 10, seed: int = 2026, **params) -> list[dict]:
     """``n`` others' parameters (``OtherParams`` fields) of one ``kind``; ``params`` (rule, d,
     g_max, noise, ...) are the same for all of them."""

@@ -84,7 +84,7 @@ class Language:
 
 class Ports(Protocol):
     def perform_self(self, motion: Clip) -> np.ndarray: ...
-    def ask_open(self, motion: Clip) -> int: ...
+    def ask_open(self, motion: Clip) -> int | None: ...  # None: "I don't know"
     def build(self, clips: list[Clip]) -> None: ...
     def associate(self, motion: Clip) -> np.ndarray: ...
     def regressor(self, motion: Clip) -> np.ndarray: ...
@@ -140,6 +140,7 @@ class OtherEstimate:
         self.self_torques: list[np.ndarray] = []  # S_self per shared motion
         self.sets: list[SetRecord] = []
         self.answers: list[tuple[float, int]] = []  # (g of the self's own torques, k_other): the interval method
+        self.dont_know = 0  # questions the other answered "I don't know" (issue 31)
 
     def __deepcopy__(self, memo):
         """A copy whose state can change without touching this one (the service works on a
@@ -176,7 +177,12 @@ class OtherEstimate:
         rec = SetRecord([], [], [])
         new = []
         for i, m in enumerate(self.motions):
-            k_other = int(ports.ask_open(m))
+            answer = ports.ask_open(m)
+            if answer is None:  # "I don't know": this motion's estimate stays as it was (issue 31)
+                new.append(self.torques[i])
+                self.dont_know += 1
+                continue
+            k_other = int(answer)
             self.body_answers.append((m.name, k_other))
             s_hat = np.asarray(ports.associate(m), float)
             k_self = self.language.k(s_hat)
@@ -259,7 +265,12 @@ class OtherEstimate:
         if key is None:
             return None
         motion = self._clip_of(key)
-        k = int(ports.ask_open(motion))
+        answer = ports.ask_open(motion)
+        if answer is None:  # not known: asked, and never asked again
+            self.probes_asked.append((key, 0))
+            self.dont_know += 1
+            return key, 0
+        k = int(answer)
         self.answers.append((self.language.g(np.asarray(ports.perform_self(motion), float)), k))
         self.probes_asked.append((key, k))
         self.body_answers.append((key, k))
@@ -275,7 +286,7 @@ class OtherEstimate:
 
         header = {"language": asdict(self.language), "probes": self.probes, "probes_asked": self.probes_asked,
                   "body_answers": self.body_answers, "body": self.body_state(),
-                  "other": self.other, "notes": self.notes,
+                  "other": self.other, "notes": self.notes, "dont_know": self.dont_know,
                   "answers": self.answers, "sets": [asdict(r) for r in self.sets],
                   "motions": [{"name": m.name, "channels": m.channels, "fps": m.fps} for m in self.motions]}
         arrays = {"header": np.array(json.dumps(header))}
@@ -306,6 +317,7 @@ class OtherEstimate:
         # estimates saved before issue 13 have no body answers: the body estimate starts from the self's
         est.body_answers = [(str(n), int(k)) for n, k in h.get("body_answers", [])]
         est._saved_body = h.get("body")
+        est.dont_know = int(h.get("dont_know", 0))
         return est
 
     def explained(self, ports: Ports) -> bool:
@@ -467,10 +479,11 @@ class LocalPorts:
         out, _ = perform(self.self_body, motion)
         return out.select([TORQUE_PREFIX + j for j in self.language.joints])
 
-    def ask_open(self, motion: Clip) -> int:
-        from shared.symbols import index_of
+    def ask_open(self, motion: Clip) -> int | None:
+        from shared.symbols import DONT_KNOW, index_of, parse_answer
 
-        return index_of(self.other.answer_open(motion), self.language.d)
+        word = parse_answer(self.other.answer_open(motion), "open", self.language.d)
+        return None if word == DONT_KNOW else index_of(word, self.language.d)
 
     def regressor(self, motion: Clip) -> np.ndarray:
         from shared.estimation.body import self_regressor
