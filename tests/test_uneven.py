@@ -333,3 +333,20 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
     assert "1x after 2 set(s): the other's answers contradict" in text
     assert "100 % without noise: met; at least 95 % with 10 % noise: missed" in text and "(lowest with noise: mass, 80 %)" in text
     assert "d = 8 missed" in text and "d = 4 met" in text
+    # the thesis's claim of figs. 3.14/3.15 is computed per estimator; equal numbers of questions side by side
+    from shared.reproduce.ch3 import equal_questions_lines, rule_claim_lines
+
+    def curve_of(thesis_err, body_err):
+        rows = []
+        for k, (t, b) in enumerate(zip(thesis_err, body_err)):
+            row = _row(t, t)
+            row["body_unknown"] = {"error": b, "match": 1.0, "distance": 0.0}
+            rows.append({"set": k, **row, "questions": {"thesis": 4 * k, "body": 8 * k}})
+        return {"rows": rows, "stopped": None}
+
+    claim = rule_claim_lines({"right|5": {**curve_of([0.5, 0.4], [0.3, 0.01]), "d": 5, "rule": "f4", "assumed": "f4"},
+                              "wrong|5": {**curve_of([0.5, 0.3], [0.3, 0.5]), "d": 5, "rule": "f4", "assumed": "eq3.8"}})
+    assert any("d = 5, thesis estimator: **reversed**" in x for x in claim)
+    assert any("d = 5, body estimator: **holds**" in x for x in claim)
+    eq = equal_questions_lines({"c": curve_of([0.5, 0.4, 0.3], [0.5, 0.2, 0.1])})
+    assert "| c | 8 | 30.0 % | 20.0 % (set 1, 8 asked) | body |" in eq

@@ -141,12 +141,16 @@ class Ch3:
 
     def curve(self, name: str, params: dict, lang: Language, motions: dict, methods=METHODS) -> dict:
         """Metrics after 0..sets conversation sets (the estimate must be started)."""
-        rows, stopped, model = [], None, None
+        rows, stopped, model, asked = [], None, None, 0
         for s in range(self.sets + 1):
             if s:
                 r = self.c.request("estimator", "converse", {"estimate": name, "sets": 1})
                 stopped, model = r.get("stopped"), r.get("model")
-            rows.append({"set": s, **self.score(name, params, lang, motions, methods)})
+                asked = r["info"]["answers"]
+            # questions so far: the thesis estimator reads the shared motions' answers (4 a set), the
+            # body estimator every answer (probes too)
+            rows.append({"set": s, "questions": {"thesis": 4 * s, "body": asked},
+                         **self.score(name, params, lang, motions, methods)})
             if stopped:
                 break
         return {"rows": rows, "stopped": stopped, "model": model}
@@ -394,6 +398,46 @@ def outside_lines(outside: dict | None) -> list[str]:
     return lines
 
 
+def rule_claim_lines(rules: dict) -> list[str]:
+    """The thesis's claim of figs. 3.14/3.15, computed per estimator and d: the identified (right)
+    rule gives a lower unknown-motion error than every wrong one (one other each: a comparison,
+    not a test)."""
+    lines = ["**The thesis's claim (the right rule estimates better than a wrong one), computed per estimator:**", ""]
+    for d in sorted({int(key.split("|")[1]) for key in rules}):
+        right = rules.get(f"right|{d}")
+        wrongs = [cur for key, cur in rules.items() if key.endswith(f"|{d}") and not key.startswith("right")]
+        if not right or not wrongs:
+            continue
+        for m in ("thesis", "body"):
+            r = right["rows"][-1][f"{m}_unknown"]["error"]
+            w = [cur["rows"][-1][f"{m}_unknown"]["error"] for cur in wrongs]
+            word = "holds" if all(r < x for x in w) else "reversed" if all(r > x for x in w) else "mixed"
+            lines.append(f"- d = {d}, {m} estimator: **{word}** (right {_pct(r)}, wrong "
+                         + ", ".join(f"{cur['assumed']} {_pct(x)}" for cur, x in zip(wrongs, w)) + ")")
+    return lines + [""]
+
+
+def equal_questions_lines(curves: dict, group: str = "unknown") -> list[str]:
+    """The thesis and body estimators side by side at equal numbers of questions: each curve's
+    thesis estimator after its last set (4 questions a set), against the body estimator at the
+    last set where it had asked no more than that."""
+    lines = [f"**At equal numbers of questions** ({group} motions; the thesis estimator reads 4 answers a set, the "
+             "body estimator every answer, probes too):", "",
+             "| conversation | questions | thesis estimator | body estimator (its set) | lower |", "|---|---|---|---|---|"]
+    for label, cur in curves.items():
+        rows = [r for r in cur["rows"] if isinstance(r.get("questions"), dict)]  # curves before the count: none
+        if not rows:
+            continue
+        last = rows[-1]
+        q = last["questions"]["thesis"]
+        fair = [r for r in rows if r["questions"]["body"] <= q]
+        b = fair[-1] if fair else rows[0]
+        t_err, b_err = last[f"thesis_{group}"]["error"], b[f"body_{group}"]["error"]
+        lines.append(f"| {label} | {q} | {_pct(t_err)} | {_pct(b_err)} (set {b['set']}, {b['questions']['body']} "
+                     f"asked) | {'body' if b_err < t_err else 'thesis' if t_err < b_err else 'equal'} |")
+    return lines + [""]
+
+
 def people_lines(people: dict | None) -> list[str]:
     """The report's section on others answering like people (issue 31)."""
     if not people:
@@ -539,6 +583,7 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
                      f"{_pct(r['thesis_known']['match'], 0)} / {_pct(r['thesis_unknown']['match'], 0)} | {words} |")
     lines += ["", "The thesis's figures: ~10 % error on known and ~20 % on unknown motions, match 80 / 70 / 30 % on unknown "
               f"motions at d = 4 / 6 / 8. \"At the thesis's level\" means within {THESIS_LEVEL * 100:.0f} points.", ""]
+    lines += equal_questions_lines({f"d = {d}": cur for d, cur in oq.items()}, "unknown")
     # ---------------- figs 3.14 / 3.15
     series = {}
     for key, cur in rules.items():
@@ -568,6 +613,8 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
         lines.append(f"| {d}, {cur['rule']} | {cur['assumed']} | {qs} | {_pct(r['thesis_unknown']['error'])}{stop} | "
                      f"{_pct(r['body_unknown']['error'])} | {'~10 %' if label == 'right' else '45-60 %'} | "
                      f"{level(r['thesis_unknown']['error'], fig, True if label == 'right' else None)} |")
+    lines += [""] + rule_claim_lines(rules) + equal_questions_lines(
+        {f"d = {key.split('|')[1]}, {cur['rule']} read as {cur['assumed']}": cur for key, cur in rules.items()}, "unknown")
     des = next((cur["design"] for cur in rules.values() if cur.get("design")), None)
     if des:
         a = des["a"]
