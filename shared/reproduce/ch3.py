@@ -39,6 +39,7 @@ from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
 
 SETS = 6
 OTHERS = 10  # per kind of the population
+FAST = 2.5  # the unknown motions also played this many times faster (issue 31)
 G_MAX = 0.6  # the shared language's range for eq. 3.8 (three times the self's heaviest basic motion)
 G_MAX_RULES = 1.2  # f4 is a single joint's peak torque: its range is larger than eq. 3.8's mean
 METHODS = ("thesis", "interval", "body")
@@ -168,6 +169,10 @@ class Ch3:
         shared = basic_motions(ALL if joints_all else ARM)
         motions = {"known": [hold(m, missing) for m in shared],
                    "unknown": [hold(m, missing) for m in unknown_motions(10, joints=ALL if joints_all else ARM)]}
+        # the unknown motions played FAST times faster (issue 31): where speed-dependent terms (damping,
+        # armature, friction) weigh more than on the motions the conversation shared
+        motions["unknown_fast"] = [m.with_data(m.data, fps=m.fps * FAST, name=f"{m.name}_x{FAST:g}")
+                                   for m in motions["unknown"]]
         row = self.score(name, p, lang, motions)
         row.update(mass=p["mass"], body=p["body"], sets=r["info"]["sets_done"], stopped=r.get("stopped"),
                    questions=r["info"]["answers"], model=r.get("model"), dont_know=r["info"].get("dont_know", 0))
@@ -359,15 +364,22 @@ def population_summary(uneven: dict) -> dict:
              # the model check (issue 31): how often the estimator said the other is beyond what it can model
              "outside_said": sum(bool((r.get("model") or {}).get("outside")) for r in rows)}
         for m in METHODS:
-            for k in ("known", "unknown"):
+            for k in ("known", "unknown", "unknown_fast"):
+                if f"{m}_{k}" not in rows[0]:  # runs before the fast motions existed
+                    continue
                 e = [r[f"{m}_{k}"]["error"] for r in rows]
                 s[f"{m}_{k}"] = float(np.mean(e))
                 s[f"{m}_{k}_max"] = float(np.max(e))
         s["match"] = {d: float(np.mean([r["body_unknown_match"][d] for r in rows])) for d in (4, 6, 8)}
         s["ok_known"] = s["body_known"] < GOALS["known"]
         s["ok_unknown"] = s["body_unknown"] < GOALS["unknown"]
+        s["ok_fast"] = s.get("body_unknown_fast", 0.0) < GOALS["unknown"]
         out[kind] = s
     return out
+
+
+def _fast(s: dict) -> str:
+    return f"{_pct(s['body_unknown_fast'])} ({_pct(s['body_unknown_fast_max'])})" if "body_unknown_fast" in s else "-"
 
 
 def outside_lines(outside: dict | None) -> list[str]:
@@ -384,16 +396,16 @@ def outside_lines(outside: dict | None) -> list[str]:
              "is the estimator's model check (`OtherEstimate.model_check`): answers its best body misses beyond what "
              "the other's own inconsistency explains.", "",
              "| kind | thesis known | thesis unknown | interval known | interval unknown | body known | body unknown | "
-             "questions per other | conversations stopped early | said \"outside what I can model\" |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             f"body unknown at {FAST:g}x speed | questions per other | conversations stopped early | "
+             "said \"outside what I can model\" |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for kind, s in summ.items():
         cells = [f"{_pct(s[f'{m}_{k}'])} ({_pct(s[f'{m}_{k}_max'])})" for m in METHODS for k in ("known", "unknown")]
-        lines.append(f"| {kind} | " + " | ".join(cells) + f" | {s['questions']:.0f} | {s['stops']} | "
+        lines.append(f"| {kind} | " + " | ".join(cells) + f" | {_fast(s)} | {s['questions']:.0f} | {s['stops']} | "
                      f"{s['outside_said']} of {s['n']} |")
-    missed = [k for k, s in summ.items() if not (s["ok_known"] and s["ok_unknown"])]
+    missed = [k for k, s in summ.items() if not (s["ok_known"] and s["ok_unknown"] and s["ok_fast"])]
     best = {k: min(METHODS, key=lambda m: s[f"{m}_unknown"]) for k, s in summ.items()}
-    lines += ["", f"**Goal (issue 31): body estimator below 5 % known and 10 % unknown on every kind outside its "
-              f"model:** {verdict(not missed)}" + (f" (missed: {', '.join(missed)})" if missed else "") + ". Lowest "
+    lines += ["", f"**Goal (issue 31): body estimator below 5 % known, 10 % unknown and 10 % unknown at {FAST:g}x "
+              f"speed on every kind outside its model:** {verdict(not missed)}" + (f" (missed: {', '.join(missed)})" if missed else "") + ". Lowest "
               "unknown-motion error per kind: " + ", ".join(f"{k} {m}" for k, m in best.items()) + ".", ""]
     return lines
 
@@ -486,11 +498,12 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
               f"d = 6, {ch.sets if ch else SETS} conversation sets of the 4 shared motions and 4 probes each; "
               "errors (eq. 3.9) on the 4 known and 10 unknown motions, mean over the kind's others (worst in brackets).",
               "", "| kind | thesis known | thesis unknown | interval known | interval unknown | body known | body unknown | "
+              f"body unknown at {FAST:g}x speed | "
               "questions per other (the thesis estimator reads the 4 shared ones per set) | conversations stopped early | "
-              "said \"outside what I can model\" |", "|---|---|---|---|---|---|---|---|---|---|"]
+              "said \"outside what I can model\" |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for kind, s in summ.items():
         cells = [f"{_pct(s[f'{m}_{k}'])} ({_pct(s[f'{m}_{k}_max'])})" for m in METHODS for k in ("known", "unknown")]
-        lines.append(f"| {kind} | " + " | ".join(cells) + f" | {s['questions']:.0f} | {s['stops']} | "
+        lines.append(f"| {kind} | " + " | ".join(cells) + f" | {_fast(s)} | {s['questions']:.0f} | {s['stops']} | "
                      f"{s['outside_said']} of {s['n']} |")
     left = sum(s["left_out"] for s in summ.values())
     if left:
