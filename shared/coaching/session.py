@@ -458,12 +458,12 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
             demo = partial_emphasis(base.resample(demo.fps), demo, part)
         return demo
 
-    efforts: dict[int, float] = {}
+    efforts: dict[int, tuple[Clip, float]] = {}  # the clip is kept with its effort: its id cannot be reused
 
     def effort_of(demo: Clip) -> float:
         if id(demo) not in efforts:
-            efforts[id(demo)] = float(ports.effort(demo))
-        return efforts[id(demo)]
+            efforts[id(demo)] = (demo, float(ports.effort(demo)))
+        return efforts[id(demo)][1]
 
     def why_not(demo: Clip) -> str | None:
         if session.check and session.target_report:
