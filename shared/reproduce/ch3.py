@@ -227,8 +227,9 @@ class Ch3:
         plans += [(kind, "weighted", weighted_candidates()) for kind in ("mass",) if kind in self.kinds]
         for kind, cset, cands in plans:
             # the weighted rules without noise only: a doubled joint weight and a doubled link feel alike
-            for noise in (0.0, 0.1) if cset == "thesis" else (0.0,):
-                for method in ("thesis", "auto") if cset == "thesis" else ("auto",):
+            # 20 % inconsistent answers: issue 31 (answers like people's); the auto method only
+            for noise in (0.0, 0.1, 0.2) if cset == "thesis" else (0.0,):
+                for method in ("thesis", "auto") if cset == "thesis" and noise < 0.2 else ("auto",):
                     n_others = max(self.others, len(cands))
                     pop = population(kind, n_others, seed=self.population_seed, joints=list(ALL), g_max=G_MAX_RULES)
 
@@ -540,26 +541,36 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
               "**thesis pairs**: fig. 3.11's m1/m2, m3/m4, answers predicted from the self's own torques; **auto** "
               "(issue 13): pairs chosen on the estimated body, a posterior over rule and body together, answers "
               "weighed against 10 % noise, stop at 99.9 %.", "",
-              "| kind | candidates | method | no noise | questions | 10 % noise | questions | failures |",
-              "|---|---|---|---|---|---|---|---|"]
-    goal_rows = {}
+              "| kind | candidates | method | no noise | questions | 10 % noise | questions | 20 % noise | questions | "
+              "failures |", "|---|---|---|---|---|---|---|---|---|---|"]
+    goal_rows, goal_20 = {}, {}
+
+    def cell(v):
+        return f"{_pct(v['rate'], 0)} of {v['trials']} | {v['questions']:.1f}" if v else "not run | -"
+
     for key, v in ident.items():
         if v["noise"] != 0:
             continue
         noisy = ident.get(key[: key.rindex("|")] + "|0.1")
+        noisier = ident.get(key[: key.rindex("|")] + "|0.2")
         fails = "; ".join(f"{label}: " + ", ".join(f"{n}x {r}" for r, n in f.items())
-                          for label, f in (("no noise", v["failures"]), ("noise", noisy["failures"] if noisy else {})) if f) or "-"
-        with_noise = (f"{_pct(noisy['rate'], 0)} of {noisy['trials']} | {noisy['questions']:.1f}" if noisy
-                      else "not run | -")
-        lines.append(f"| {v['kind']} | {v['candidates']} | {v['method']} | {_pct(v['rate'], 0)} of {v['trials']} | "
-                     f"{v['questions']:.1f} | {with_noise} | {fails} |")
+                          for label, f in (("no noise", v["failures"]), ("noise", noisy["failures"] if noisy else {}),
+                                           ("20 % noise", noisier["failures"] if noisier else {})) if f) or "-"
+        lines.append(f"| {v['kind']} | {v['candidates']} | {v['method']} | {cell(v)} | {cell(noisy)} | {cell(noisier)} | "
+                     f"{fails} |")
         if v["method"] == "auto" and v["candidates"] == "thesis" and noisy:
             goal_rows[v["kind"]] = (v["rate"], noisy["rate"])
+        if v["method"] == "auto" and v["candidates"] == "thesis" and noisier:
+            goal_20[v["kind"]] = noisier["rate"]
     ok_clean = all(a >= GOALS["identification"] for a, _ in goal_rows.values())
     ok_noisy = all(b >= GOALS["identification_noisy"] for _, b in goal_rows.values())
     worst = min(goal_rows.items(), key=lambda kv: kv[1][1]) if goal_rows else None
+    worst20 = min(goal_20.items(), key=lambda kv: kv[1]) if goal_20 else None
     lines += ["", f"**Goal (f1-f4, auto, every kind): 100 % without noise: {verdict(ok_clean)}; at least 95 % with 10 % "
-              f"noise: {verdict(ok_noisy)}**" + (f" (lowest with noise: {worst[0]}, {_pct(worst[1][1], 0)})." if worst else "."),
+              f"noise: {verdict(ok_noisy)}**" + (f" (lowest with noise: {worst[0]}, {_pct(worst[1][1], 0)})." if worst else ".")
+              + (f" **Issue 31's: at least 95 % with 20 % inconsistent answers: "
+                 f"{verdict(all(r >= GOALS['identification_noisy'] for r in goal_20.values()))}** (lowest: {worst20[0]}, "
+                 f"{_pct(worst20[1], 0)})." if worst20 else ""),
               "", "A failure is either a wrong rule or no rule reaching 99.9 % within 40 questions; both count against "
               "the rate. The 12 weighted rules (f1-f4 as they are, with the knee doubled, with the shoulder pitch "
               "doubled) cannot all be told apart once the body is unknown: a rule that doubles the knee's torque "
