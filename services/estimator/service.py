@@ -256,20 +256,21 @@ def make_service(settings: Settings | None = None) -> Service:
                     break
                 est = work
                 # contradiction alone never stops the conversation (issue 31): the least squares weighs
-                # every answer, and the model check says how sure it is, or that the other is outside
-                # what the self can model
+                # every answer, and the model check (which fits the body to every answer, the last probe's
+                # too, before the set is saved) says how sure it is, or that the other is outside what the
+                # self can model
+                est.model_check(ports)
                 est.save(path(name))
                 done += 1
                 svc.publish("progress", {"estimate": name, "set": len(est.sets), "scale": float(est.scale()),
                                          "consistent": bool(est.consistent()), "k_other": rec.k_other,
                                          "k_self": rec.k_self})
-                if stopped:
-                    break
             if stopped:
                 est.notes.append(f"stopped after {len(est.sets)} set(s): {stopped}")
                 est.save(path(name))
                 ports.build(est.database())
-        out = {"info": info_of(name, est), "completed": done, "model": model_reply(est.model_check(ports))}
+        check = est.model_check(ports)  # the body fitted to every answer before the info reads it
+        out = {"info": info_of(name, est), "completed": done, "model": model_reply(check)}
         if stopped:
             out["stopped"] = stopped
         return out
