@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shared.agents.learner import FAMILIES, SimulatedLearner, population, to_phase
+from shared.agents.learner import FAMILIES, LearnerParams, SimulatedLearner, population, to_phase
 from shared.agents.other import OtherParams, SimulatedOther
 from shared.clip import Clip
 from shared.errors import BadInput
@@ -355,3 +355,21 @@ def test_every_learner_family_has_a_sensitivity_sweep_of_its_own_parameters():
     assert set(SENSITIVITY) == set(FAMILIES)
     names = {f.name for f in fields(LearnerParams)}
     assert all(set(params) <= names for params in SENSITIVITY.values())
+
+
+def test_every_swept_parameter_changes_what_its_family_does(squat):
+    """A sensitivity row whose parameter the family ignores would be three identical rows."""
+    from dataclasses import asdict
+
+    from shared.reproduce.coaching import SENSITIVITY
+
+    base = population(1, 0)[0]
+    demo = squat.with_data(squat.data * 1.2)
+    for family, params in SENSITIVITY.items():
+        for name, values in params.items():
+            outs = []
+            for v in (values[0], values[-1]):
+                learner = SimulatedLearner("l", squat, LearnerParams(**{**asdict(base), "family": family, name: v}))
+                learner.imitate(squat, None)  # the target first, as a session shows it (the overshoot's reference)
+                outs.append(np.concatenate([a.data.ravel() for a in learner.imitate(demo, None)]))
+            assert not np.allclose(outs[0], outs[1]), (family, name)

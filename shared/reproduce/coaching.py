@@ -235,7 +235,8 @@ SENSITIVITY = {"thesis": {"gain": (0.15, 0.3, 0.6), "threshold": (0.0, 3.0, 6.0)
                # its rates are the published ones (not varied): what the learner perceives and does is
                "two_rate": {"threshold": (0.0, 3.0, 6.0), "noise": (0.3, 1.0, 3.0)},
                "copy": {"noise": (0.3, 1.0, 3.0)},
-               "fixed_step": {"step": (2.0, 4.0, 8.0), "threshold": (0.0, 3.0, 6.0)}}
+               # it has no threshold (its step is blind to the difference's size): its step and its noise
+               "fixed_step": {"step": (2.0, 4.0, 8.0), "noise": (0.3, 1.0, 3.0)}}
 SENSITIVITY_ALPHAS = (0.0, 1.0, 2.0, 3.0)
 NB_TRAIN_SEED = 1
 #: the felt-effort experiment's learners: strength U(STRENGTH) x the target's effort, seeded per learner
