@@ -92,7 +92,7 @@ def compare(g1: float, g2: float, jnd: float = 0.05) -> str:
     return ">" if g1 > g2 else "<"
 
 
-#: the parsed answer "I don't know" to an open question (a person may not know; issue 31)
+#: the parsed answer "I don't know" to an open question (a person may not know)
 DONT_KNOW = "don't know"
 _DONT_KNOW = {"i don t know", "i dont know", "don t know", "dont know", "not sure", "i m not sure", "no idea",
               "i can t tell", "cannot tell", "can t tell", "i don t know really", "hard to say"}

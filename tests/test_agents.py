@@ -89,7 +89,7 @@ def test_answer_noise_is_one_bin_off_at_the_set_rate():
 
 
 def test_an_other_can_answer_like_a_person():
-    """Issue 31: its own word boundaries (gamma), drifting with the questions, and "I don't know",
+    """An other may answer like a person: its own word boundaries (gamma), drifting with the questions, and "I don't know",
     which the dialogue's parser understands as no word."""
     from shared.symbols import DONT_KNOW, parse_answer
 

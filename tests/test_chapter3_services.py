@@ -149,7 +149,7 @@ def test_a_misbehaving_other_stops_the_conversation_and_keeps_the_estimate(chapt
 
 def test_contradiction_alone_never_stops_a_conversation_and_the_reply_says_how_sure_it_is(chapter3_services,
                                                                                          client_of):
-    """Issue 31: an other whose words are random goes on being asked; the model check weighs its
+    """An other whose words are random goes on being asked; the model check weighs its
     answers and says how inconsistent it is; an honest other of a body like the self's is neither
     doubted nor called outside what the estimator can model."""
     env, _ = chapter3_services

@@ -117,7 +117,7 @@ def test_the_population_replays_and_each_kind_is_what_it_says():
 
 
 def test_others_outside_the_estimators_model_are_what_they_say():
-    """Issue 31: springs pull towards their rest angle, rotor inertia adds torque where the joint
+    """Others outside the estimators' model: springs pull towards their rest angle, rotor inertia adds torque where the joint
     accelerates, a lossy gear makes driving heavier than being driven, a tendon carries the
     elbow's torque to the shoulder, static friction exceeds sliding near rest, and a tiring other
     feels the same motion heavier after more questions. None is a scaled self."""
@@ -162,7 +162,7 @@ def test_others_outside_the_estimators_model_are_what_they_say():
 
 
 def test_the_model_check_tells_an_inconsistent_other_from_one_outside_the_model():
-    """Issue 31: an other of a body like the self's answering with 20 % noise is inconsistent, not
+    """The model check: an other of a body like the self's answering with 20 % noise is inconsistent, not
     outside the model; a consistent other with a lossy gear whose answers no body the self can
     write down explains is said to be outside what it can model."""
     noisy = population("mass", 1, d=6, g_max=0.6, joints=list(ARM), noise=0.2)[0]

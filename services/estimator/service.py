@@ -255,7 +255,7 @@ def make_service(settings: Settings | None = None) -> Service:
                     stopped = e.message
                     break
                 est = work
-                # contradiction alone never stops the conversation (issue 31): the least squares weighs
+                # contradiction alone never stops the conversation: the least squares weighs
                 # every answer, and the model check (which fits the body to every answer, the last probe's
                 # too, before the set is saved) says how sure it is, or that the other is outside what the
                 # self can model

@@ -9,7 +9,7 @@ the torques of its ``joints`` and
   with answer noise ``p``, an answer is one bin off (up or down, at random) with probability ``p``;
 * for robustness tests it can misbehave (``behaviour``): answer ``nonsense``, ``contradict``
   itself (a random word each time), or stay ``silent`` (the simulator never answers for it);
-* may answer **like a person** (issue 31): with its own word boundaries (it words ``g`` as
+* may answer **like a person**: with its own word boundaries (it words ``g`` as
   ``g_max (g / g_max)^gamma``), drifting over the conversation (``drift`` per question asked),
   and "I don't know" with probability ``dont_know``;
 * answers a **comparative question** about two motions with ``'>'``, ``'<'`` or ``'equal'``
@@ -53,10 +53,10 @@ class OtherParams:
     behaviour: str = "honest"  # fault injection for robustness tests: honest | nonsense | contradict | silent
     body: dict | None = None  # how its body differs unevenly (BodySpec fields but mass; issue 13), None: even
     kind: str = ""  # the population kind it was drawn from (shared.agents.population), for reports
-    # how its torques become what it feels, beyond a rigid body (issue 31; None: the torques themselves):
+    # how its torques become what it feels, beyond a rigid body (None: the torques themselves):
     # gear {joint: ratio}, efficiency (0-1], coupling {"src>dst": c}, stribeck {joint: [F_c, F_s, v_s]}, fatigue
     transmission: dict | None = None
-    # answers like people's (issue 31): its own word boundaries g' = g_max (g / g_max)^gamma, drifting by
+    # answers like people's: its own word boundaries g' = g_max (g / g_max)^gamma, drifting by
     # `drift` per question (g' times 1 + drift * asked), and "I don't know" with probability dont_know
     gamma: float = 1.0
     drift: float = 0.0
@@ -125,8 +125,8 @@ def check_transmission(t: dict | None, joints) -> None:
 
 
 def transmitted(tau: np.ndarray, motion: Clip, joints, t: dict | None, asked: int = 0) -> np.ndarray:
-    """What an other feels of its joint torques ``tau`` (T x joints) through a transmission
-    (issue 31; none of it is in the body estimator's model):
+    """What an other feels of its joint torques ``tau`` (T x joints) through a transmission (none of it is in the body
+    estimator's model):
 
     * ``stribeck``: friction ``(F_c + (F_s - F_c) exp(-(qd / v_s)^2)) tanh(qd / 0.05)`` added
       (static friction above the sliding one near rest; the estimator's is Coulomb's alone);
@@ -187,7 +187,7 @@ class SimulatedOther:
         """A word of Table 3.1 for how heavy ``motion`` felt."""
         p = self.params
         g = self.g(motion)
-        if p.gamma != 1.0 or p.drift:  # its own word boundaries, drifting (answers like people's, issue 31)
+        if p.gamma != 1.0 or p.drift:  # its own word boundaries, drifting (answers like people's)
             g = p.g_max * (max(g, 0.0) / p.g_max) ** p.gamma * (1.0 + p.drift * self.asked)
         k = f_div(g, p.d, p.g_max)
         rng = self._rng()

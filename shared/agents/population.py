@@ -17,7 +17,7 @@ legs        the shin carries 1.5-2.5x its share, and is 1.0-1.4x as long
 mixed       links, payload, shares, damping and friction at once
 ==========  =====================================================================================
 
-**Outside the estimator's model** (issue 31, :data:`OUTSIDE_KINDS`): bodies and transmissions the
+**Outside the estimator's model** (:data:`OUTSIDE_KINDS`): bodies and transmissions the
 body estimator's regressor has no column for. They are reported, never tuned on: the
 estimator's settings were chosen on the kinds above only.
 
@@ -94,7 +94,7 @@ def _transmission(kind: str, r: np.random.Generator) -> dict | None:
     return None
 
 
-#: answers like people's (issue 31; :func:`people_answers`)
+#: answers like people's (:func:`people_answers`)
 PEOPLE = {"gamma": (0.7, 1.4), "drift": (-0.005, 0.005), "noise": (0.1, 0.3), "dont_know": (0.05, 0.15)}
 
 

@@ -11,7 +11,7 @@ change the link lengths, the links' shares of the mass, add a payload held in th
 (a point mass at the end of the forearm), viscous damping (MuJoCo joint damping, in the
 torques ``mj_inverse`` reports), joint springs with a rest angle and rotor inertia (MuJoCo
 ``stiffness``/``springref`` and ``armature``, in those torques too; outside the body estimator's
-model, issue 31) and Coulomb friction (``friction * tanh(qdot / 0.05 rad/s)``,
+model) and Coulomb friction (``friction * tanh(qdot / 0.05 rad/s)``,
 added to the torques by :func:`shared.bodies.body.perform`) per joint, and leave joints out (a
 missing joint is welded at 0: the body cannot move it and feels nothing there).
 """
@@ -47,7 +47,7 @@ class BodySpec:
     damping: dict[str, float] = field(default_factory=dict)  # joint -> viscous damping, N m s / rad
     friction: dict[str, float] = field(default_factory=dict)  # joint -> Coulomb friction, N m
     missing: list[str] = field(default_factory=list)  # joints the body does not have
-    # beyond the body estimator's model (issue 31): joint springs, their rest angles, rotor inertia
+    # beyond the body estimator's model: joint springs, their rest angles, rotor inertia
     stiffness: dict[str, float] = field(default_factory=dict)  # joint -> spring, N m / rad (MuJoCo stiffness)
     rest: dict[str, float] = field(default_factory=dict)  # joint -> the spring's rest angle, degrees (springref)
     armature: dict[str, float] = field(default_factory=dict)  # joint -> rotor inertia, kg m^2 (MuJoCo armature)

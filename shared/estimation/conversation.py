@@ -140,7 +140,7 @@ class OtherEstimate:
         self.self_torques: list[np.ndarray] = []  # S_self per shared motion
         self.sets: list[SetRecord] = []
         self.answers: list[tuple[float, int]] = []  # (g of the self's own torques, k_other): the interval method
-        self.dont_know = 0  # questions the other answered "I don't know" (issue 31)
+        self.dont_know = 0  # questions the other answered "I don't know"
 
     def __deepcopy__(self, memo):
         """A copy whose state can change without touching this one (the service works on a
@@ -178,7 +178,7 @@ class OtherEstimate:
         new = []
         for i, m in enumerate(self.motions):
             answer = ports.ask_open(m)
-            if answer is None:  # "I don't know": this motion's estimate stays as it was (issue 31)
+            if answer is None:  # "I don't know": this motion's estimate stays as it was
                 new.append(self.torques[i])
                 self.dont_know += 1
                 continue
@@ -326,7 +326,7 @@ class OtherEstimate:
         return self.body(ports).consistent() or self.consistent()
 
     def model_check(self, ports: Ports) -> dict:
-        """How far the answers agree with the best body the self can write down (issue 31).
+        """How far the answers agree with the best body the self can write down.
 
         Two rates over the body answers: **repeat disagreement**, among questions asked more than
         once (the shared motions, every set), the share of answers that differ from that

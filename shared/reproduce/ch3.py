@@ -39,7 +39,7 @@ from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
 
 SETS = 6
 OTHERS = 10  # per kind of the population
-FAST = 2.5  # the unknown motions also played this many times faster (issue 31)
+FAST = 2.5  # the unknown motions also played this many times faster
 G_MAX = 0.6  # the shared language's range for eq. 3.8 (three times the self's heaviest basic motion)
 G_MAX_RULES = 1.2  # f4 is a single joint's peak torque: its range is larger than eq. 3.8's mean
 METHODS = ("thesis", "interval", "body")
@@ -92,7 +92,7 @@ class Ch3:
         """The other's real torques: its own body performing the motions (evaluation only)."""
         other = None
         out = []
-        # a tiring other (issue 31) feels as it does now, after every question it was asked
+        # a tiring other feels as it does now, after every question it was asked
         asked = (self.c.request("simulator", "other_reveal", {"other": name})["asked"]
                  if (params.get("transmission") or {}).get("fatigue") else 0)
         for m in motions:
@@ -169,7 +169,7 @@ class Ch3:
         shared = basic_motions(ALL if joints_all else ARM)
         motions = {"known": [hold(m, missing) for m in shared],
                    "unknown": [hold(m, missing) for m in unknown_motions(10, joints=ALL if joints_all else ARM)]}
-        # the unknown motions played FAST times faster (issue 31): where speed-dependent terms (damping,
+        # the unknown motions played FAST times faster: where speed-dependent terms (damping,
         # armature, friction) weigh more than on the motions the conversation shared
         motions["unknown_fast"] = [m.with_data(m.data, fps=m.fps * FAST, name=f"{m.name}_x{FAST:g}")
                                    for m in motions["unknown"]]
@@ -183,7 +183,7 @@ class Ch3:
     def uneven(self, kinds=None) -> dict:
         """Issue 13: every kind of other, 10 each; the three estimators after the sets
         (``WORKERS`` others at a time: the services are separate processes). ``kinds``: these
-        instead of the run's (the kinds outside the estimator's model, issue 31)."""
+        instead of the run's (the kinds outside the estimator's model)."""
         res = {}
         for kind in self.kinds if kinds is None else kinds:
             # heavier legs matter only to a conversation about the knee
@@ -198,7 +198,7 @@ class Ch3:
         return res
 
     def people(self, kinds=("mass", "mixed")) -> dict:
-        """Issue 31: in-model others answering like people (:func:`people_answers`: own and
+        """In-model others answering like people (:func:`people_answers`: own and
         drifting word boundaries, 10-30 % inconsistent answers, "I don't know"); the conversation
         goes on through all of it."""
         res = {}
@@ -227,7 +227,7 @@ class Ch3:
         plans += [(kind, "weighted", weighted_candidates()) for kind in ("mass",) if kind in self.kinds]
         for kind, cset, cands in plans:
             # the weighted rules without noise only: a doubled joint weight and a doubled link feel alike
-            # 20 % inconsistent answers: issue 31 (answers like people's); the auto method only
+            # 20 % inconsistent answers (answers like people's): the auto method only
             for noise in (0.0, 0.1, 0.2) if cset == "thesis" else (0.0,):
                 for method in ("thesis", "auto") if cset == "thesis" and noise < 0.2 else ("auto",):
                     n_others = max(self.others, len(cands))
@@ -362,7 +362,7 @@ def population_summary(uneven: dict) -> dict:
         s = {"n": len(rows), "stopped": sum(bool(r.get("stopped")) for r in rows), "stops": _stops(rows),
              "questions": float(np.mean([r["questions"] for r in rows])),
              "left_out": int(sum(r.get("known_left_out", 0) + r.get("unknown_left_out", 0) for r in rows)),
-             # the model check (issue 31): how often the estimator said the other is beyond what it can model
+             # the model check: how often the estimator said the other is beyond what it can model
              "outside_said": sum(bool((r.get("model") or {}).get("outside")) for r in rows)}
         for m in METHODS:
             for k in ("known", "unknown", "unknown_fast"):
@@ -384,12 +384,12 @@ def _fast(s: dict) -> str:
 
 
 def outside_lines(outside: dict | None) -> list[str]:
-    """The report's section on others outside the estimators' model (issue 31): the same table
+    """The report's section on others outside the estimators' model: the same table
     and goals as the population's, on kinds no setting was chosen on."""
     if not outside:
         return []
     summ = population_summary(outside)
-    lines = ["### Outside the estimators' model (issue 31): reported, never tuned on", "",
+    lines = ["### Outside the estimators' model: reported, never tuned on", "",
              "Bodies and transmissions none of the three estimators has a term for (`shared/agents/population.py`, "
              "`OUTSIDE_KINDS`): joint springs with rest angles, rotor inertia, gears with transmission losses, "
              "tendon-like coupling, Stribeck friction, fatigue over the conversation (a tiring other's error is "
@@ -405,7 +405,7 @@ def outside_lines(outside: dict | None) -> list[str]:
                      f"{s['outside_said']} of {s['n']} |")
     missed = [k for k, s in summ.items() if not (s["ok_known"] and s["ok_unknown"] and s["ok_fast"])]
     best = {k: min(METHODS, key=lambda m: s[f"{m}_unknown"]) for k, s in summ.items()}
-    lines += ["", f"**Goal (issue 31): body estimator below 5 % known, 10 % unknown and 10 % unknown at {FAST:g}x "
+    lines += ["", f"**Goal: body estimator below 5 % known, 10 % unknown and 10 % unknown at {FAST:g}x "
               f"speed on every kind outside its model:** {verdict(not missed)}" + (f" (missed: {', '.join(missed)})" if missed else "") + ". Lowest "
               "unknown-motion error per kind: " + ", ".join(f"{k} {m}" for k, m in best.items()) + ".", ""]
     return lines
@@ -452,11 +452,11 @@ def equal_questions_lines(curves: dict, group: str = "unknown") -> list[str]:
 
 
 def people_lines(people: dict | None) -> list[str]:
-    """The report's section on others answering like people (issue 31)."""
+    """The report's section on others answering like people."""
     if not people:
         return []
     summ = population_summary(people)
-    lines = ["### Answers like people's (issue 31)", "",
+    lines = ["### Answers like people's", "",
              "Others of in-model kinds whose answers are a person's, drawn per other (`people_answers`): their own word "
              "boundaries (a g worded as g_max (g / g_max)^gamma, gamma 0.7-1.4), drifting by up to 0.5 % per question, "
              "10-30 % of answers one word off, 5-15 % \"I don't know\" (the question goes unanswered). No conversation "
@@ -568,7 +568,7 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
     worst20 = min(goal_20.items(), key=lambda kv: kv[1]) if goal_20 else None
     lines += ["", f"**Goal (f1-f4, auto, every kind): 100 % without noise: {verdict(ok_clean)}; at least 95 % with 10 % "
               f"noise: {verdict(ok_noisy)}**" + (f" (lowest with noise: {worst[0]}, {_pct(worst[1][1], 0)})." if worst else ".")
-              + (f" **Issue 31's: at least 95 % with 20 % inconsistent answers: "
+              + (f" **At least 95 % with 20 % inconsistent answers: "
                  f"{verdict(all(r >= GOALS['identification_noisy'] for r in goal_20.values()))}** (lowest: {worst20[0]}, "
                  f"{_pct(worst20[1], 0)})." if worst20 else ""),
               "", "A failure is either a wrong rule or no rule reaching 99.9 % within 40 questions; both count against "
