@@ -626,6 +626,11 @@ def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
         assert (tmp_path / f"rep/ch4-6/copy_squat_{fig}.png").stat().st_size > 5000
     r = cli(env, "reproduce", "ch4", "--out", tmp_path / "rep", "--families", "oracle")
     assert r.returncode == 2 and "oracle" in r.stderr and "Traceback" not in r.stderr
+    # the effort policy with a simulated learner that has no strength is refused before anything is made
+    squat = next((REPO / "data/hdm05/amc/squat1Reps").glob("*.amc"))
+    r = cli(env, "coach", "start", "--target", squat, "--learner", "weak", "--effort")
+    assert r.returncode == 2 and "strength" in r.stderr and "Traceback" not in r.stderr
+    assert "weak" not in cli(env, "coach", "list").stdout
 
 
 def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_path):

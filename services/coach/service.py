@@ -22,13 +22,12 @@ from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
 from shared.clip import Clip
-from shared.coaching.effort import EffortEstimate, effort
+from shared.coaching.effort import EffortEstimate, performed_effort
 from shared.coaching.policies import (SWEEP, Calibration, Policy, best_alpha, fit_emu1_corrected, fit_nb,
                                       simulated_coach_demonstrations)
 from shared.deadline import check_time, completed
 from shared.coaching.session import Session, Trial, session_to_dict, start, trial
 from shared.errors import BadInput, Conflict, NotFound
-from shared.estimation.conversation import TORQUE_PREFIX
 from shared.io import load_clip, save_clip
 from shared.io.atomic import atomic_write
 from shared.pss.store import check_name
@@ -37,6 +36,7 @@ from shared.pss.store import check_name
 class BusCoachPorts:
     def __init__(self, client: Client, skeleton_json: str | None):
         self.c, self.skeleton = client, skeleton_json
+        self._last: tuple | None = None  # (clip, effort) of the last clip performed
 
     def build(self, space, target):
         t = target.with_data(target.data, name="target", label="target")
@@ -63,14 +63,16 @@ class BusCoachPorts:
                     "not_checked": ["joint limits and balance (the target has no skeleton)"], "feasible": None}, None
         r = self.c.request("simulator", "perform", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False)})
         out = clip_from_wire(r["clip"])
+        self._last = (clip, performed_effort(out))  # the check and the effort policy ask about the same clip
         return r["report"], out.select(["cog.x", "cog.y", "cog.z"])
 
     def effort(self, clip):
         if self.skeleton is None:
             return None
+        if self._last is not None and self._last[0] is clip:
+            return self._last[1]
         r = self.c.request("simulator", "perform", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False)})
-        out = clip_from_wire(r["clip"])
-        return effort(out.select([c for c in out.channels if c.startswith(TORQUE_PREFIX)]))
+        return performed_effort(clip_from_wire(r["clip"]))
 
 
 def trial_reply(session: Session, rec: Trial, demo: Clip) -> dict:
@@ -184,6 +186,10 @@ def make_service(settings: Settings | None = None) -> Service:
         if target.n_frames < 10:
             raise BadInput(f"the target has {target.n_frames} frames at 30 fps; at least 10", field="target")
         policy = Policy.from_dict(req["policy"])
+        if policy.effort and req["learner"] and not (req["learner_params"] or {}).get("strength"):
+            # refused before anything is created: without a strength the learner has nothing to feel with
+            raise BadInput("the effort policy asks the learner how heavy each motion felt; a simulated learner needs a "
+                           "strength for that (learner_params.strength, `--strength` in the CLI)", field="policy")
         s = Session(name, target, policy, req["learner"], mode=req["mode"], check=req["check"])
         check_owned(s, replacing=meta.exists())
         with writing(name):

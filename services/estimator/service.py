@@ -255,11 +255,11 @@ def make_service(settings: Settings | None = None) -> Service:
                     stopped = e.message
                     break
                 est = work
-                # contradiction alone never stops the conversation: the least squares weighs
-                # every answer, and the model check (which fits the body to every answer, the last probe's
-                # too, before the set is saved) says how sure it is, or that the other is outside what the
-                # self can model
-                est.model_check(ports)
+                # contradiction alone never stops the conversation: the least squares weighs every
+                # answer, and the reply's model check says how sure it is, or that the other is outside
+                # what the self can model. The body is fitted to every answer (the last probe's too)
+                # before the set is saved.
+                est.body(ports)
                 est.save(path(name))
                 done += 1
                 svc.publish("progress", {"estimate": name, "set": len(est.sets), "scale": float(est.scale()),

@@ -86,7 +86,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from shared.clip import Clip
-from shared.coaching.effort import effort, word
+from shared.coaching.effort import performed_effort, word
 from shared.errors import BadInput
 
 N_PHASE = 100
@@ -308,8 +308,7 @@ class SimulatedLearner:
     def _effort(self, clip: Clip) -> float:
         from shared.bodies.body import perform
 
-        out, _ = perform(self._body, clip)
-        return effort(out.select([c for c in out.channels if c.startswith("tau.")]))
+        return performed_effort(perform(self._body, clip)[0])
 
     def performed(self) -> np.ndarray:
         """The learner's own last performance on the phase axis (its attempts' mean, motor

@@ -82,7 +82,7 @@ class OtherParams:
         lacking = [j for j in self.joints if j in self.body_spec().missing]
         if lacking:
             raise BadInput(f"the other cannot feel joints its body lacks: {lacking}", field="joints")
-        check_transmission(self.transmission, self.joints)
+        check_transmission(self.transmission)
         if self.behaviour not in BEHAVIOURS:
             raise BadInput(f"behaviour must be one of {', '.join(BEHAVIOURS)}, got {self.behaviour!r}", field="behaviour")
         if self.weights is not None and len(self.weights) != len(self.joints):
@@ -99,7 +99,7 @@ class OtherParams:
 TRANSMISSION_KEYS = ("gear", "efficiency", "coupling", "stribeck", "fatigue")
 
 
-def check_transmission(t: dict | None, joints) -> None:
+def check_transmission(t: dict | None) -> None:
     if t is None:
         return
     if not isinstance(t, dict) or not set(t) <= set(TRANSMISSION_KEYS):

@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from shared.clip import Clip
 from shared.errors import BadInput
 from shared.estimation.conversation import Language, scale_interval, scale_of
 from shared.symbols import f_conv, f_div
@@ -40,6 +41,11 @@ LANGUAGE = Language(d=4, g_max=1.0, tau_max=1.0, joints=[], rule="eq3.8")
 def effort(torques: np.ndarray) -> float:
     """``E = mean_t sum_j |tau_j|`` (eq. 3.8 with ``tau_max`` 1 N m) of a T x J torque pattern."""
     return f_conv(np.asarray(torques, float), "eq3.8", 1.0)
+
+
+def performed_effort(performed: Clip) -> float:
+    """:func:`effort` of a clip as :func:`shared.bodies.body.perform` returns it (its ``tau.*`` channels)."""
+    return effort(performed.select([c for c in performed.channels if c.startswith("tau.")]))
 
 
 def word(g: float) -> int:

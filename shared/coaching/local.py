@@ -9,7 +9,7 @@ import numpy as np
 from shared.bodies.body import perform
 from shared.bodies.human import human_body
 from shared.clip import Clip
-from shared.coaching.effort import effort
+from shared.coaching.effort import performed_effort
 from shared.pss.space import ProtoSymbolSpace
 
 
@@ -18,6 +18,7 @@ class LocalCoachPorts:
         self.spaces: dict[str, ProtoSymbolSpace] = {}
         self.body = None if skeleton is None else human_body(skeleton)
         self.space_params = space_params or {}
+        self._last: tuple | None = None  # (clip, effort) of the last clip performed
 
     def build(self, space, target: Clip):
         t = target.with_data(target.data, name="target", label="target")
@@ -43,10 +44,12 @@ class LocalCoachPorts:
             return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames,
                     "not_checked": ["joint limits and balance (no body for this target)"], "feasible": None}, None
         out, report = perform(self.body, clip)
+        self._last = (clip, performed_effort(out))  # the check and the effort policy ask about the same clip
         return report, out.select(["cog.x", "cog.y", "cog.z"])
 
     def effort(self, clip):
         if self.body is None:
             return None
-        out, _ = perform(self.body, clip)
-        return effort(out.select([c for c in out.channels if c.startswith("tau.")]))
+        if self._last is not None and self._last[0] is clip:
+            return self._last[1]
+        return performed_effort(perform(self.body, clip)[0])
