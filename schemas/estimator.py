@@ -62,7 +62,8 @@ CONVERSE = Endpoint(
         "stopped": F(Str(max_len=1000), "why the conversation stopped early (a silent or senseless other; never "
                      "contradiction alone)", required=False),
         "model": F(AnyMap(), "how far the answers agree with the estimated body: agreement, repeat_disagreement, "
-                   "misfits, p, outside (the other is beyond what the self can model) and a verdict sentence",
+                   "misfits, p, outside (the other is beyond what the self can model), a verdict sentence and the "
+                   "body estimate's residual correction (active, amplitude, length, drift, evidence)",
                    required=False),
     })),
     "Run conversation sets (eq. 3.2-3.6); each completed set is saved before the next starts.",
@@ -73,8 +74,9 @@ ESTIMATE_EP = Endpoint(
     "estimate",
     Message("estimator.estimate", Map({
         "estimate": ESTIMATE, "clip": F(CLIP, "any motion of the joints, known or not"),
-        "method": F(Str(choices=("thesis", "interval", "body")), "thesis: eq. 3.5 through the space; interval: one "
-                    "torque scale; body: the regressor on the estimated body (issue 13)", required=False,
+        "method": F(Str(choices=("thesis", "space", "interval", "body")), "thesis: eq. 3.5 through the space; space: "
+                    "the same with the words' bins and every motion talked about in the space; interval: one "
+                    "torque scale; body: the regressor on the estimated body", required=False,
                     default="thesis"),
     })),
     Message("estimator.estimate.reply", Map({
@@ -93,8 +95,8 @@ IDENTIFY = Endpoint(
                         required=False, default="thesis"),
         "method": F(Str(choices=("auto", "thesis")), "auto: pairs chosen on the estimated body, answers weighed "
                     "against noise (issue 13); thesis: its m1/m2, m3/m4", required=False, default="auto"),
-        "noise": F(Float(0.0, 0.5), "auto: the share of comparisons the self allows to be wrong", required=False,
-                   default=0.1),
+        "noise": F(Float(0.0, 0.5), "auto: the share of comparisons the self allows to be wrong (default: weighed "
+                   "over levels from 5 % to answering at random)", required=False),
         "confidence": F(Float(0.5, 0.9999), "auto: stop when one rule holds this share of the posterior",
                         required=False, default=0.999),
         "jnd": F(Float(0.0, 1.0), "the just-noticeable difference assumed", required=False, default=0.05),

@@ -45,7 +45,7 @@ def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services,
     r = _ok(est.CONVERSE, c.request("estimator", "converse", {"estimate": "r2", "sets": 3}))
     assert r["completed"] == 3 and r["info"]["sets_done"] == 3 and r["info"]["consistent"]
     assert r["info"]["scale"] == pytest.approx(2.0, rel=0.05)  # the other is twice as heavy
-    for method in ("thesis", "interval", "body"):
+    for method in ("thesis", "space", "interval", "body"):
         e = _ok(est.ESTIMATE_EP, c.request("estimator", "estimate", {"estimate": "r2", "clip": motion, "method": method}))
         assert e["clip"]["sensor"] == ["tau.shoulder_pitch", "tau.shoulder_roll", "tau.elbow"] and e["g"] > 0
     assert _ok(est.INFO_EP, c.request("estimator", "info", {"estimate": "r2"}))["sets_done"] == 3
@@ -59,7 +59,7 @@ def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services,
     # (it did: set 0 of a rerun gave the end of the last run's numbers)
     fresh = c.request("estimator", "estimate", {"estimate": "r2", "clip": motion, "method": "thesis"})["g"]
     c.request("estimator", "start", {"estimate": "r2", "other": "r2", "d": 6, "replace": True})
-    assert "est-r2" not in {s["space"] for s in c.request("pss", "list")["spaces"]}
+    assert not {"est-r2", "est-r2.space", "est-r2.self"} & {s["space"] for s in c.request("pss", "list")["spaces"]}
     again = c.request("estimator", "estimate", {"estimate": "r2", "clip": motion, "method": "thesis"})["g"]
     c.request("estimator", "start", {"estimate": "r2x", "other": "r2", "d": 6, "replace": True})
     first = c.request("estimator", "estimate", {"estimate": "r2x", "clip": motion, "method": "thesis"})["g"]

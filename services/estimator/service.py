@@ -1,7 +1,7 @@
 """The estimator service: learns what each other feels (contract: ``schemas/estimator.py``).
 
-It never trains a model itself: ``P_other_hat`` lives on the pss service (space
-``est-<estimate>``), the self's torques come from the simulator (body ``self``) and every
+It never trains a model itself: ``P_other_hat`` lives on the pss service (spaces
+``est-<estimate>`` and, for the space estimator, ``est-<estimate>.space``), the self's torques come from the simulator (body ``self``) and every
 question goes through the dialogue service. The chapter-3 algorithm is
 ``shared.estimation`` run on :class:`BusPorts`.
 
@@ -27,7 +27,7 @@ from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
 from shared.deadline import check_time, completed
 from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
-from shared.estimation.conversation import TORQUE_PREFIX, Language, OtherEstimate, hold, with_torques
+from shared.estimation.conversation import SPACES, TORQUE_PREFIX, Language, OtherEstimate, hold, with_torques
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
 from shared.estimation.rules import (THESIS_CANDIDATES, candidate_bodies, design_thesis_pairs, identification_motions,
                                      identify_bodies, identify_thesis, weighted_candidates)
@@ -105,13 +105,21 @@ class BusPorts:
             raise Stopped(f"the other's answer {r['raw']!r} is not a comparison ({r['problem']})")
         return r["answer"]
 
-    def build(self, clips) -> None:
-        self.c.request("pss", "build", {"space": self.space, "replace": True,
+    def space_of(self, space: str = "thesis") -> str:
+        """The pss space of the thesis estimator (``est-<estimate>``) or the space estimator's
+        (``est-<estimate>.space``); a name too long for pss (64 characters) is replaced by a hash."""
+        import hashlib
+
+        base = self.space if len(self.space) <= 58 else "est-" + hashlib.sha1(self.name.encode()).hexdigest()[:24]
+        return base if space == "thesis" else f"{base}.{space}"
+
+    def build(self, clips, space: str = "thesis") -> None:
+        self.c.request("pss", "build", {"space": self.space_of(space), "replace": True,
                                         "clips": [clip_to_wire(c) for c in clips]})
 
-    def associate(self, motion) -> np.ndarray:
-        r = self.c.request("pss", "associate", {"space": self.space, "clip": clip_to_wire(motion), "missing": "sensor",
-                                                "weighting": "inverse_distance"})
+    def associate(self, motion, space: str = "thesis") -> np.ndarray:
+        r = self.c.request("pss", "associate", {"space": self.space_of(space), "clip": clip_to_wire(motion),
+                                                "missing": "sensor", "weighting": "inverse_distance"})
         return self._taus(r["aligned"])
 
 
@@ -173,7 +181,7 @@ def _identify_on_bodies(est: OtherEstimate, cands, ports: BusPorts, design: dict
         answers = [(key, est.regressor(ports, key), k) for key, k in est.body_answers]
         shared = [ports.regressor(m) for m in est.motions]
     bodies = candidate_bodies(ports.language, shared, answers, cands, scale=est.scale())
-    return identify_bodies(cands, motions, regs, bodies, ports.ask_compare, jnd=req["jnd"], noise=req["noise"],
+    return identify_bodies(cands, motions, regs, bodies, ports.ask_compare, jnd=req["jnd"], noise=req.get("noise"),
                            confidence=req["confidence"])
 
 
@@ -228,12 +236,14 @@ def make_service(settings: Settings | None = None) -> Service:
         with writing(name):
             # P_other_hat is built when first needed (converse rebuilds it anyway; estimate builds a missing one),
             # so a space left by an earlier estimate of this name must go: its answers are not this one's
-            try:
-                bus().request("pss", "delete", {"space": f"est-{name}"}, timeout=30)
-            except RemoteError as e:
-                if e.code != "not_found":
-                    raise
-            est.start(BusPorts(bus(), name, req["other"], lang), build=False)
+            ports = BusPorts(bus(), name, req["other"], lang)
+            for space in SPACES:
+                try:
+                    bus().request("pss", "delete", {"space": ports.space_of(space)}, timeout=30)
+                except RemoteError as e:
+                    if e.code != "not_found":
+                        raise
+            est.start(ports, build=False)
             est.save(path(name))
         return info_of(name, est)
 
@@ -243,7 +253,8 @@ def make_service(settings: Settings | None = None) -> Service:
         with writing(name):
             est = load(name)
             ports = BusPorts(bus(), name, est.other, est.language, req["timeout"])
-            ports.build(est.database())  # the space matches the saved state, whatever happened before
+            for space in SPACES:  # the spaces match the saved state, whatever happened before
+                ports.build(est.database(space), space)
             done, stopped = 0, None
             for _ in range(req["sets"]):
                 completed(f"{done} of {req['sets']} conversation set(s) completed and kept")
@@ -268,7 +279,8 @@ def make_service(settings: Settings | None = None) -> Service:
             if stopped:
                 est.notes.append(f"stopped after {len(est.sets)} set(s): {stopped}")
                 est.save(path(name))
-                ports.build(est.database())
+                for space in SPACES:
+                    ports.build(est.database(space), space)
         check = est.model_check(ports)  # the body fitted to every answer before the info reads it
         out = {"info": info_of(name, est), "completed": done, "model": model_reply(check)}
         if stopped:
@@ -288,7 +300,7 @@ def make_service(settings: Settings | None = None) -> Service:
         try:
             tau = est.estimate(motion, ports, req["method"])
         except RemoteError as e:  # the space of a fresh estimate (or one pss lost): build it from the saved database
-            if e.code != "not_found" or req["method"] != "thesis":
+            if e.code != "not_found" or req["method"] not in ("thesis", "space"):
                 raise
             with building_lock:
                 lock = building.setdefault(name, threading.Lock())
@@ -300,7 +312,8 @@ def make_service(settings: Settings | None = None) -> Service:
                 except RemoteError as again:
                     if again.code != "not_found":
                         raise
-                    ports.build(est.database())
+                    for space in SPACES:
+                        ports.build(est.database(space), space)
                     tau = est.estimate(motion, ports, req["method"])
         g = est.language.g(tau)
         k = est.language.k(tau)
@@ -366,10 +379,12 @@ def make_service(settings: Settings | None = None) -> Service:
             if not path(name).exists():
                 raise NotFound(f"no estimate named {name!r}", estimate=name)
             path(name).unlink()
-        try:
-            bus().request("pss", "delete", {"space": f"est-{name}"}, timeout=30)
-        except MirrorcoachError:
-            pass  # the space may never have been built
+        for space in SPACES:
+            try:
+                bus().request("pss", "delete", {"space": BusPorts(bus(), name, "", Language()).space_of(space)},
+                              timeout=30)
+            except MirrorcoachError:
+                pass  # the space may never have been built
         return {"estimate": name, "deleted": True}
 
     return svc

@@ -54,7 +54,8 @@ class OtherParams:
     body: dict | None = None  # how its body differs unevenly (BodySpec fields but mass; issue 13), None: even
     kind: str = ""  # the population kind it was drawn from (shared.agents.population), for reports
     # how its torques become what it feels, beyond a rigid body (None: the torques themselves):
-    # gear {joint: ratio}, efficiency (0-1], coupling {"src>dst": c}, stribeck {joint: [F_c, F_s, v_s]}, fatigue
+    # gear {joint: ratio}, efficiency (0-1], coupling {"src>dst": c}, stribeck {joint: [F_c, F_s, v_s]}, fatigue,
+    # drag {joint: c} (c qd |qd|), bias {joint: N m}
     transmission: dict | None = None
     # answers like people's: its own word boundaries g' = g_max (g / g_max)^gamma, drifting by
     # `drift` per question (g' times 1 + drift * asked), and "I don't know" with probability dont_know
@@ -96,7 +97,7 @@ class OtherParams:
         return self
 
 
-TRANSMISSION_KEYS = ("gear", "efficiency", "coupling", "stribeck", "fatigue")
+TRANSMISSION_KEYS = ("gear", "efficiency", "coupling", "stribeck", "fatigue", "drag", "bias")
 
 
 def check_transmission(t: dict | None) -> None:
@@ -119,6 +120,10 @@ def check_transmission(t: dict | None) -> None:
                 isinstance(x, (int, float)) and 0 <= x <= 100 for x in v) and v[2] > 0):
             raise BadInput(f"transmission stribeck[{j}] must be [F_c, F_s, v_s] (N m, N m, rad/s > 0)",
                            field="transmission")
+    for key, lo, hi in (("drag", 0.0, 1.0), ("bias", -1.0, 1.0)):
+        for j, v in (t.get(key) or {}).items():
+            if not (isinstance(v, (int, float)) and lo <= v <= hi):
+                raise BadInput(f"transmission {key}[{j}] must be in [{lo}, {hi}], got {v!r}", field="transmission")
     f = t.get("fatigue", 0.0)
     if not (isinstance(f, (int, float)) and 0 <= f <= 1):
         raise BadInput(f"transmission fatigue must be in [0, 1] per question, got {f!r}", field="transmission")
@@ -133,21 +138,30 @@ def transmitted(tau: np.ndarray, motion: Clip, joints, t: dict | None, asked: in
     * ``gear``: each joint's torque felt times its ratio, and ``efficiency`` eta: driving
       (``tau qd > 0``) the motor feels ``tau / eta``, back-driven ``tau eta``;
     * ``coupling`` ``{"src>dst": c}``: a tendon-like share of joint src's torque felt at dst;
-    * ``fatigue``: everything felt ``(1 + fatigue * asked)`` times as heavy after ``asked`` questions.
+    * ``fatigue``: everything felt ``(1 + fatigue * asked)`` times as heavy after ``asked`` questions;
+    * ``drag`` ``{joint: c}``: quadratic drag ``c qd |qd|`` added; ``bias`` ``{joint: b}``: a
+      constant ``b`` N m added (a counterweight set wrong).
     """
     if not t:
         return tau
     out = np.array(tau, float)
     names = list(joints)
-    if t.get("stribeck") or t.get("efficiency", 1.0) < 1.0:
+    if t.get("stribeck") or t.get("drag") or t.get("efficiency", 1.0) < 1.0:
         qd = np.column_stack([np.gradient(np.radians(motion.column(j)), 1.0 / motion.fps) if j in motion.channels
                               else np.zeros(len(out)) for j in names])
         for j, (fc, fs, vs) in (t.get("stribeck") or {}).items():
             if j in names:
                 v = qd[:, names.index(j)]
                 out[:, names.index(j)] += (fc + (fs - fc) * np.exp(-(v / vs) ** 2)) * np.tanh(v / 0.05)
+        for j, c in (t.get("drag") or {}).items():
+            if j in names:
+                v = qd[:, names.index(j)]
+                out[:, names.index(j)] += c * v * np.abs(v)
         eta = float(t.get("efficiency", 1.0))
         out = np.where(out * qd > 0, out / eta, out * eta)
+    for j, b in (t.get("bias") or {}).items():
+        if j in names:
+            out[:, names.index(j)] += b
     for j, ratio in (t.get("gear") or {}).items():
         if j in names:
             out[:, names.index(j)] *= ratio
