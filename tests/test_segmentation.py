@@ -1,0 +1,77 @@
+"""Repetitions found in one continuous take (shared/capture/segment.py, shared/capture/takes.py)."""
+
+import numpy as np
+import pytest
+
+from shared.capture import segment as seg
+from shared.capture.takes import join, score
+from shared.errors import BadInput
+from shared.io import load_clip
+
+
+def _clips(hdm05, performer, cls):
+    return [load_clip(f) for f in sorted((hdm05 / "amc" / cls).glob(f"HDM_{performer}_*.amc"))]
+
+
+def test_the_dtw_kernels_match_their_python_source():
+    """The compiled kernels give what their plain-python source gives; a stretch equal to the
+    target costs nothing, and the best stretch ending at a column starts where it really does."""
+    r = np.random.default_rng(0)
+    cost = np.ascontiguousarray(r.random((12, 40)))
+    acc, start = seg.subsequence_dtw(cost)
+    acc_py, start_py = seg.subsequence_dtw.py(cost)
+    assert np.allclose(acc, acc_py) and np.array_equal(start, start_py)
+    assert seg.global_dtw(cost[:, :15]) == pytest.approx(seg.global_dtw.py(cost[:, :15]))
+    a = np.sin(np.linspace(0, 3, 20))[:, None]
+    b = np.vstack([np.zeros((7, 1)), a, np.zeros((9, 1))])
+    acc, start = seg.subsequence_dtw(seg._distances(a, b))
+    assert acc[7 + 19] == pytest.approx(0.0) and start[7 + 19] == 7
+    assert seg.global_dtw(seg._distances(a, a)) == pytest.approx(0.0)
+    assert seg.global_dtw(seg._distances(a, a[:5])) == np.inf  # a slope steeper than 2 cannot join the ends
+
+
+def test_a_joined_take_holds_its_clips_where_it_says(hdm05):
+    clips = _clips(hdm05, "bk", "squat1Reps")[:3]
+    take, bounds = join(clips, seed=3)
+    assert len(bounds) == 3 and take.channels == clips[0].channels and take.fps == clips[0].fps
+    for clip, (s, e) in zip(clips, bounds):
+        i = int(round(s * take.fps))
+        assert e - s == pytest.approx(clip.duration + 1 / clip.fps, abs=1e-9)
+        part = take.data[i:i + clip.n_frames]
+        assert np.allclose(np.mod(part - clip.data + 180, 360) - 180, 0.0, atol=1e-6)  # whole turns aside
+    assert bounds[1][0] - bounds[0][1] >= 1.0  # a rest between repetitions
+    with pytest.raises(BadInput):
+        join([])
+
+
+def test_repetitions_of_the_same_performer_are_found_and_another_motion_is_not_cut(hdm05):
+    """Five squats of one performer, the target another of that performer's squats: all five
+    found, boundaries within 150 ms (median); a take of jogging holds no squat."""
+    squats = _clips(hdm05, "bk", "squat1Reps")
+    if len(squats) < 6:
+        pytest.skip("needs six squats of one performer (the full HDM05 sample)")
+    take, truth = join(squats[1:6], seed=1)
+    others = [_clips(hdm05, "bd", c)[0] for c in ("kickLFront1Reps", "elbowToKnee1RepsLelbowStart",
+                                                    "rotateArmsBothBackward1Reps")]
+    found = seg.segment(take, squats[0], expected=5, background=others)
+    s = score([(r.start, r.end) for r in found.repetitions], truth)
+    assert s["f1"] == 1.0 and np.median(s["boundary_errors"]) <= 0.15, (s, found.verdict)
+    assert found.verdict == "5 repetition(s) found" and all(0 < r.confidence <= 1 for r in found.repetitions)
+    assert all(r.cohort is not None and r.cohort <= seg.COHORT for r in found.repetitions)
+    jog = _clips(hdm05, "bk", "jogLeftCircle4StepsRstart") or _clips(hdm05, "bd", "kickLFront1Reps")
+    take, _ = join(jog[:3], seed=2)
+    none = seg.segment(take, squats[0], expected=5, background=others)
+    assert none.repetitions == [] and none.verdict.startswith("not the target")
+    fewer = seg.segment(join(squats[1:4], seed=1)[0], squats[0], expected=5, background=others)
+    assert fewer.verdict == "fewer repetitions than expected: 3 found, 5 expected"
+
+
+def test_bad_takes_are_refused_clearly(hdm05):
+    squat = _clips(hdm05, "bk", "squat1Reps")[0]
+    with pytest.raises(BadInput, match="skeleton"):
+        seg.segment(squat.with_data(squat.data, skeleton=None), squat)
+    with pytest.raises(BadInput, match="at least 1"):
+        seg.segment(squat, squat, expected=0)
+    with pytest.raises(BadInput, match="does not move"):
+        still = squat.with_data(np.repeat(squat.data[:1], squat.n_frames, axis=0))
+        seg.segment(squat, still)
