@@ -272,6 +272,7 @@ from shared.cli import cluster as _cluster  # noqa: E402,F401  (registers the cl
 from shared.cli import coach as _coach  # noqa: E402,F401  (registers the coach commands on app)
 from shared.cli import study as _study  # noqa: E402,F401  (registers the study commands on app)
 from shared.cli import deploy as _deploy  # noqa: E402,F401  (registers the deploy commands on app)
+from shared.cli import capture as _capture  # noqa: E402,F401  (registers the capture commands on app)
 
 
 def main() -> None:

@@ -283,6 +283,14 @@ def to_bvh_form(clip: Clip) -> tuple[Skeleton, np.ndarray, list[str]]:
 def write_bvh(clip: Clip, path) -> None:
     """Write the motion channels of ``clip`` as BVH (sensor channels are not part of BVH;
     keep them with NPZ)."""
+    header, rows = bvh_lines(clip)
+    Path(path).write_text("\n".join(header + [f"Frames: {len(rows)}", f"Frame Time: {1.0 / clip.fps:.12g}"] + rows)
+                          + "\n")
+
+
+def bvh_lines(clip: Clip) -> tuple[list[str], list[str]]:
+    """The BVH text of ``clip``: its header (``HIERARCHY`` to ``MOTION``) and one line per frame
+    (what a motion capture suite broadcasts in real time after the header)."""
     sk, data, chans = to_bvh_form(clip)
     out = ["HIERARCHY"]
 
@@ -318,7 +326,4 @@ def write_bvh(clip: Clip, path) -> None:
         stack.extend(reversed(sk.children(i)))
     data = data[:, [chans.index(c) for c in declared]]
     out.append("MOTION")
-    out.append(f"Frames: {data.shape[0]}")
-    out.append(f"Frame Time: {1.0 / clip.fps:.12g}")
-    out.extend(fmt(row) for row in data)
-    Path(path).write_text("\n".join(out) + "\n")
+    return out, [fmt(row) for row in data]

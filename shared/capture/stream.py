@@ -1,0 +1,366 @@
+"""Motion capture streamed live: BVH motion lines over TCP, and a replay source that plays any
+clip through the same path (the stand-in for a capture suit, used by the tests and the demo).
+
+**The stream.** Motion capture suites broadcast BVH in real time: once the skeleton (a BVH
+header, ``HIERARCHY`` to ``MOTION``, or a BVH file the recorder is given), then one line of
+channel values per frame. :class:`ReplaySource` serves a clip that way on a TCP port (the
+header, ``Frames: 0`` and ``Frame Time``, then a line per frame paced at the clip's rate).
+
+**Recording** (:func:`record`) reads such a stream into a take (a BVH file, read back with the
+project's reader, so every studio convention applies) and reports what happened, never
+silently:
+
+* a frame line with the wrong number of values, or values that are not numbers: dropped and
+  counted;
+* frames the source skipped: a gap between two lines longer than ``GAP`` frame times is
+  counted as the frames that fit in it;
+* the source stopping (the connection closed, or no line for ``idle`` seconds): the take ends
+  there, or, with ``reconnect``, the recorder connects again (up to that many times) and the
+  take goes on, the pause reported;
+* a new header in the middle of the stream: another skeleton (other joints, channels or bone
+  lengths) ends the take before it and is reported (a take holds one skeleton); the same one
+  again is noted and the take goes on.
+
+Everything is bounded: the line length, the header's size, the frames of one take.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from shared.clip import Clip
+from shared.errors import BadInput
+
+GAP = 2.5  # a gap between frame lines longer than this many frame times counts as skipped frames
+MAX_LINE = 1 << 16  # bytes of one line
+MAX_HEADER_LINES = 5000
+MAX_FRAMES = 120 * 60 * 30  # 30 minutes at 120 fps
+
+
+# ---------------------------------------------------------------------------- the replay source
+class ReplaySource:
+    """A clip served as a live BVH stream on ``host:port`` (``port=0``: any free port; see
+    :attr:`port`). ``header=False`` sends frame lines only (the recorder then needs the skeleton
+    from a file); ``speed`` plays faster or slower; ``loop`` plays again from the start.
+    For tests of the recorder's reports it can misbehave like hardware: ``skip`` (frame indices
+    never sent), ``stop_after`` (frames, then the connection closes) and ``switch`` (a clip whose
+    header is sent after ``stop_after`` frames instead of closing)."""
+
+    def __init__(self, clip: Clip, host: str = "127.0.0.1", port: int = 0, header: bool = True, speed: float = 1.0,
+                 loop: bool = False, skip: set[int] | None = None, stop_after: int | None = None,
+                 switch: Clip | None = None, connections: int | None = None):
+        from shared.io.bvh import bvh_lines
+
+        if not speed > 0:
+            raise BadInput(f"speed must be positive, got {speed}", field="speed")
+        self.clip = clip
+        self.head, self.rows = bvh_lines(clip)
+        self.switch_lines = bvh_lines(switch) if switch is not None else None
+        self.header, self.speed, self.loop = header, float(speed), loop
+        self.skip, self.stop_after = set(skip or ()), stop_after
+        self.connections = connections  # serve this many connections, then stop listening
+        self._sock = socket.create_server((host, port))
+        self._sock.settimeout(0.2)
+        self.host, self.port = self._sock.getsockname()[:2]
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, daemon=True, name="replay-source")
+        self.served = 0
+
+    def __enter__(self) -> "ReplaySource":
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    @property
+    def address(self) -> str:
+        return f"tcp://{self.host}:{self.port}"
+
+    def start(self) -> "ReplaySource":
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self._sock.close()
+
+    def _serve(self) -> None:
+        while not self._stop.is_set():
+            if self.connections is not None and self.served >= self.connections:
+                self._sock.close()  # gone, as a source switched off: a reconnect finds no one
+                return
+            try:
+                conn, _ = self._sock.accept()
+            except (TimeoutError, socket.timeout):
+                continue
+            except OSError:
+                return
+            self.served += 1
+            with conn:
+                try:
+                    self._play(conn)
+                except OSError:
+                    pass  # the recorder went away
+        self._sock.close()
+
+    def _play(self, conn: socket.socket) -> None:
+        dt = 1.0 / (self.clip.fps * self.speed)
+
+        def send_header(head):
+            conn.sendall(("\n".join(head + ["Frames: 0", f"Frame Time: {1.0 / self.clip.fps:.12g}"]) + "\n").encode())
+
+        if self.header:
+            send_header(self.head)
+        t0 = time.monotonic()
+        sent = 0
+        while not self._stop.is_set():
+            for i, row in enumerate(self.rows):
+                if self._stop.is_set():
+                    return
+                if self.stop_after is not None and sent >= self.stop_after:
+                    if self.switch_lines is not None:
+                        head, rows = self.switch_lines
+                        send_header(head)
+                        for r in rows:
+                            conn.sendall((r + "\n").encode())
+                    return
+                wait = t0 + sent * dt - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
+                sent += 1
+                if i in self.skip:
+                    continue
+                conn.sendall((row + "\n").encode())
+            if not self.loop:
+                return
+
+
+# ---------------------------------------------------------------------------- recording
+@dataclass
+class Take:
+    """A recorded take: its BVH file, the clip read from it and what happened on the way."""
+
+    path: Path
+    clip: Clip | None
+    frames: int
+    events: list[str] = field(default_factory=list)
+    dropped: int = 0  # malformed lines
+    skipped: int = 0  # frames the source left out (gaps)
+    reconnects: int = 0
+    ended: str = ""
+
+    def to_dict(self) -> dict:
+        return {"path": str(self.path), "frames": self.frames, "events": self.events, "dropped": self.dropped,
+                "skipped": self.skipped, "reconnects": self.reconnects, "ended": self.ended,
+                "seconds": self.clip.duration if self.clip is not None else 0.0}
+
+
+def parse_source(source: str) -> tuple[str, int]:
+    """``tcp://host:port`` (or ``host:port``) -> (host, port)."""
+    text = source[len("tcp://"):] if source.startswith("tcp://") else source
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise BadInput(f"a live source is tcp://HOST:PORT, got {source!r}", field="source")
+    return host.strip("[]"), int(port)
+
+
+class _Lines:
+    """Lines from a socket, bounded in length; ``None`` at the end of the stream; raises
+    TimeoutError after ``idle`` seconds without a line."""
+
+    def __init__(self, conn: socket.socket, idle: float):
+        self.conn, self.buf = conn, b""
+        conn.settimeout(idle)
+
+    def next(self) -> str | None:
+        while b"\n" not in self.buf:
+            if len(self.buf) > MAX_LINE:
+                raise BadInput(f"a line of the stream is longer than {MAX_LINE} bytes: not BVH", field="source")
+            chunk = self.conn.recv(65536)
+            if not chunk:
+                if self.buf:
+                    line, self.buf = self.buf, b""
+                    return line.decode("latin-1")
+                return None
+            self.buf += chunk
+        line, _, self.buf = self.buf.partition(b"\n")
+        return line.decode("latin-1").rstrip("\r")
+
+
+def _header_of(path: Path) -> list[str]:
+    lines = Path(path).read_text(encoding="latin-1").splitlines()
+    for i, line in enumerate(lines):
+        if line.strip().upper() == "MOTION":
+            return lines[:i + 1]
+    raise BadInput(f"{path}: no MOTION line: not a BVH file to take the skeleton from", field="skeleton")
+
+
+def _skeleton(header: list[str]) -> list[list[str]]:
+    """A header's words, line by line: two headers are one skeleton when these are equal."""
+    return [line.split() for line in header if line.strip()]
+
+
+def _channels(header: list[str]) -> int:
+    return sum(int(line.split()[1]) for line in header if line.strip().upper().startswith("CHANNELS"))
+
+
+def record(source: str, out: Path, *, seconds: float | None = None, frames: int | None = None,
+           skeleton: Path | None = None, fps: float | None = None, idle: float = 2.0, reconnect: int = 0,
+           connect_timeout: float = 5.0, on_frame=None) -> Take:
+    """Record a take from a live BVH stream (module docstring) into ``out`` (a .bvh file),
+    until ``seconds`` or ``frames`` (whichever first), the source stops, or its skeleton
+    changes. ``skeleton``: a BVH file whose header the stream's lines follow (a stream without
+    a header); ``fps`` its rate (else the file's). ``on_frame(i)`` is called for every frame."""
+    host, port = parse_source(source)
+    if seconds is None and frames is None:
+        raise BadInput("say how long to record: seconds or frames", field="seconds")
+    limit = min(frames or MAX_FRAMES, MAX_FRAMES)
+    header: list[str] | None = _header_of(skeleton) if skeleton is not None else None
+    frame_time = None if fps is None else 1.0 / fps
+    if header is not None and frame_time is None:
+        frame_time = _frame_time(Path(skeleton))
+    events: list[str] = []
+    rows: list[str] = []
+    dropped = skipped = reconnects = 0
+    ended = ""
+    deadline = None if seconds is None else time.monotonic() + seconds
+    last_arrival = None
+    connected = False
+    while True:
+        conn, waited = None, time.monotonic()
+        while conn is None:  # a source coming back gets connect_timeout seconds to listen again
+            try:
+                conn = socket.create_connection((host, port), timeout=connect_timeout)
+            except OSError as e:
+                if not connected:
+                    raise BadInput(f"no live source at {source}: {e.strerror or e}", field="source") from None
+                if time.monotonic() - waited > connect_timeout:
+                    ended = f"the source did not come back within {connect_timeout:g} s"
+                    break
+                time.sleep(0.1)
+        if conn is None:
+            break
+        if connected:
+            reconnects += 1
+            events.append(f"reconnected after frame {len(rows)} ({time.monotonic() - waited:.1f} s)")
+        connected = True
+        lines = _Lines(conn, idle)
+        own_header: list[str] = []
+        in_header = False
+        stop = False
+        with conn:
+            while True:
+                if deadline is not None and time.monotonic() >= deadline:
+                    ended, stop = f"{seconds:g} s recorded", True
+                    break
+                if len(rows) >= limit:
+                    ended, stop = f"{len(rows)} frames recorded", True
+                    break
+                try:
+                    line = lines.next()
+                except (TimeoutError, socket.timeout):
+                    line = None
+                    events.append(f"no frame for {idle:g} s after frame {len(rows)}: the source stopped")
+                except OSError as e:
+                    line = None
+                    events.append(f"the connection broke after frame {len(rows)} ({e.strerror or e})")
+                if line is None:
+                    break
+                text = line.strip()
+                if not text:
+                    continue
+                word = text.split()[0].upper()
+                if word == "HIERARCHY":
+                    in_header, own_header = True, [text]
+                    continue
+                if in_header:
+                    if len(own_header) > MAX_HEADER_LINES:
+                        raise BadInput(f"a BVH header of more than {MAX_HEADER_LINES} lines: not a skeleton",
+                                       field="source")
+                    own_header.append(line)
+                    if word == "MOTION":
+                        in_header = False
+                        if header is not None and rows:
+                            if _skeleton(own_header) != _skeleton(header):
+                                events.append(f"the skeleton changed after frame {len(rows)} ({_channels(header)} -> "
+                                              f"{_channels(own_header)} channels): the take ends there")
+                                ended, stop = "the skeleton changed", True
+                                break
+                            events.append(f"the same skeleton sent again after frame {len(rows)}: kept recording")
+                        header = own_header
+                    continue
+                if word.startswith("FRAME"):  # "Frames: n" / "Frame Time: t"
+                    if word == "FRAME" and "TIME" in text.upper():
+                        try:
+                            frame_time = float(text.split(":")[1])
+                        except (IndexError, ValueError):
+                            events.append(f"unreadable frame time {text!r}")
+                    continue
+                if header is None:
+                    raise BadInput("the stream sends frames without a skeleton: give the BVH file it follows "
+                                   "(--skeleton)", field="skeleton")
+                values = text.split()
+                try:
+                    [float(v) for v in values]
+                    ok = len(values) == _channels(header)
+                except ValueError:
+                    ok = False
+                if not ok:
+                    dropped += 1
+                    if dropped <= 5:
+                        events.append(f"dropped a malformed frame line after frame {len(rows)} "
+                                      f"({len(values)} values, {_channels(header)} channels)")
+                    continue
+                now = time.monotonic()
+                if last_arrival is not None and frame_time and now - last_arrival > GAP * frame_time:
+                    missing = int(round((now - last_arrival) / frame_time)) - 1
+                    skipped += missing
+                    events.append(f"about {missing} frame(s) missing after frame {len(rows)} "
+                                  f"({(now - last_arrival) * 1000:.0f} ms without a frame)")
+                last_arrival = now
+                rows.append(text)
+                if on_frame is not None:
+                    on_frame(len(rows))
+        if stop:
+            break
+        if reconnects < reconnect:
+            last_arrival = None
+            continue
+        ended = ended or "the source stopped"
+        break
+    if dropped > 5:
+        events.append(f"{dropped} malformed frame lines dropped in all")
+    out = Path(out)
+    if header is None or not rows:
+        return Take(out, None, 0, events + ["no frames recorded"], dropped, skipped, reconnects, ended or "no frames")
+    from shared.io import load_clip
+    from shared.io.atomic import atomic_write
+
+    text = "\n".join(header + [f"Frames: {len(rows)}", f"Frame Time: {frame_time or 1 / 30:.12g}"] + rows) + "\n"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(out, lambda f: f.write(text.encode("latin-1")))
+    return Take(out, load_clip(out), len(rows), events, dropped, skipped, reconnects, ended)
+
+
+def _frame_time(path: Path) -> float | None:
+    for line in Path(path).read_text(encoding="latin-1").splitlines():
+        if line.strip().upper().startswith("FRAME TIME"):
+            try:
+                return float(line.split(":")[1])
+            except (IndexError, ValueError):
+                return None
+    return None
+
+
+def replay_to_file(clip: Clip, out: Path, **kw) -> Take:
+    """A clip through the whole live path (a replay source on loopback, recorded): what a take
+    from a capture suit would be."""
+    with ReplaySource(clip, connections=1, **kw) as src:
+        return record(src.address, out, seconds=clip.duration * 2 + 5, idle=2.0)
+

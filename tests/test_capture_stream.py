@@ -1,0 +1,138 @@
+"""Live motion capture: BVH over a real TCP socket on loopback (shared/capture/stream.py)."""
+
+import socket
+from pathlib import Path
+import threading
+
+import numpy as np
+import pytest
+
+from shared.capture.stream import ReplaySource, parse_source, record
+from shared.errors import BadInput
+from shared.io import load_clip, save_clip
+
+
+@pytest.fixture(scope="module")
+def squat(bundled):
+    clip = load_clip(sorted((bundled / "amc/squat1Reps").glob("*.amc"))[0]).resample(30.0)
+    return clip.frames(0, 60)  # 2 s
+
+
+def _as_bvh(clip, tmp_path):
+    path = tmp_path / "ref.bvh"
+    save_clip(clip, path)
+    return load_clip(path)
+
+
+def test_a_replayed_clip_arrives_whole(squat, tmp_path):
+    """Every frame of a clip served as a live stream is recorded, as the file the clip writes."""
+    with ReplaySource(squat, speed=4.0, connections=1) as src:
+        take = record(src.address, tmp_path / "take.bvh", seconds=30, idle=1.0)
+    ref = _as_bvh(squat, tmp_path)
+    assert take.frames == squat.n_frames and take.dropped == 0 and take.reconnects == 0
+    assert take.clip.channels == ref.channels and take.clip.fps == pytest.approx(30.0)
+    assert np.allclose(take.clip.data, ref.data, atol=1e-4)
+    assert take.ended.startswith("no frame for") or "stopped" in take.ended
+
+
+def test_skipped_frames_a_stopped_source_and_a_reconnect_are_reported(squat, tmp_path):
+    with ReplaySource(squat, skip=set(range(20, 30)), connections=1) as src:
+        take = record(src.address, tmp_path / "gaps.bvh", seconds=30, idle=1.0)
+    assert take.frames == squat.n_frames - 10 and take.skipped >= 8
+    assert any("missing after frame 20" in e for e in take.events), take.events
+    with ReplaySource(squat, speed=4.0, stop_after=30, connections=2) as src:
+        take = record(src.address, tmp_path / "again.bvh", seconds=30, idle=1.0, reconnect=1)
+    assert take.reconnects == 1 and any("reconnected after frame 30" in e for e in take.events)
+    assert take.frames == 30 + 30  # the source stopped after 30 frames both times
+    with ReplaySource(squat, speed=4.0, stop_after=30, connections=1) as src:
+        take = record(src.address, tmp_path / "gone.bvh", seconds=30, idle=1.0, reconnect=1, connect_timeout=0.5)
+    assert take.frames == 30 and "did not come back" in take.ended
+
+
+def test_a_skeleton_change_ends_the_take(squat, cmu, tmp_path):
+    other = load_clip(cmu / "scaled_131_01.bvh").frames(0, 10)
+    with ReplaySource(squat, speed=4.0, stop_after=25, switch=other, connections=1) as src:
+        take = record(src.address, tmp_path / "switch.bvh", seconds=30, idle=1.0)
+    assert take.frames == 25 and take.ended == "the skeleton changed"
+    assert any("skeleton changed after frame 25" in e for e in take.events)
+
+
+def _raw_server(payload: bytes):
+    srv = socket.create_server(("127.0.0.1", 0))
+
+    def serve():
+        conn, _ = srv.accept()
+        with conn:
+            conn.sendall(payload)
+        srv.close()
+
+    threading.Thread(target=serve, daemon=True).start()
+    return f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+
+
+def test_malformed_lines_are_dropped_and_counted_and_a_headerless_stream_needs_its_skeleton(squat, tmp_path):
+    save_clip(squat, tmp_path / "skeleton.bvh")
+    text = (tmp_path / "skeleton.bvh").read_text().splitlines()
+    motion = text.index("MOTION")
+    header, rows = text[:motion + 1], text[motion + 3:]
+    bad = [rows[0], "1 2 x", "1 2 3", rows[1], "", rows[2]]
+    source = _raw_server(("\n".join(header + ["Frames: 0", "Frame Time: 0.0333333"] + bad) + "\n").encode())
+    take = record(source, tmp_path / "bad.bvh", seconds=10, idle=1.0)
+    assert take.frames == 3 and take.dropped == 2 and sum("malformed" in e for e in take.events) == 2
+    source = _raw_server(("\n".join(rows[:5]) + "\n").encode())
+    with pytest.raises(BadInput, match="skeleton"):
+        record(source, tmp_path / "x.bvh", seconds=10, idle=1.0)
+    source = _raw_server(("\n".join(rows[:5]) + "\n").encode())
+    take = record(source, tmp_path / "y.bvh", seconds=10, idle=1.0, skeleton=tmp_path / "skeleton.bvh")
+    assert take.frames == 5 and take.clip.fps == pytest.approx(30.0)
+
+
+def test_bad_sources_are_refused_clearly(tmp_path):
+    for bad in ("localhost", "tcp://host:port", "tcp://:80", "tcp://h:70000"):
+        with pytest.raises(BadInput, match="tcp://HOST:PORT"):
+            parse_source(bad)
+    free = socket.create_server(("127.0.0.1", 0))
+    port = free.getsockname()[1]
+    free.close()
+    with pytest.raises(BadInput, match="no live source"):
+        record(f"tcp://127.0.0.1:{port}", tmp_path / "none.bvh", seconds=1, connect_timeout=0.5)
+    with pytest.raises(BadInput, match="how long"):
+        record(f"tcp://127.0.0.1:{port}", tmp_path / "none.bvh")
+
+
+def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp_path):
+    """`capture serve` plays a take as a live source on a loopback port, `capture record` records
+    it, `capture segment` cuts it into rep files that `study attempt` takes: no file cut by hand."""
+    import json
+    import subprocess
+    import sys
+
+    from shared.capture.takes import join
+
+    squats = sorted((bundled / "amc/squat1Reps").glob("HDM_bd_*.amc"))
+    take, truth = join([load_clip(f) for f in squats] * 2, seed=4)  # four repetitions of one performer
+    save_clip(take.resample(30.0), tmp_path / "joined.bvh")
+    cmd = [sys.executable, "-m", "shared.cli"]
+    server = subprocess.Popen(cmd + ["capture", "serve", str(tmp_path / "joined.bvh"), "--port", "0", "--speed", "8"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        address = server.stdout.readline().strip()
+        assert address.startswith("tcp://127.0.0.1:"), server.stderr.read()
+        r = subprocess.run(cmd + ["capture", "record", str(tmp_path / "take.bvh"), "--source", address, "--seconds", "60",
+                                  "--idle", "1", "--json"], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+        rec = json.loads(r.stdout)
+        assert rec["frames"] == load_clip(tmp_path / "joined.bvh").n_frames and rec["dropped"] == 0
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+    r = subprocess.run(cmd + ["capture", "segment", str(tmp_path / "take.bvh"), "--target", str(squats[0]),
+                              "--expected", "4", "--out", str(tmp_path / "reps"), "--json"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert len(out["files"]) == len(out["repetitions"]) >= 3 and all(Path(f).exists() for f in out["files"])
+    assert all(load_clip(f).n_frames > 10 for f in out["files"])
+    r = subprocess.run(cmd + ["capture", "record", str(tmp_path / "x.txt"), "--source", address, "--seconds", "1"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "error:" in r.stderr and "Traceback" not in r.stderr
