@@ -38,12 +38,13 @@ status: $(STAMP)
 
 test: $(STAMP)
 	@# CI: Blender is the real client of our BVH files (tests/test_conventions.py), Mesa's Vulkan driver lets the
-	@# real rerun viewer run without a screen (tests/test_dashboard.py); elsewhere those tests skip, saying why
+	@# real rerun viewer run without a screen (tests/test_dashboard.py), espeak-ng says the adverb
+	@# (tests/test_capture_stream.py); elsewhere those tests skip, saying why
 	@if [ "$$CI" = "true" ] && command -v apt-get >/dev/null 2>&1 && { ! command -v blender >/dev/null 2>&1 || \
-	    ! ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1; }; then \
-	  echo "installing Blender and Mesa's Vulkan driver (Debian packages) for the BVH and viewer tests"; \
+	    ! command -v espeak-ng >/dev/null 2>&1 || ! ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1; }; then \
+	  echo "installing Blender, espeak-ng and Mesa's Vulkan driver (Debian packages) for the BVH, speech and viewer tests"; \
 	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends blender \
-	    mesa-vulkan-drivers libvulkan1) >/dev/null 2>&1 || echo "warning: not installed; those tests will be skipped"; fi
+	    espeak-ng mesa-vulkan-drivers libvulkan1) >/dev/null 2>&1 || echo "warning: not installed; those tests will be skipped"; fi
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
 bench: bytecode

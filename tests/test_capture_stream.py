@@ -136,3 +136,17 @@ def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp
     r = subprocess.run(cmd + ["capture", "record", str(tmp_path / "x.txt"), "--source", address, "--seconds", "1"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "error:" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_the_adverb_is_said_into_a_file_of_its_length_and_not_silent(tmp_path):
+    from shared.capture import speech
+
+    if not speech.available():
+        pytest.skip("espeak-ng is not installed here (make test installs it under CI)")
+    short = speech.speak("more", tmp_path / "more.wav")
+    long = speech.speak("a little more, much more like this", tmp_path / "long.wav")
+    assert short.path.exists() and 0.2 < short.seconds < 2.0 and short.rms > 0.01
+    assert long.seconds > short.seconds + 0.5  # the adverb's length, not a fixed sound
+    assert speech.measure(short.path) == (short.seconds, short.rms)
+    with pytest.raises(BadInput, match="nothing"):
+        speech.speak("   ", tmp_path / "none.wav")

@@ -633,6 +633,40 @@ def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
     assert "weak" not in cli(env, "coach", "list").stdout
 
 
+def test_a_study_trial_from_a_live_take_cut_and_said_aloud(cluster, bundled, tmp_path):
+    """A participant's repetitions arrive as one take over a live stream (a replay source on a
+    real loopback socket), are cut automatically, and the trial goes on with the adverb said
+    into a sound file beside the next demonstration: no file chosen or cut by hand."""
+    from shared.capture import speech
+    from shared.capture.stream import ReplaySource, record
+    from shared.capture.takes import join
+    from shared.io import load_clip
+
+    env = cluster
+    squats = sorted((bundled / "amc/squat1Reps").glob("*.amc"))
+    target, bd = squats[0], [s for s in squats if "_bd_" in s.name]
+    study = tmp_path / "study"
+    r = cli(env, "study", "init", study, "--target", target, "--participants", "1", "--cases", "2", "--trials", "2",
+            "--seed", "3")
+    assert r.returncode == 0, r.stderr
+    joined, _ = join([load_clip(f) for f in bd] * 2, seed=5)
+    with ReplaySource(joined.resample(30.0), speed=8.0, connections=1) as src:
+        take = record(src.address, tmp_path / "take.bvh", seconds=60, idle=1.0)
+    assert take.frames > 0 and take.dropped == 0
+    r = cli(env, "study", "attempt", study, "--take", take.path, "--expected", "4", "--participant", "P01")
+    assert r.returncode == 0, r.stderr
+    assert "repetition(s) found" in r.stderr or "repetitions than expected" in r.stderr, r.stderr
+    assert 'say "more like this"' in r.stdout, r.stdout
+    shown = Path(r.stdout.split("next: show ")[1].split(" and say")[0])
+    assert shown.exists()
+    if speech.available():
+        wav = shown.with_suffix(".wav")
+        seconds, rms = speech.measure(wav)
+        assert 0.3 < seconds < 5.0 and rms > 0.01
+    r = cli(env, "study", "attempt", study, "--participant", "P01")
+    assert r.returncode == 2 and "not both" in r.stderr
+
+
 def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_path):
     """Thesis 5.4.1 with people: `--cases sweep` plans each participant's alpha sweep (without
     and with the adverb, counterbalanced like any case), `study emu2` picks each one's alpha that

@@ -1,7 +1,8 @@
 """The estimator service: learns what each other feels (contract: ``schemas/estimator.py``).
 
-It never trains a model itself: ``P_other_hat`` lives on the pss service (spaces
-``est-<estimate>`` and, for the space estimator, ``est-<estimate>.space``), the self's torques come from the simulator (body ``self``) and every
+It never trains a model itself: ``P_other_hat`` lives on the pss service (space
+``est-<estimate>``; the space estimator's ``estspace-<estimate>`` beside the self's
+``estself-<estimate>``), the self's torques come from the simulator (body ``self``) and every
 question goes through the dialogue service. The chapter-3 algorithm is
 ``shared.estimation`` run on :class:`BusPorts`.
 
@@ -106,12 +107,14 @@ class BusPorts:
         return r["answer"]
 
     def space_of(self, space: str = "thesis") -> str:
-        """The pss space of the thesis estimator (``est-<estimate>``) or the space estimator's
-        (``est-<estimate>.space``); a name too long for pss (64 characters) is replaced by a hash."""
+        """The pss space of the thesis estimator (``est-<estimate>``), of the space estimator
+        (``estspace-<estimate>``) or the self's (``estself-<estimate>``); a name too long for pss
+        (64 characters) ends in a hash of the estimate's name instead."""
         import hashlib
 
-        base = self.space if len(self.space) <= 58 else "est-" + hashlib.sha1(self.name.encode()).hexdigest()[:24]
-        return base if space == "thesis" else f"{base}.{space}"
+        prefix = {"thesis": "est-", "space": "estspace-", "self": "estself-"}[space]
+        name = prefix + self.name
+        return name if len(name) <= 64 else prefix + hashlib.sha1(self.name.encode()).hexdigest()[:32]
 
     def build(self, clips, space: str = "thesis") -> None:
         self.c.request("pss", "build", {"space": self.space_of(space), "replace": True,

@@ -224,16 +224,29 @@ def study_next(folder: Path = FOLDER, participant: Optional[str] = typer.Option(
 
 @study_app.command("attempt")
 def study_attempt(folder: Path = FOLDER,
-                  clips: list[Path] = typer.Argument(..., help="The participant's attempt: its repetitions."),
+                  clips: Optional[list[Path]] = typer.Argument(None, help="The participant's attempt: its repetitions "
+                                                                          "(or one continuous --take)."),
                   participant: str = typer.Option(..., help="Whose attempt (the plan's id, e.g. P01)."),
+                  take: Optional[Path] = typer.Option(None, "--take", help="One continuous take of the repetitions "
+                                                                           "(e.g. from `capture record`): cut "
+                                                                           "automatically into them."),
+                  expected: int = typer.Option(5, help="Repetitions in the take."),
+                  say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav "
+                                                                        "(espeak-ng)."),
                   skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
-    """One trial of the participant's current case: recorded, and the next motion written to show/."""
+    """One trial of the participant's current case: recorded, and the next motion written to show/
+    (with the adverb spoken into a .wav beside it)."""
     from schemas.common import clip_from_wire
     from shared.io import load_clip
     from shared.study import append, next_step, policy, session_name, trial_event
 
     p, events = _study(folder)
-    attempts = [read_clip(x, skeleton=skeleton) for x in clips]
+    if bool(clips) == bool(take):
+        _fail("give the attempt's repetitions as files, or one continuous --take (not both)")
+    if take is not None:
+        attempts = _cut(read_clip(take, skeleton=skeleton), load_clip(folder / "target.npz"), expected)
+    else:
+        attempts = [read_clip(x, skeleton=skeleton) for x in clips]
     with _client() as c:
         events = _reconcile(c, folder, p, events)
         step = next_step(p, events, participant)
@@ -251,6 +264,30 @@ def study_attempt(folder: Path = FOLDER,
                                                    "adverb": r.get("adverb")}, shown))
     typer.echo(f"{participant}, case {case}, trial {step['trial']}: d_p {r['d_p']:.1f}"
                + ("; case done" if last else f"; next: show {shown}" + (f' and say "{r["adverb"]}"' if r.get("adverb") else "")))
+    if say and not last and r.get("adverb"):
+        _say(r["adverb"], Path(shown).with_suffix(".wav"))
+
+
+def _cut(take, target, expected: int) -> list:
+    """A continuous take cut into the target's repetitions (:mod:`shared.capture.segment`)."""
+    from shared.capture.segment import segment
+
+    result = segment(take, target, expected=expected)
+    typer.echo(f"take {take.name}: {result.verdict}", err=True)
+    if not result.repetitions:
+        _fail(f"no repetition of the target in {take.name}: {result.verdict}")
+    return [take.frames(int(round(r.start * take.fps)), int(round(r.end * take.fps))) for r in result.repetitions]
+
+
+def _say(adverb: str, path: Path) -> None:
+    """The adverb said into ``path`` (a printed note, never a failure, without an engine)."""
+    from shared.capture.speech import NoSpeech, speak
+
+    try:
+        speech = speak(adverb, path)
+        typer.echo(f"said \"{adverb}\" into {path} ({speech.seconds:.1f} s)", err=True)
+    except NoSpeech as e:
+        typer.echo(f"not said aloud: {e.message}", err=True)
 
 
 @study_app.command("seat")

@@ -373,6 +373,8 @@ class Dashboard:
         as it is now (static: visible on every timeline)."""
         name = ev["space"]
         static = False
+        if name.startswith(("estspace-", "estself-")):  # the space estimator's own spaces: not drawn
+            return
         if name.startswith("coach-"):
             s = name[6:]
             if s not in self.targets:
