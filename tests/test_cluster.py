@@ -667,6 +667,34 @@ def test_a_study_trial_from_a_live_take_cut_and_said_aloud(cluster, bundled, tmp
     assert r.returncode == 2 and "not both" in r.stderr
 
 
+def test_a_whole_study_runs_live_from_replayed_takes(cluster, bundled, tmp_path):
+    """`study run` with a live source: 2 participants x 2 cases x 2 trials, each trial's take
+    recorded from the stream, cut, scored and logged, without a file chosen by hand; the study's
+    export is the same table as with `study attempt`."""
+    from shared.capture.stream import ReplaySource
+    from shared.capture.takes import join
+    from shared.io import load_clip
+    from shared.reproduce.tidy import read
+
+    env = cluster
+    squats = sorted((bundled / "amc/squat1Reps").glob("*.amc"))
+    bd = [load_clip(s) for s in squats if "_bd_" in s.name]
+    study = tmp_path / "study"
+    r = cli(env, "study", "init", study, "--target", squats[0], "--participants", "2", "--cases", "1,2", "--trials",
+            "2", "--seed", "5")
+    assert r.returncode == 0, r.stderr
+    takes = [join(bd * 2, seed=k)[0].resample(30.0) for k in range(8)]
+    with ReplaySource(takes, speed=8.0, connections=8) as src:
+        r = cli(env, "study", "run", study, "--source", src.address, "--expected", "4", "--idle", "0.5", timeout=900)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "nothing left" in r.stdout and r.stdout.count("recording from") == 8
+    assert len(list((study / "takes").glob("*.bvh"))) == 8
+    r = cli(env, "study", "export", study, "--out", tmp_path / "trials.csv")
+    assert r.returncode == 0, r.stderr
+    rows = read(tmp_path / "trials.csv")
+    assert len(rows) == 8 and {r["world"] for r in rows} == {"people"}
+
+
 def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_path):
     """Thesis 5.4.1 with people: `--cases sweep` plans each participant's alpha sweep (without
     and with the adverb, counterbalanced like any case), `study emu2` picks each one's alpha that

@@ -44,21 +44,24 @@ MAX_FRAMES = 120 * 60 * 30  # 30 minutes at 120 fps
 # ---------------------------------------------------------------------------- the replay source
 class ReplaySource:
     """A clip served as a live BVH stream on ``host:port`` (``port=0``: any free port; see
-    :attr:`port`). ``header=False`` sends frame lines only (the recorder then needs the skeleton
+    :attr:`port`); a list of clips plays one per connection, in turn (a study's takes). ``header=False`` sends frame lines only (the recorder then needs the skeleton
     from a file); ``speed`` plays faster or slower; ``loop`` plays again from the start.
     For tests of the recorder's reports it can misbehave like hardware: ``skip`` (frame indices
     never sent), ``stop_after`` (frames, then the connection closes) and ``switch`` (a clip whose
     header is sent after ``stop_after`` frames instead of closing)."""
 
-    def __init__(self, clip: Clip, host: str = "127.0.0.1", port: int = 0, header: bool = True, speed: float = 1.0,
+    def __init__(self, clip: Clip | list[Clip], host: str = "127.0.0.1", port: int = 0, header: bool = True, speed: float = 1.0,
                  loop: bool = False, skip: set[int] | None = None, stop_after: int | None = None,
                  switch: Clip | None = None, connections: int | None = None):
         from shared.io.bvh import bvh_lines
 
         if not speed > 0:
             raise BadInput(f"speed must be positive, got {speed}", field="speed")
-        self.clip = clip
-        self.head, self.rows = bvh_lines(clip)
+        clips = list(clip) if isinstance(clip, (list, tuple)) else [clip]
+        if not clips:
+            raise BadInput("nothing to play", field="clip")
+        self.clips = clips
+        self.plays = [bvh_lines(c) for c in clips]
         self.switch_lines = bvh_lines(switch) if switch is not None else None
         self.header, self.speed, self.loop = header, float(speed), loop
         self.skip, self.stop_after = set(skip or ()), stop_after
@@ -110,24 +113,26 @@ class ReplaySource:
         self._sock.close()
 
     def _play(self, conn: socket.socket) -> None:
-        dt = 1.0 / (self.clip.fps * self.speed)
+        k = (self.served - 1) % len(self.clips)
+        clip, (head, rows) = self.clips[k], self.plays[k]
+        dt = 1.0 / (clip.fps * self.speed)
 
-        def send_header(head):
-            conn.sendall(("\n".join(head + ["Frames: 0", f"Frame Time: {1.0 / self.clip.fps:.12g}"]) + "\n").encode())
+        def send_header(lines):
+            conn.sendall(("\n".join(lines + ["Frames: 0", f"Frame Time: {1.0 / clip.fps:.12g}"]) + "\n").encode())
 
         if self.header:
-            send_header(self.head)
+            send_header(head)
         t0 = time.monotonic()
         sent = 0
         while not self._stop.is_set():
-            for i, row in enumerate(self.rows):
+            for i, row in enumerate(rows):
                 if self._stop.is_set():
                     return
                 if self.stop_after is not None and sent >= self.stop_after:
                     if self.switch_lines is not None:
-                        head, rows = self.switch_lines
-                        send_header(head)
-                        for r in rows:
+                        other_head, other_rows = self.switch_lines
+                        send_header(other_head)
+                        for r in other_rows:
                             conn.sendall((r + "\n").encode())
                     return
                 wait = t0 + sent * dt - time.monotonic()
@@ -154,6 +159,8 @@ class Take:
     skipped: int = 0  # frames the source left out (gaps)
     reconnects: int = 0
     ended: str = ""
+    last_frame: float | None = None  # time.monotonic() when the last frame arrived
+    ended_at: float | None = None  # time.monotonic() when the take ended (the source stopped, the time was up)
 
     def to_dict(self) -> dict:
         return {"path": str(self.path), "frames": self.frames, "events": self.events, "dropped": self.dropped,
@@ -230,7 +237,7 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
     dropped = skipped = reconnects = 0
     ended = ""
     deadline = None if seconds is None else time.monotonic() + seconds
-    last_arrival = None
+    last_arrival = last_frame = None
     connected = False
     while True:
         conn, waited = None, time.monotonic()
@@ -323,7 +330,7 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                     skipped += missing
                     events.append(f"about {missing} frame(s) missing after frame {len(rows)} "
                                   f"({(now - last_arrival) * 1000:.0f} ms without a frame)")
-                last_arrival = now
+                last_arrival = last_frame = now
                 rows.append(text)
                 if on_frame is not None:
                     on_frame(len(rows))
@@ -334,18 +341,20 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
             continue
         ended = ended or "the source stopped"
         break
+    ended_at = time.monotonic()
     if dropped > 5:
         events.append(f"{dropped} malformed frame lines dropped in all")
     out = Path(out)
     if header is None or not rows:
-        return Take(out, None, 0, events + ["no frames recorded"], dropped, skipped, reconnects, ended or "no frames")
+        return Take(out, None, 0, events + ["no frames recorded"], dropped, skipped, reconnects, ended or "no frames",
+                    last_frame, ended_at)
     from shared.io import load_clip
     from shared.io.atomic import atomic_write
 
     text = "\n".join(header + [f"Frames: {len(rows)}", f"Frame Time: {frame_time or 1 / 30:.12g}"] + rows) + "\n"
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, lambda f: f.write(text.encode("latin-1")))
-    return Take(out, load_clip(out), len(rows), events, dropped, skipped, reconnects, ended)
+    return Take(out, load_clip(out), len(rows), events, dropped, skipped, reconnects, ended, last_frame, ended_at)
 
 
 def _frame_time(path: Path) -> float | None:

@@ -21,7 +21,8 @@ app.add_typer(capture_app, name="capture")
 
 
 @capture_app.command("serve")
-def capture_serve(clip: Path = typer.Argument(..., help="Clip to play: .amc, .bvh or .npz with a skeleton."),
+def capture_serve(clips: list[Path] = typer.Argument(..., help="Clips to play (.amc, .bvh or .npz with a skeleton): "
+                                                               "one per connection, in turn."),
                   port: int = typer.Option(7460, help="TCP port to serve on (0: any free port, printed)."),
                   host: str = typer.Option("127.0.0.1", help="Address to bind (loopback by default)."),
                   speed: float = typer.Option(1.0, help="Play this many times faster."),
@@ -29,18 +30,21 @@ def capture_serve(clip: Path = typer.Argument(..., help="Clip to play: .amc, .bv
                   header: bool = typer.Option(True, "--header/--no-header",
                                               help="Send the BVH header first (as most suites do)."),
                   skeleton: Optional[Path] = typer.Option(None, help=SKELETON_HELP)):
-    """Serve a clip as a live BVH stream (the stand-in for a capture suit) until Ctrl-C."""
+    """Serve clips as a live BVH stream (the stand-in for a capture suit) until Ctrl-C: each
+    connection gets the next clip (a study's takes, one per trial)."""
     from shared.capture.stream import ReplaySource
 
-    c = read_clip(clip, skeleton=skeleton)
-    if c.skeleton is None:
-        _fail(f"{clip} has no skeleton: a live BVH stream needs one")
+    cs = [read_clip(c, skeleton=skeleton) for c in clips]
+    for path, c in zip(clips, cs):
+        if c.skeleton is None:
+            _fail(f"{path} has no skeleton: a live BVH stream needs one")
     try:
-        src = ReplaySource(c, host=host, port=port, header=header, speed=speed, loop=loop)
+        src = ReplaySource(cs, host=host, port=port, header=header, speed=speed, loop=loop)
     except OSError as e:
         _fail(f"cannot listen on {host}:{port}: {e.strerror or e}")
     with src:
-        typer.echo(f"serving {clip.name} ({c.n_frames} frames at {c.fps:g} fps) on {src.address}", err=True)
+        typer.echo(f"serving {len(cs)} clip(s) ({', '.join(p.name for p in clips[:3])}"
+                   f"{', ...' if len(cs) > 3 else ''}) on {src.address}", err=True)
         typer.echo(src.address)
         try:
             while True:

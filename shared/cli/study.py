@@ -5,6 +5,7 @@ See :mod:`shared.study` for the folder, the counterbalanced plan and why no tria
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Optional
 
@@ -236,17 +237,25 @@ def study_attempt(folder: Path = FOLDER,
                   skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """One trial of the participant's current case: recorded, and the next motion written to show/
     (with the adverb spoken into a .wav beside it)."""
-    from schemas.common import clip_from_wire
     from shared.io import load_clip
-    from shared.study import append, next_step, policy, session_name, trial_event
 
-    p, events = _study(folder)
     if bool(clips) == bool(take):
         _fail("give the attempt's repetitions as files, or one continuous --take (not both)")
     if take is not None:
         attempts = _cut(read_clip(take, skeleton=skeleton), load_clip(folder / "target.npz"), expected)
     else:
         attempts = [read_clip(x, skeleton=skeleton) for x in clips]
+    _trial(folder, participant, attempts, say)
+
+
+def _trial(folder: Path, participant: str, attempts: list, say: bool) -> dict:
+    """One trial (the coach scores the attempt and decides the next demonstration and adverb),
+    logged; the next demonstration written to show/ and the adverb said beside it."""
+    from schemas.common import clip_from_wire
+    from shared.io import load_clip
+    from shared.study import append, next_step, policy, session_name, trial_event
+
+    p, events = _study(folder)
     with _client() as c:
         events = _reconcile(c, folder, p, events)
         step = next_step(p, events, participant)
@@ -266,6 +275,63 @@ def study_attempt(folder: Path = FOLDER,
                + ("; case done" if last else f"; next: show {shown}" + (f' and say "{r["adverb"]}"' if r.get("adverb") else "")))
     if say and not last and r.get("adverb"):
         _say(r["adverb"], Path(shown).with_suffix(".wav"))
+    return {"participant": participant, "case": case, "trial": step["trial"], "last": last, "shown": shown,
+            "adverb": r.get("adverb"), "d_p": r["d_p"]}
+
+
+@study_app.command("run")
+def study_run(folder: Path = FOLDER,
+              source: str = typer.Option(..., help="The live source: tcp://HOST:PORT (a capture suit's BVH stream, or "
+                                                   "`capture serve`)."),
+              participant: Optional[str] = typer.Option(None, help="Only this participant's trials."),
+              steps: Optional[int] = typer.Option(None, help="Run this many trials, then stop (default: all)."),
+              expected: int = typer.Option(5, help="Repetitions in each take."),
+              idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
+              seconds: float = typer.Option(120.0, help="A take's longest duration."),
+              retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
+              say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav.")):
+    """The study, live: trial after trial, the take is recorded from the source until it stops,
+    cut into its repetitions, scored by the coach, the next demonstration written to show/ and the
+    adverb said into a .wav beside it. Every take is kept in takes/; the log, CSV and reports are
+    those of `study attempt`."""
+    from shared.capture.segment import segment
+    from shared.capture.stream import record
+    from shared.io import load_clip
+    from shared.study import next_step
+
+    target = load_clip(folder / "target.npz")
+    done = 0
+    while steps is None or done < steps:
+        p, events = _study(folder)
+        with _client() as c:
+            events = _reconcile(c, folder, p, events)
+        step = next_step(p, events, participant)
+        if step is None:
+            typer.echo("nothing left: every case of every participant is done")
+            return
+        who, case, n = step["participant"], step["case"], step["trial"]
+        typer.echo(f"{who}, case {case}, trial {n}: recording from {source}")
+        for attempt in range(retries + 1):
+            out = folder / "takes" / f"{who}_case{case}_trial{n}_{attempt + 1}.bvh"
+            take = record(source, out, seconds=seconds, idle=idle)
+            for e in take.events:
+                typer.echo(f"  {e}", err=True)
+            if not take.frames:
+                _fail(f"the source at {source} gave no frames ({take.ended})")
+            result = segment(take.clip, target, expected=expected)
+            typer.echo(f"  take {out.name}: {take.frames} frames, {result.verdict}", err=True)
+            if result.repetitions:
+                break
+        else:
+            _fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {n} of {who}")
+        parts = [take.clip.frames(int(round(r.start * take.clip.fps)), int(round(r.end * take.clip.fps)))
+                 for r in result.repetitions]
+        _trial(folder, who, parts, say)
+        if take.last_frame is not None:
+            typer.echo(f"  next demonstration and adverb ready {time.monotonic() - take.last_frame:.2f} s after the "
+                       f"take's last frame ({take.ended_at - take.last_frame:.2f} s of it until the take ended: "
+                       f"{take.ended})", err=True)
+        done += 1
 
 
 def _cut(take, target, expected: int) -> list:

@@ -1,0 +1,73 @@
+"""A live study from replayed takes, end to end: ``study run`` with a live source (a replay
+source on loopback playing one take per trial, real HDM05 clips of one performer joined with
+rests), 2 participants x 4 cases x 4 trials, nobody touching a file. Measures the whole study
+and, per trial, the time from the take's last frame to the next demonstration written and the
+adverb said, and how much of it passed before the take ended (the replay source closes after
+its take; a source that keeps streaming is ended by ``--idle`` or ``--seconds``). Writes
+``bench/results/live.*``.
+
+    python -m bench.live --hdm05 ../shared/data/hdm05
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.common import parse_args, private_cluster, write_results
+
+IDLE = 0.5  # seconds without a frame that end a take (the replay closes sooner)
+
+
+def main(argv=None) -> int:
+    args = parse_args(__doc__, argv)
+    from shared.capture.stream import ReplaySource
+    from shared.capture.takes import join
+    from shared.io import load_clip
+
+    files = sorted((args.hdm05 / "amc" / "squat1Reps").glob("HDM_bk_*.amc"))
+    target, reps = files[0], [load_clip(f) for f in files[1:6]]
+    takes = [join(reps, seed=k)[0].resample(30.0) for k in range(32)]
+    work = Path(tempfile.mkdtemp(prefix="mc-bench-live-"))
+    cmd = [sys.executable, "-m", "shared.cli"]
+    with private_cluster("benchlive"):
+        study = work / "study"
+        subprocess.run(cmd + ["study", "init", str(study), "--target", str(target), "--participants", "2", "--cases",
+                              "1,2,3,4", "--trials", "4", "--seed", "1"], check=True, capture_output=True)
+        with ReplaySource(takes, speed=4.0, connections=32) as src:
+            t0 = time.perf_counter()
+            r = subprocess.run(cmd + ["study", "run", str(study), "--source", src.address, "--idle", str(IDLE)],
+                               capture_output=True, text=True, timeout=3600)
+            seconds = time.perf_counter() - t0
+    if r.returncode != 0:
+        print(r.stdout, r.stderr)
+        return 1
+    ready = [float(x) for x in re.findall(r"ready ([0-9.]+) s after the take's last frame", r.stderr)]
+    waited = [float(x) for x in re.findall(r"\(([0-9.]+) s of it until the take ended", r.stderr)]
+    found = re.findall(r"frames, (\d+) repetition\(s\) found|fewer repetitions than expected: (\d+) found", r.stderr)
+    trials = r.stdout.count("recording from")
+    res = {"trials": trials, "seconds": seconds, "idle_s": IDLE, "takes_speed": 4.0,
+           "ready_after_last_frame_s": {"median": float(np.median(ready)), "max": float(np.max(ready))} if ready else None,
+           "until_the_take_ended_s": {"median": float(np.median(waited))} if waited else None,
+           "takes_with_5_found": sum(1 for a, b in found if a == "5"), "takes": len(found)}
+    md = ["# A live study from replayed takes", "",
+          f"2 participants x 4 cases x 4 trials: {trials} trials in {seconds:.0f} s (takes played 4x faster).",
+          f"Next demonstration and adverb ready {res['ready_after_last_frame_s']['median']:.2f} s (median; longest "
+          f"{res['ready_after_last_frame_s']['max']:.2f} s) after the take's last frame, "
+          f"{res['until_the_take_ended_s']['median']:.2f} s of which until the take ended (the replay source closes "
+          "after its take; a suit that keeps streaming ends a take only after --seconds). Goal: 1 s after the fifth "
+          "repetition; each take here ends with 1 s of rest (0.25 s at 4x) after it.",
+          f"Takes cut into 5 repetitions: {res['takes_with_5_found']} of {res['takes']}."]
+    write_results(args.out, "live", res, md)
+    print("\n".join(md[2:]))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
