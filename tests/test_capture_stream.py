@@ -150,3 +150,18 @@ def test_the_adverb_is_said_into_a_file_of_its_length_and_not_silent(tmp_path):
     assert speech.measure(short.path) == (short.seconds, short.rms)
     with pytest.raises(BadInput, match="nothing"):
         speech.speak("   ", tmp_path / "none.wav")
+
+
+def test_a_source_that_never_stops_ends_a_take_when_asked(squat, tmp_path):
+    """A suit keeps streaming while the person stands still: the take ends when ``until`` says
+    so (checked every quarter second of frames), with no gap reported for the checks."""
+    looks = []
+
+    def enough(clip):
+        looks.append(clip.n_frames)
+        return "enough frames" if clip.n_frames >= 45 else None
+
+    with ReplaySource(squat, speed=2.0, connections=1, hold=True) as src:
+        take = record(src.address, tmp_path / "held.bvh", seconds=30, idle=1.0, until=enough)
+    assert take.ended == "enough frames" and 45 <= take.frames <= 52 and take.skipped == 0, take.events
+    assert looks and all(b - a == looks[1] - looks[0] for a, b in zip(looks, looks[1:]))

@@ -684,10 +684,13 @@ def test_a_whole_study_runs_live_from_replayed_takes(cluster, bundled, tmp_path)
             "2", "--seed", "5")
     assert r.returncode == 0, r.stderr
     takes = [join(bd * 2, seed=k)[0].resample(30.0) for k in range(8)]
-    with ReplaySource(takes, speed=8.0, connections=8) as src:
+    # the source never stops on its own (a suit streams the person standing still after the take):
+    # each take ends once its 4 repetitions are seen
+    with ReplaySource(takes, speed=8.0, connections=8, hold=True) as src:
         r = cli(env, "study", "run", study, "--source", src.address, "--expected", "4", "--idle", "0.5", timeout=900)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "nothing left" in r.stdout and r.stdout.count("recording from") == 8
+    assert r.stderr.count("4 repetitions seen") == 8, r.stderr
     assert len(list((study / "takes").glob("*.bvh"))) == 8
     r = cli(env, "study", "export", study, "--out", tmp_path / "trials.csv")
     assert r.returncode == 0, r.stderr

@@ -52,7 +52,7 @@ class ReplaySource:
 
     def __init__(self, clip: Clip | list[Clip], host: str = "127.0.0.1", port: int = 0, header: bool = True, speed: float = 1.0,
                  loop: bool = False, skip: set[int] | None = None, stop_after: int | None = None,
-                 switch: Clip | None = None, connections: int | None = None):
+                 switch: Clip | None = None, connections: int | None = None, hold: bool = False):
         from shared.io.bvh import bvh_lines
 
         if not speed > 0:
@@ -66,6 +66,8 @@ class ReplaySource:
         self.header, self.speed, self.loop = header, float(speed), loop
         self.skip, self.stop_after = set(skip or ()), stop_after
         self.connections = connections  # serve this many connections, then stop listening
+        self.hold = hold  # after the take, keep sending its last frame (a person standing still) until the recorder goes
+        self.started: list[float] = []  # time.monotonic() when each connection's first frame was due
         self._sock = socket.create_server((host, port))
         self._sock.settimeout(0.2)
         self.host, self.port = self._sock.getsockname()[:2]
@@ -123,6 +125,7 @@ class ReplaySource:
         if self.header:
             send_header(head)
         t0 = time.monotonic()
+        self.started.append(t0)
         sent = 0
         while not self._stop.is_set():
             for i, row in enumerate(rows):
@@ -142,6 +145,13 @@ class ReplaySource:
                 if i in self.skip:
                     continue
                 conn.sendall((row + "\n").encode())
+            if self.hold:
+                while not self._stop.is_set():
+                    wait = t0 + sent * dt - time.monotonic()
+                    if wait > 0:
+                        time.sleep(wait)
+                    sent += 1
+                    conn.sendall((rows[-1] + "\n").encode())
             if not self.loop:
                 return
 
@@ -219,11 +229,13 @@ def _channels(header: list[str]) -> int:
 
 def record(source: str, out: Path, *, seconds: float | None = None, frames: int | None = None,
            skeleton: Path | None = None, fps: float | None = None, idle: float = 2.0, reconnect: int = 0,
-           connect_timeout: float = 5.0, on_frame=None) -> Take:
+           connect_timeout: float = 5.0, on_frame=None, until=None, check_every: float = 0.25) -> Take:
     """Record a take from a live BVH stream (module docstring) into ``out`` (a .bvh file),
     until ``seconds`` or ``frames`` (whichever first), the source stops, or its skeleton
     changes. ``skeleton``: a BVH file whose header the stream's lines follow (a stream without
-    a header); ``fps`` its rate (else the file's). ``on_frame(i)`` is called for every frame."""
+    a header); ``fps`` its rate (else the file's). ``on_frame(i)`` is called for every frame.
+    ``until(clip)``: called with the take so far every ``check_every`` seconds of frames; the
+    take ends when it returns a reason (a source that never stops: a person done repeating)."""
     host, port = parse_source(source)
     if seconds is None and frames is None:
         raise BadInput("say how long to record: seconds or frames", field="seconds")
@@ -334,6 +346,13 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                 rows.append(text)
                 if on_frame is not None:
                     on_frame(len(rows))
+                step = max(int(round(check_every / (frame_time or 1 / 30))), 1)
+                if until is not None and len(rows) % step == 0:
+                    reason = until(_clip_of(header, rows, frame_time, Path(out)))
+                    last_arrival = time.monotonic()  # the check's own time is no gap in the stream
+                    if reason:
+                        ended, stop = str(reason), True
+                        break
         if stop:
             break
         if reconnects < reconnect:
@@ -355,6 +374,24 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, lambda f: f.write(text.encode("latin-1")))
     return Take(out, load_clip(out), len(rows), events, dropped, skipped, reconnects, ended, last_frame, ended_at)
+
+
+def _clip_of(header: list[str], rows: list[str], frame_time: float | None, out: Path) -> Clip:
+    """The take so far as a clip (read by the project's BVH reader, conventions and all)."""
+    import os
+    import tempfile
+
+    from shared.io import load_clip
+
+    text = "\n".join(header + [f"Frames: {len(rows)}", f"Frame Time: {frame_time or 1 / 30:.12g}"] + rows) + "\n"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".partial-", suffix=".bvh", dir=out.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(text.encode("latin-1"))
+        return load_clip(tmp)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
 
 
 def _frame_time(path: Path) -> float | None:

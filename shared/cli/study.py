@@ -20,6 +20,7 @@ study_app = typer.Typer(help="Run the thesis's studies with people: participants
 app.add_typer(study_app, name="study")
 
 FOLDER = typer.Argument(..., help="The study's folder (made by `study init`).")
+REST_AFTER = 0.3  # seconds of take after the last expected repetition before a live take ends
 
 
 def _study(folder: Path) -> tuple[dict, list[dict]]:
@@ -289,6 +290,8 @@ def study_run(folder: Path = FOLDER,
               idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
               seconds: float = typer.Option(120.0, help="A take's longest duration."),
               retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
+              check_every: float = typer.Option(0.25, help="Seconds of take between looks for the expected "
+                                                           "repetitions (the take ends once they are all seen)."),
               say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav.")):
     """The study, live: trial after trial, the take is recorded from the source until it stops,
     cut into its repetitions, scored by the coach, the next demonstration written to show/ and the
@@ -300,6 +303,16 @@ def study_run(folder: Path = FOLDER,
     from shared.study import next_step
 
     target = load_clip(folder / "target.npz")
+
+    def repeated_enough(clip) -> str | None:
+        """The take ends once the expected repetitions are seen, with a moment of rest after the last."""
+        if clip.duration < 1.0:
+            return None
+        seen = segment(clip, target, expected=expected)
+        if len(seen.repetitions) >= expected and clip.duration - seen.repetitions[-1].end >= REST_AFTER:
+            return f"{len(seen.repetitions)} repetitions seen"
+        return None
+
     done = 0
     while steps is None or done < steps:
         p, events = _study(folder)
@@ -313,7 +326,7 @@ def study_run(folder: Path = FOLDER,
         typer.echo(f"{who}, case {case}, trial {n}: recording from {source}")
         for attempt in range(retries + 1):
             out = folder / "takes" / f"{who}_case{case}_trial{n}_{attempt + 1}.bvh"
-            take = record(source, out, seconds=seconds, idle=idle)
+            take = record(source, out, seconds=seconds, idle=idle, until=repeated_enough, check_every=check_every)
             for e in take.events:
                 typer.echo(f"  {e}", err=True)
             if not take.frames:
@@ -328,9 +341,10 @@ def study_run(folder: Path = FOLDER,
                  for r in result.repetitions]
         _trial(folder, who, parts, say)
         if take.last_frame is not None:
-            typer.echo(f"  next demonstration and adverb ready {time.monotonic() - take.last_frame:.2f} s after the "
+            now = time.monotonic()
+            typer.echo(f"  next demonstration and adverb ready {now - take.last_frame:.2f} s after the "
                        f"take's last frame ({take.ended_at - take.last_frame:.2f} s of it until the take ended: "
-                       f"{take.ended})", err=True)
+                       f"{take.ended}; ready at {now:.3f})", err=True)
         done += 1
 
 
