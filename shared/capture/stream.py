@@ -300,8 +300,13 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                     continue
                 if in_header:
                     if len(own_header) > MAX_HEADER_LINES:
-                        raise BadInput(f"a BVH header of more than {MAX_HEADER_LINES} lines: not a skeleton",
-                                       field="source")
+                        if not rows:
+                            raise BadInput(f"a BVH header of more than {MAX_HEADER_LINES} lines: not a skeleton",
+                                           field="source")
+                        events.append(f"a header of more than {MAX_HEADER_LINES} lines after frame {len(rows)}: "
+                                      "the take ends there (the frames so far are kept)")
+                        ended, stop = "the stream sent no skeleton", True
+                        break
                     own_header.append(line)
                     if word == "MOTION":
                         in_header = False
