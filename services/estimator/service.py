@@ -47,7 +47,6 @@ class BusPorts:
 
     def __init__(self, client: Client, name: str, other: str, language: Language, timeout: float = 120.0):
         self.c, self.name, self.other, self.language, self.timeout = client, name, other, language, timeout
-        self.space = f"est-{name}"
 
     def _taus(self, wire: dict) -> np.ndarray:
         clip = clip_from_wire(wire)

@@ -201,14 +201,13 @@ class OtherEstimate:
         width = lang.g_max / lang.d
         for key, k in answered:
             motion = self._clip_of(key)
-            s_hat = _on_frames(np.asarray(ports.associate(motion, "space"), float), motion.n_frames)
-            g = lang.g(self.relative(motion, ports))
+            estimate, own, s_hat = self._relative(motion, ports)
+            g = lang.g(estimate)
             lo, hi = lang.bounds(k)
             target = min(max(g, lo + INSIDE_BIN * width), hi - INSIDE_BIN * width if np.isfinite(hi) else np.inf)
             if g > 1e-12 and lang.g(s_hat) > 1e-12:
                 self.space_torques[key] = s_hat * (target / g)
             else:  # nothing felt in the space: the self's own torques, scaled into the bin
-                own = np.asarray(ports.perform_self(motion), float)
                 self.space_torques[key] = own * (target / max(lang.g(own), 1e-12))
         ports.build(self.database("space"), "space")
 
@@ -425,12 +424,16 @@ class OtherEstimate:
         scaled by how much heavier the association in the other's adapted space is than the same
         association in the self's space (eq. 3.2 in both; what the association gets wrong about
         the motion's size it gets wrong in both, and cancels)."""
+        return self._relative(motion, ports)[0]
+
+    def _relative(self, motion: Clip, ports: Ports) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`relative`, the self's own torques and the association in the other's space."""
         own = np.asarray(ports.perform_self(motion), float)
         other = _on_frames(np.asarray(ports.associate(motion, "space"), float), len(own))
         mine = _on_frames(np.asarray(ports.associate(motion, "self"), float), len(own))
         a, b = np.abs(other).mean(axis=0), np.abs(mine).mean(axis=0)
         overall = a.sum() / max(b.sum(), 1e-12)
-        return own * np.where(b > 1e-6 * max(b.max(), 1e-12), a / np.maximum(b, 1e-12), overall)
+        return own * np.where(b > 1e-6 * max(b.max(), 1e-12), a / np.maximum(b, 1e-12), overall), own, other
 
     def repeat_disagreement(self) -> float:
         """Among questions asked more than once, the share of answers that differ from that

@@ -8,7 +8,7 @@ never sees them.
 
 Sections:
 
-* **the uneven population** (issue 13, the default): 10 others of every kind of
+* **the uneven population** (the default): 10 others of every kind of
   :mod:`shared.agents.population` (link lengths, payloads, mass shares, damping, friction, a
   missing joint, heavier legs, all at once, and the thesis's proportional other), each estimated
   by the thesis's eq. 3.5, the interval estimator and the body estimator, then its rule
@@ -549,7 +549,7 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
              "of its residual when the answers give evidence for one (`shared/estimation/correction.py`).", ""]
     # ---------------- the population
     pop_seed = ch.population_seed if ch else 2026
-    lines += ["## Others whose bodies really differ (issue 13)", "",
+    lines += ["## Others whose bodies really differ", "",
               f"{n_kind} kinds of body, {next(iter(summ.values()))['n'] if summ else 0} others each "
               f"(`shared/agents/population.py`, seed {pop_seed}; the body estimator's settings were chosen on seed 13), "
               f"d = 6, {ch.sets if ch else SETS} conversation sets of the 4 shared motions and 4 probes each; "
@@ -595,7 +595,7 @@ def write_report(out: Path, res: dict, seconds: float, ch: "Ch3 | None" = None) 
               "Per kind, others converting with f1, f2, f3, f4 in turn (and the 12 weighted rules on the proportional "
               "kind); "
               "**thesis pairs**: fig. 3.11's m1/m2, m3/m4, answers predicted from the self's own torques; **auto** "
-              "(issue 13): pairs chosen on the estimated body (a pair asked up to 3 times: a noisy other answers it "
+              "(beyond the thesis): pairs chosen on the estimated body (a pair asked up to 3 times: a noisy other answers it "
               "anew), a posterior over rule, body and the other's inconsistency together (from 5 % of answers off to "
               "answering at random), stop at 99.9 %. "
               "The kinds outside the model (" + ", ".join(OUTSIDE_KINDS) + ") are in the table too, never tuned on.", "",
