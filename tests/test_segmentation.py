@@ -30,8 +30,9 @@ def test_the_dtw_kernels_match_their_python_source():
     assert seg.global_dtw(seg._distances(a, a[:5])) == np.inf  # a slope steeper than 2 cannot join the ends
 
 
-def test_a_joined_take_holds_its_clips_where_it_says(hdm05):
-    clips = _clips(hdm05, "bk", "squat1Reps")[:3]
+def test_a_joined_take_holds_its_clips_where_it_says(bundled):
+    two = _clips(bundled, "bk", "squat1Reps")[:2]
+    clips = [two[0], two[1], two[0]]
     take, bounds = join(clips, seed=3)
     assert len(bounds) == 3 and take.channels == clips[0].channels and take.fps == clips[0].fps
     for clip, (s, e) in zip(clips, bounds):
@@ -44,30 +45,29 @@ def test_a_joined_take_holds_its_clips_where_it_says(hdm05):
         join([])
 
 
-def test_repetitions_of_the_same_performer_are_found_and_another_motion_is_not_cut(hdm05):
-    """Five squats of one performer, the target another of that performer's squats: all five
-    found, boundaries within 150 ms (median); a take of jogging holds no squat."""
-    squats = _clips(hdm05, "bk", "squat1Reps")
-    if len(squats) < 6:
-        pytest.skip("needs six squats of one performer (the full HDM05 sample)")
-    take, truth = join(squats[1:6], seed=1)
-    others = [_clips(hdm05, "bd", c)[0] for c in ("kickLFront1Reps", "elbowToKnee1RepsLelbowStart",
+def test_repetitions_of_the_same_performer_are_found_and_another_motion_is_not_cut(bundled):
+    """Five squats of one performer (the bundled sample's, joined with rests of their own), the
+    target another of that performer's squats: all five found, boundaries within 150 ms
+    (median); a take of that performer's kicks holds no squat; three squats are "fewer"."""
+    target, squat = _clips(bundled, "bk", "squat1Reps")[:2]
+    take, truth = join([squat] * 5, seed=1)
+    others = [_clips(bundled, "bd", c)[0] for c in ("kickLFront1Reps", "elbowToKnee1RepsLelbowStart",
                                                     "rotateArmsBothBackward1Reps")]
-    found = seg.segment(take, squats[0], expected=5, background=others)
+    found = seg.segment(take, target, expected=5, background=others)
     s = score([(r.start, r.end) for r in found.repetitions], truth)
     assert s["f1"] == 1.0 and np.median(s["boundary_errors"]) <= 0.15, (s, found.verdict)
     assert found.verdict == "5 repetition(s) found" and all(0 < r.confidence <= 1 for r in found.repetitions)
     assert all(r.cohort is not None and r.cohort <= seg.COHORT for r in found.repetitions)
-    jog = _clips(hdm05, "bk", "jogLeftCircle4StepsRstart") or _clips(hdm05, "bd", "kickLFront1Reps")
-    take, _ = join(jog[:3], seed=2)
-    none = seg.segment(take, squats[0], expected=5, background=others)
+    assert [c.n_frames for c in found.cut(take)] == [round((r.end - r.start) * take.fps) for r in found.repetitions]
+    kicks, _ = join(_clips(bundled, "bk", "kickLFront1Reps") * 2, seed=2)
+    none = seg.segment(kicks, target, expected=5, background=others)
     assert none.repetitions == [] and none.verdict.startswith("not the target")
-    fewer = seg.segment(join(squats[1:4], seed=1)[0], squats[0], expected=5, background=others)
+    fewer = seg.segment(join([squat] * 3, seed=1)[0], target, expected=5, background=others)
     assert fewer.verdict == "fewer repetitions than expected: 3 found, 5 expected"
 
 
-def test_bad_takes_are_refused_clearly(hdm05):
-    squat = _clips(hdm05, "bk", "squat1Reps")[0]
+def test_bad_takes_are_refused_clearly(bundled):
+    squat = _clips(bundled, "bk", "squat1Reps")[0]
     with pytest.raises(BadInput, match="skeleton"):
         seg.segment(squat.with_data(squat.data, skeleton=None), squat)
     with pytest.raises(BadInput, match="at least 1"):

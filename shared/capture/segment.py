@@ -55,7 +55,6 @@ from shared.errors import BadInput
 
 FPS = 30.0  # both clips are compared at this rate
 SPEEDS = (0.5, 2.0)  # a repetition lasts this many times the target's duration (the steps' slopes)
-VELOCITY = 0.0  # weight of the features' velocities (seconds) beside the positions
 OVERLAP = 0.2  # a repetition may overlap one already taken by this share of its length
 THRESHOLD = 2.5  # cost / the target's spread above which a stretch is not the target
 COHORT = 0.7  # a stretch's cost against the target / against the nearest other motion, at most
@@ -149,6 +148,14 @@ class Segmentation:
             return f"{n} repetition(s) found"
         return f"{'fewer' if n < self.expected else 'more'} repetitions than expected: {n} found, {self.expected} expected"
 
+    def cut(self, take: Clip) -> list[Clip]:
+        """The repetitions as clips cut from ``take`` (at its own frame rate)."""
+        out = []
+        for k, r in enumerate(self.repetitions, 1):
+            part = take.frames(int(round(r.start * take.fps)), int(round(r.end * take.fps)))
+            out.append(part.with_data(part.data, name=f"rep{k}"))
+        return out
+
     def to_dict(self) -> dict:
         return {"repetitions": [r.to_dict() for r in self.repetitions], "expected": self.expected,
                 "threshold": self.threshold, "verdict": self.verdict, "notes": list(self.notes),
@@ -171,18 +178,16 @@ def features_of(target: Clip, clips: list[Clip], fps: float = FPS) -> list[np.nd
     feats = MotionFeatures.for_clips([target], sensor=False)
     if not feats.has_position:
         raise BadInput("the target's skeleton gives no joint positions to compare", field="target")
-    out = [_positions(feats, c.resample(fps)) for c in [target, *clips]]
-    if VELOCITY:
-        out = [np.hstack([x, VELOCITY * np.gradient(x, 1 / fps, axis=0)]) if len(x) > 1 else np.hstack([x, 0 * x])
-               for x in out]
-    return out
+    # velocities beside the positions were tried (weight 0.3 s): with the cohort check they turned
+    # away nearly every repetition across performers (HDM05 dg takes, bk targets)
+    return [_positions(feats, c.resample(fps)) for c in [target, *clips]]
 
 
 def _spread(x: np.ndarray) -> float:
     return float(np.mean(np.linalg.norm(x - x.mean(axis=0), axis=1)))
 
 
-def _find(a: np.ndarray, b: np.ndarray, others: list, threshold: float, cohort: float, fps: float):
+def _find(a: np.ndarray, b: np.ndarray, others: list, threshold: float, cohort: float):
     """Stretches of ``b`` that are repetitions of ``a`` (module docstring): (start, end, cost,
     cohort ratio) in frames, and the lowest cost of a stretch not taken."""
     spread = _spread(a)
@@ -231,14 +236,14 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
     if _spread(a) < 1e-6:
         raise BadInput("the target does not move: nothing to find", field="target")
     others = [(o, _spread(o)) for o in others if len(o) > 1 and _spread(o) > 1e-6]
-    taken, best_other = _find(a, b, others, threshold, cohort, fps)
+    taken, best_other = _find(a, b, others, threshold, cohort)
     if SELF_TEMPLATE and taken:
         # the person's own repetition most like the target becomes the template: their other
         # repetitions are nearer to it than to the demonstration of another body
         s0, e0, *_ = min(taken, key=lambda t: t[3])
         seed = b[s0:e0 + 1]
         if _spread(seed) > 1e-6:
-            own, _ = _find(seed, b, others, threshold, cohort, fps)
+            own, _ = _find(seed, b, others, threshold, cohort)
             if any(s <= s0 + OVERLAP * (e0 - s0) and e >= e0 - OVERLAP * (e0 - s0) for s, e, *_ in own):
                 taken = own
     reps = []

@@ -210,11 +210,22 @@ class _Lines:
         return line.decode("latin-1").rstrip("\r")
 
 
-def _header_of(path: Path) -> list[str]:
-    lines = Path(path).read_text(encoding="latin-1").splitlines()
+def _skeleton_file(path: Path) -> tuple[list[str], float | None]:
+    """A BVH file's header (``HIERARCHY`` to ``MOTION``) and its frame time, read once."""
+    try:
+        lines = Path(path).read_text(encoding="latin-1").splitlines()
+    except OSError as e:
+        raise BadInput(f"{path}: cannot read the skeleton file: {e.strerror or e}", field="skeleton") from None
     for i, line in enumerate(lines):
         if line.strip().upper() == "MOTION":
-            return lines[:i + 1]
+            frame_time = None
+            for after in lines[i + 1:i + 3]:
+                if after.strip().upper().startswith("FRAME TIME"):
+                    try:
+                        frame_time = float(after.split(":")[1])
+                    except (IndexError, ValueError):
+                        frame_time = None
+            return lines[:i + 1], frame_time
     raise BadInput(f"{path}: no MOTION line: not a BVH file to take the skeleton from", field="skeleton")
 
 
@@ -229,21 +240,19 @@ def _channels(header: list[str]) -> int:
 
 def record(source: str, out: Path, *, seconds: float | None = None, frames: int | None = None,
            skeleton: Path | None = None, fps: float | None = None, idle: float = 2.0, reconnect: int = 0,
-           connect_timeout: float = 5.0, on_frame=None, until=None, check_every: float = 0.25) -> Take:
+           connect_timeout: float = 5.0, until=None, check_every: float = 0.25) -> Take:
     """Record a take from a live BVH stream (module docstring) into ``out`` (a .bvh file),
     until ``seconds`` or ``frames`` (whichever first), the source stops, or its skeleton
     changes. ``skeleton``: a BVH file whose header the stream's lines follow (a stream without
-    a header); ``fps`` its rate (else the file's). ``on_frame(i)`` is called for every frame.
+    a header); ``fps`` its rate (else the file's).
     ``until(clip)``: called with the take so far every ``check_every`` seconds of frames; the
     take ends when it returns a reason (a source that never stops: a person done repeating)."""
     host, port = parse_source(source)
     if seconds is None and frames is None:
         raise BadInput("say how long to record: seconds or frames", field="seconds")
     limit = min(frames or MAX_FRAMES, MAX_FRAMES)
-    header: list[str] | None = _header_of(skeleton) if skeleton is not None else None
-    frame_time = None if fps is None else 1.0 / fps
-    if header is not None and frame_time is None:
-        frame_time = _frame_time(Path(skeleton))
+    header, file_frame_time = _skeleton_file(skeleton) if skeleton is not None else (None, None)
+    frame_time = 1.0 / fps if fps else file_frame_time
     events: list[str] = []
     rows: list[str] = []
     dropped = skipped = reconnects = 0
@@ -289,6 +298,12 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                 except OSError as e:
                     line = None
                     events.append(f"the connection broke after frame {len(rows)} ({e.strerror or e})")
+                except BadInput as e:  # a line too long: not BVH; the frames so far are kept
+                    if not rows:
+                        raise
+                    events.append(f"after frame {len(rows)}: {e.message}; the take ends there")
+                    ended, stop = "the stream stopped being BVH", True
+                    break
                 if line is None:
                     break
                 text = line.strip()
@@ -349,8 +364,6 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                                   f"({(now - last_arrival) * 1000:.0f} ms without a frame)")
                 last_arrival = last_frame = now
                 rows.append(text)
-                if on_frame is not None:
-                    on_frame(len(rows))
                 step = max(int(round(check_every / (frame_time or 1 / 30))), 1)
                 if until is not None and len(rows) % step == 0:
                     reason = until(_clip_of(header, rows, frame_time, Path(out)))
@@ -398,20 +411,4 @@ def _clip_of(header: list[str], rows: list[str], frame_time: float | None, out: 
     finally:
         Path(tmp).unlink(missing_ok=True)
 
-
-def _frame_time(path: Path) -> float | None:
-    for line in Path(path).read_text(encoding="latin-1").splitlines():
-        if line.strip().upper().startswith("FRAME TIME"):
-            try:
-                return float(line.split(":")[1])
-            except (IndexError, ValueError):
-                return None
-    return None
-
-
-def replay_to_file(clip: Clip, out: Path, **kw) -> Take:
-    """A clip through the whole live path (a replay source on loopback, recorded): what a take
-    from a capture suit would be."""
-    with ReplaySource(clip, connections=1, **kw) as src:
-        return record(src.address, out, seconds=clip.duration * 2 + 5, idle=2.0)
 

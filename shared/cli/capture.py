@@ -102,10 +102,9 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
     files = []
     if out is not None and result.repetitions:
         out.mkdir(parents=True, exist_ok=True)
-        for k, r in enumerate(result.repetitions, 1):
-            part = t.frames(int(round(r.start * t.fps)), int(round(r.end * t.fps)))
-            path = out / f"rep{k}.bvh"
-            save_clip(part.with_data(part.data, name=f"rep{k}"), path)
+        for part in result.cut(t):
+            path = out / f"{part.name}.bvh"
+            save_clip(part, path)
             files.append(str(path))
     if as_json:
         typer.echo(json.dumps({**result.to_dict(), "files": files}, indent=1))

@@ -337,9 +337,7 @@ def study_run(folder: Path = FOLDER,
                 break
         else:
             _fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {n} of {who}")
-        parts = [take.clip.frames(int(round(r.start * take.clip.fps)), int(round(r.end * take.clip.fps)))
-                 for r in result.repetitions]
-        _trial(folder, who, parts, say)
+        _trial(folder, who, result.cut(take.clip), say)
         if take.last_frame is not None:
             now = time.monotonic()
             typer.echo(f"  next demonstration and adverb ready {now - take.last_frame:.2f} s after the "
@@ -356,7 +354,7 @@ def _cut(take, target, expected: int) -> list:
     typer.echo(f"take {take.name}: {result.verdict}", err=True)
     if not result.repetitions:
         _fail(f"no repetition of the target in {take.name}: {result.verdict}")
-    return [take.frames(int(round(r.start * take.fps)), int(round(r.end * take.fps))) for r in result.repetitions]
+    return result.cut(take)
 
 
 def _say(adverb: str, path: Path) -> None:
