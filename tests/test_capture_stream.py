@@ -154,6 +154,8 @@ def test_the_adverb_is_said_into_a_file_of_its_length_and_not_silent(tmp_path):
     assert speech.measure(short.path) == (short.seconds, short.rms)
     with pytest.raises(BadInput, match="nothing"):
         speech.speak("   ", tmp_path / "none.wav")
+    aloud = speech.speak("more", tmp_path / "aloud.wav", play=True)  # played, or says why not: never a failure
+    assert aloud.played != bool(aloud.note) and aloud.seconds == pytest.approx(short.seconds)
 
 
 def test_a_source_that_never_stops_ends_a_take_when_asked(squat, tmp_path):

@@ -235,6 +235,7 @@ def study_attempt(folder: Path = FOLDER,
                   expected: int = typer.Option(5, help="Repetitions in the take."),
                   say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav "
                                                                         "(espeak-ng)."),
+                  aloud: bool = typer.Option(False, "--aloud", help="Also play it through the speakers (aplay)."),
                   skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """One trial of the participant's current case: recorded, and the next motion written to show/
     (with the adverb spoken into a .wav beside it)."""
@@ -246,10 +247,10 @@ def study_attempt(folder: Path = FOLDER,
         attempts = _cut(read_clip(take, skeleton=skeleton), load_clip(folder / "target.npz"), expected)
     else:
         attempts = [read_clip(x, skeleton=skeleton) for x in clips]
-    _trial(folder, participant, attempts, say)
+    _trial(folder, participant, attempts, say, aloud)
 
 
-def _trial(folder: Path, participant: str, attempts: list, say: bool) -> dict:
+def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: bool = False) -> dict:
     """One trial (the coach scores the attempt and decides the next demonstration and adverb),
     logged; the next demonstration written to show/ and the adverb said beside it."""
     from schemas.common import clip_from_wire
@@ -275,7 +276,7 @@ def _trial(folder: Path, participant: str, attempts: list, say: bool) -> dict:
     typer.echo(f"{participant}, case {case}, trial {step['trial']}: d_p {r['d_p']:.1f}"
                + ("; case done" if last else f"; next: show {shown}" + (f' and say "{r["adverb"]}"' if r.get("adverb") else "")))
     if say and not last and r.get("adverb"):
-        _say(r["adverb"], Path(shown).with_suffix(".wav"))
+        _say(r["adverb"], Path(shown).with_suffix(".wav"), aloud)
     return {"participant": participant, "case": case, "trial": step["trial"], "last": last, "shown": shown,
             "adverb": r.get("adverb"), "d_p": r["d_p"]}
 
@@ -292,7 +293,8 @@ def study_run(folder: Path = FOLDER,
               retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
               check_every: float = typer.Option(0.25, help="Seconds of take between looks for the expected "
                                                            "repetitions (the take ends once they are all seen)."),
-              say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav.")):
+              say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav."),
+              aloud: bool = typer.Option(False, "--aloud", help="Also play it through the speakers (aplay).")):
     """The study, live: trial after trial, the take is recorded from the source until it stops,
     cut into its repetitions, scored by the coach, the next demonstration written to show/ and the
     adverb said into a .wav beside it. Every take is kept in takes/; the log, CSV and reports are
@@ -337,7 +339,7 @@ def study_run(folder: Path = FOLDER,
                 break
         else:
             _fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {n} of {who}")
-        _trial(folder, who, result.cut(take.clip), say)
+        _trial(folder, who, result.cut(take.clip), say, aloud)
         if take.last_frame is not None:
             now = time.monotonic()
             typer.echo(f"  next demonstration and adverb ready {now - take.last_frame:.2f} s after the "
@@ -357,13 +359,15 @@ def _cut(take, target, expected: int) -> list:
     return result.cut(take)
 
 
-def _say(adverb: str, path: Path) -> None:
-    """The adverb said into ``path`` (a printed note, never a failure, without an engine)."""
+def _say(adverb: str, path: Path, aloud: bool = False) -> None:
+    """The adverb said into ``path`` and, with ``aloud``, through the speakers (a printed note,
+    never a failure, without an engine or a player)."""
     from shared.capture.speech import NoSpeech, speak
 
     try:
-        speech = speak(adverb, path)
-        typer.echo(f"said \"{adverb}\" into {path} ({speech.seconds:.1f} s)", err=True)
+        speech = speak(adverb, path, play=aloud)
+        typer.echo(f"said \"{adverb}\" into {path} ({speech.seconds:.1f} s)" + (f"; {speech.note}" if speech.note else "")
+                   + ("; played" if speech.played else ""), err=True)
     except NoSpeech as e:
         typer.echo(f"not said aloud: {e.message}", err=True)
 
