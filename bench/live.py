@@ -1,6 +1,7 @@
 """A live study from replayed takes, end to end: ``study run`` with a live source (a replay
 source on loopback playing one take per trial, real HDM05 clips of one performer joined with
-rests), 2 participants x 4 cases x 4 trials, nobody touching a file. Measures the whole study
+rests; the target another performer's), 2 participants x 4 cases x 4 trials, nobody touching a
+file; the takes go through the capture service like a capture suit's stream. Measures the whole study
 and, per trial, the time from the take's last frame to the next demonstration written and the
 adverb said, and how much of it passed before the take ended (the replay source closes after
 its take; a source that keeps streaming is ended by ``--idle`` or ``--seconds``). Writes
@@ -31,8 +32,9 @@ def main(argv=None) -> int:
     from shared.capture.takes import join
     from shared.io import load_clip
 
-    files = sorted((args.hdm05 / "amc" / "squat1Reps").glob("HDM_bk_*.amc"))
-    target, reps = files[0], [load_clip(f) for f in files[1:6]]
+    squats = args.hdm05 / "amc" / "squat1Reps"
+    target = sorted(squats.glob("HDM_bk_*.amc"))[0]  # the demonstration: one performer's squat
+    reps = [load_clip(f) for f in sorted(squats.glob("HDM_dg_*.amc"))[:5]]  # the learner: another performer
     takes = [join(reps, seed=k)[0].resample(30.0) for k in range(32)]
     work = Path(tempfile.mkdtemp(prefix="mc-bench-live-"))
     cmd = [sys.executable, "-m", "shared.cli"]

@@ -4,6 +4,7 @@
 ``mirrorcoach schemas`` prints them.
 """
 
-from schemas import coach, dialogue, estimator, pss, simulator
+from schemas import capture, coach, dialogue, estimator, pss, simulator
 
-CONTRACTS = {"pss": pss, "simulator": simulator, "dialogue": dialogue, "estimator": estimator, "coach": coach}
+CONTRACTS = {"pss": pss, "simulator": simulator, "dialogue": dialogue, "estimator": estimator, "coach": coach,
+             "capture": capture}

@@ -13,6 +13,9 @@ Starts the local cluster if it is not running (``mirrorcoach up``: router + serv
 4. coaches a simulated learner on a real squat for 4 trials (coach service), printing each
    trial's alpha, adverb and d_p;
 5. runs a short estimator conversation with a simulated other (chapter 3);
+6. coaches a person's take live: four squats of actor bd joined with rests, replayed through
+   the capture service like a capture suit's stream, cut into repetitions automatically, one
+   trial on the coach, the next demonstration written and its adverb said into a .wav;
 
 says what it did, and stops the cluster again if it started it (``--keep-running`` leaves it up).
 With ``MIRRORCOACH_DEPLOY`` set (a cluster across hosts, issue 16) it runs the same steps on that
@@ -86,6 +89,8 @@ def run(client: Client, data: Path, out: Path) -> None:
           f"{d[squat]:.1f}, to the learner {d[learner]:.1f})")
     coach_learner(client, next(c for c in train if c.label == "squat1Reps"), out)
     estimate_other(client)
+    coach_live_take(client, next(c for c in train if c.label == "squat1Reps"),
+                    [c for c in train if c.label == "squat1Reps" and "_bd_" in c.name], out)
     home = Settings().home
     print(f"done in {time.perf_counter() - t0:.1f} s. Outputs: BVH files in {out} (open in Blender or any BVH viewer); "
           f"the services' state (spaces, sessions, transcripts) in {home / 'data'}; the dashboard recording "
@@ -105,6 +110,44 @@ def coach_learner(client: Client, target, out: Path, trials: int = 4) -> None:
         note = f" (lowered from {t['alpha']:g}: {t['feasibility']})" if t["alpha_reduced"] else ""
         print(f"  trial {t['number']}: d_p {t['d_p']:6.1f}  R {r:.2f}  alpha {t['alpha_shown']:g}  "
               f"\"{t['adverb'] or 'no adverb'}\"{note}")
+
+
+def coach_live_take(client: Client, target, reps: list, out: Path) -> None:
+    """A person's repetitions as one take through the capture service (a replay: the stand-in for
+    a capture suit), cut automatically and coached for one trial; the adverb said into a .wav."""
+    from shared.capture.speech import NoSpeech, speak
+    from shared.capture.takes import join
+
+    take, _ = join(reps * 2, seed=1)
+    client.request("capture", "record", {"take": "demo-live", "replay": [clip_to_wire(take)], "speed": 4.0,
+                                         "idle": 0.5, "replace": True})
+    deadline = time.monotonic() + 120
+    info = client.request("capture", "status", {"take": "demo-live"})
+    while info["state"] == "recording" and time.monotonic() < deadline:
+        time.sleep(0.2)
+        info = client.request("capture", "status", {"take": "demo-live"})
+    if info["state"] != "done":
+        print(f"live take: {info['state']} ({info.get('error', info['ended'])})")
+        return
+    cut = client.request("capture", "segment", {"take": "demo-live", "target": clip_to_wire(target), "expected": 4})
+    print(f"live take 'demo-live' ({info['frames']} frames from {info['source']}, played 4x): {cut['verdict']}, "
+          + ", ".join(f"{r['start']:.1f}-{r['end']:.1f} s" for r in cut["repetitions"]))
+    if not cut["repetitions"]:
+        return
+    client.request("coach", "start", {"session": "demo-person", "target": clip_to_wire(target), "replace": True,
+                                      "policy": {"kind": "fixed", "alpha": 2.0, "adverb": "table"}})
+    r = client.request("coach", "attempt", {"session": "demo-person", "clips": cut["clips"]})
+    demo = clip_from_wire(r["emphatic"]).resample(target.fps)
+    save_clip(demo, out / "demo-person_trial2.bvh")
+    said = ""
+    if r.get("adverb"):
+        try:
+            speech = speak(r["adverb"], out / "demo-person_trial2.wav")
+            said = f"; said into {out / 'demo-person_trial2.wav'} ({speech.seconds:.1f} s)"
+        except NoSpeech as e:
+            said = f"; not said aloud ({e.message})"
+    print(f"  coached: d_p {r['d_p']:.1f}, next demonstration {out / 'demo-person_trial2.bvh'} "
+          f"(alpha {r['alpha_shown']:g}), \"{r.get('adverb') or 'no adverb'}\"{said}")
 
 
 def estimate_other(client: Client) -> None:

@@ -283,6 +283,12 @@ def coach_services(tmp_path_factory):
     yield from _serve(tmp_path_factory, "pss", "simulator", "coach")
 
 
+@pytest.fixture(scope="module")
+def capture_service(tmp_path_factory):
+    """A real router and a real capture service process; yields (env, Processes)."""
+    yield from _serve(tmp_path_factory, "capture")
+
+
 @pytest.fixture
 def client_of():
     """``client_of(env)``: a Client of that cluster, closed at the end of the test."""

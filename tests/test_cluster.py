@@ -48,7 +48,7 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     assert {r["name"]: r["alive"] for r in json.loads(st.stdout)} == {"supervisor": True, "router": True, "pss": True,
                                                                       "simulator": True, "dialogue": True,
                                                                       "estimator": True, "coach": True,
-                                                                      "observer": True}
+                                                                      "capture": True, "observer": True}
 
     amc = bundled / "amc"
     train = [p for p in sorted(amc.glob("*/*.amc")) if "_dg_" not in p.name]
@@ -696,6 +696,88 @@ def test_a_whole_study_runs_live_from_replayed_takes(cluster, bundled, tmp_path)
     assert r.returncode == 0, r.stderr
     rows = read(tmp_path / "trials.csv")
     assert len(rows) == 8 and {r["world"] for r in rows} == {"people"}
+
+
+def test_a_live_take_is_redone_and_a_participant_skipped_on_request(cluster, bundled, tmp_path):
+    """While `study run` records, `study redo` from another terminal records the take again (the
+    person stood still: the first take is never scored) and `study skip` leaves a participant for
+    a later run (the other participant's trials go on); the trials done are logged as any other."""
+    from shared.capture.stream import ReplaySource
+    from shared.capture.takes import join
+    from shared.io import load_clip
+
+    env = cluster
+    squats = sorted((bundled / "amc/squat1Reps").glob("*.amc"))
+    bd = [load_clip(s).resample(30.0) for s in squats if "_bd_" in s.name]
+    study = tmp_path / "study"
+    r = cli(env, "study", "init", study, "--target", squats[0], "--participants", "2", "--cases", "2", "--trials", "2",
+            "--seed", "5")
+    assert r.returncode == 0, r.stderr
+    still = bd[0].with_data(np.repeat(bd[0].data[:1], 60, axis=0))  # a person standing, streamed without end
+    take, _ = join(bd * 2, seed=1)
+    lines: list[str] = []
+    with ReplaySource([still, take, still, take, take], connections=5, hold=True, speed=4.0) as src:
+        run = subprocess.Popen([sys.executable, "-m", "shared.cli", "study", "run", str(study), "--source", src.address,
+                                "--expected", "4", "--idle", "5"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, env=env, cwd=REPO)
+        reader = threading.Thread(target=lambda: lines.extend(run.stdout), daemon=True)
+        reader.start()
+
+        def wait_for(text: str, timeout: float = 120.0) -> None:
+            deadline = time.monotonic() + timeout
+            while not any(text in x for x in lines) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            assert any(text in x for x in lines), "".join(lines)
+
+        wait_for("P01, case 2, trial 1: recording")
+        time.sleep(2.0)
+        assert cli(env, "study", "redo", study).returncode == 0
+        wait_for("redone on request")
+        wait_for("P01, case 2, trial 2: recording")
+        time.sleep(2.0)
+        assert cli(env, "study", "skip", study).returncode == 0
+        assert run.wait(timeout=120) == 0, "".join(lines)
+        reader.join(timeout=10)
+    out = "".join(lines)
+    assert "P01: skipped on request" in out and "nothing left in this run (P01 skipped" in out, out
+    assert out.count("4 repetitions seen") == 3 and out.count("redone on request") == 1, out
+    assert sorted(p.name for p in (study / "takes").glob("*.bvh")) == ["P01_case2_trial1_2.bvh", "P02_case2_trial1_1.bvh",
+                                                                       "P02_case2_trial2_1.bvh"]
+    step = json.loads(cli(env, "study", "next", study, "--json").stdout)
+    assert (step["participant"], step["trial"]) == ("P01", 2), step
+
+
+def test_coach_live_runs_trials_from_a_live_source(cluster, bundled, tmp_path):
+    """`coach live`: a new person session started on the target, two trials whose takes come from a
+    source that never stops (each ends once its repetitions are seen); each trial's demonstration
+    and spoken adverb are written to the session's folder, its take kept, the trials on the coach."""
+    from shared.capture import speech
+    from shared.capture.stream import ReplaySource
+    from shared.capture.takes import join
+    from shared.io import load_clip
+
+    env = cluster
+    squats = sorted((bundled / "amc/squat1Reps").glob("*.amc"))
+    bd = [load_clip(s).resample(30.0) for s in squats if "_bd_" in s.name]
+    takes = [join(bd * 2, seed=k)[0] for k in range(2)]
+    with ReplaySource(takes, connections=2, hold=True, speed=8.0) as src:
+        r = cli(env, "coach", "live", "live1", "--target", squats[0], "--source", src.address, "--trials", "2",
+                "--expected", "4", "--out", tmp_path / "live", timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "started session live1" in r.stderr and r.stderr.count("4 repetitions seen") == 2, r.stderr
+    assert "trial 1: d_p" in r.stdout and "trial 2: d_p" in r.stdout, r.stdout
+    shown = sorted(p.name for p in (tmp_path / "live").glob("live1_trial*.bvh"))
+    assert shown == ["live1_trial2.bvh", "live1_trial3.bvh"]
+    assert sorted(p.name for p in (tmp_path / "live/takes").glob("*.bvh")) == ["live1_trial1_1.bvh", "live1_trial2_1.bvh"]
+    if speech.available():
+        assert len(list((tmp_path / "live").glob("live1_trial*.wav"))) == 2
+    from shared.bus.client import Client
+
+    with Client(settings_of(env)) as c:
+        assert len(c.request("coach", "state", {"session": "live1"})["trials"]) == 2
+    r = cli(env, "coach", "live", "nope", "--target", squats[0], "--source", "tcp://127.0.0.1:9", "--trials", "1",
+            "--out", tmp_path / "x")
+    assert r.returncode != 0 and "no live source" in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
 def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_path):

@@ -54,7 +54,7 @@ def test_the_demo_recording_in_the_real_viewer(viewer_ok, demo_recording, tmp_pa
         v.wait_loaded()
         lines = v.timelines()
         assert {"playback", "trial", "set"} <= set(lines)
-        assert v.tabs() == ["session demo", "estimate demo", "spaces", "cluster"]
+        assert v.tabs() == ["session demo", "session demo-person", "estimate demo", "spaces", "cluster"]
         n = lines["trial"][1]
         k = (lines["playback"][1] + 1) // (n + 1)
         assert n == 4  # the demo's four trials, and no fifth one
@@ -65,6 +65,11 @@ def test_the_demo_recording_in_the_real_viewer(viewer_ok, demo_recording, tmp_pa
             shots[f"body{trial}"] = v.screenshot(tmp_path / f"body{trial}.png", view="target | attempt | emphatic")
             shots[f"session{trial}"] = v.screenshot(tmp_path / f"session{trial}.png")
             assert v.reports() == []
+        # the live take's trial (replayed through the capture service): its next demonstration shown
+        v.show_tab("session demo-person")
+        v.set_time("playback", k + k // 2)
+        shots["live1"] = v.screenshot(tmp_path / "live1.png", view="target | attempt | emphatic")
+        assert v.reports() == []
         v.show_tab("estimate demo")
         v.set_time("set", lines["set"][1])
         shots["estimate"] = v.screenshot(tmp_path / "estimate.png")
@@ -76,14 +81,14 @@ def test_the_demo_recording_in_the_real_viewer(viewer_ok, demo_recording, tmp_pa
     for name, path in shots.items():  # not empty: many colours, not one background
         im, _, _ = _pixels(path, (0, 0, 0))
         assert len(np.unique(im.reshape(-1, 3), axis=0)) > 200, name
-    for trial in (1, 4):  # upright: every figure's head above its feet on screen
-        _, hy, hx = _pixels(shots[f"body{trial}"], HEAD)
-        _, fy, fx = _pixels(shots[f"body{trial}"], FOOT)
+    for shot in ("body1", "body4", "live1"):  # upright: every figure's head above its feet on screen
+        _, hy, hx = _pixels(shots[shot], HEAD)
+        _, fy, fx = _pixels(shots[shot], FOOT)
         assert len(hy) > 5 and len(fy) > 5, (len(hy), len(fy))
         edges = np.linspace(min(hx.min(), fx.min()), max(hx.max(), fx.max()) + 1, 4)  # three people, side by side
         for a, b in zip(edges[:-1], edges[1:]):
             h, f = hy[(hx >= a) & (hx < b)], fy[(fx >= a) & (fx < b)]
-            assert len(h) and len(f) and h.mean() < f.mean() - 20, (trial, a, b)
+            assert len(h) and len(f) and h.mean() < f.mean() - 20, (shot, a, b)
     # the figures move: the middle of trial 1 and of trial 4 differ
     a, _, _ = _pixels(shots["body1"], HEAD)
     b, _, _ = _pixels(shots["body4"], HEAD)

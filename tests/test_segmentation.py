@@ -66,6 +66,36 @@ def test_repetitions_of_the_same_performer_are_found_and_another_motion_is_not_c
     assert fewer.verdict == "fewer repetitions than expected: 3 found, 5 expected"
 
 
+def test_movements_lie_between_the_rests_and_shapes_forget_posture_and_size(bundled):
+    """The rests of a joined take separate its movements: each true repetition lies inside one
+    (give or take the way into its first pose); a stretch moved and scaled is the same shape."""
+    squat = _clips(bundled, "bd", "squat1Reps")[0]
+    take, truth = join([squat] * 3, seed=2)
+    a, b = seg.features_of(squat, [take])
+    moves = seg.movements(b, seg.REST_SHARE * float(np.mean(seg.speed(a, seg.FPS))), seg.FPS)
+    assert len(moves) == 3, moves
+    for (s, e), (ts, te) in zip(moves, truth):
+        assert s / seg.FPS <= ts + 0.4 and e / seg.FPS >= te - 0.4 and (e - s) / seg.FPS <= (te - ts) + 1.0
+    moved = 2.5 * a + 0.3
+    assert seg.global_dtw(seg._distances(seg.shape(a), seg.shape(moved))) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("cls", ["elbowToKnee1RepsLelbowStart", "kickLFront1Reps", "rotateArmsBothBackward1Reps",
+                                 "squat1Reps"])
+def test_another_performers_repetitions_are_found_and_other_motions_never_cut(bundled, cls):
+    """The bundled sample's three performers: a take of bd's repetitions, the target bk's, the
+    cohort dg's other motions: every repetition found; bd's takes of the other motions hold none."""
+    classes = ["elbowToKnee1RepsLelbowStart", "kickLFront1Reps", "rotateArmsBothBackward1Reps", "squat1Reps"]
+    target = _clips(bundled, "bk", cls)[0]
+    others = [_clips(bundled, "dg", o)[0] for o in classes if o != cls]
+    take, truth = join(_clips(bundled, "bd", cls) * 2, seed=7)
+    found = seg.segment(take, target, expected=4, background=others)
+    assert score([(r.start, r.end) for r in found.repetitions], truth)["f1"] == 1.0, found.to_dict()
+    for o in classes:
+        if o != cls:
+            assert seg.segment(join(_clips(bundled, "bd", o) * 2, seed=8)[0], target, background=others).repetitions == []
+
+
 def test_bad_takes_are_refused_clearly(bundled):
     squat = _clips(bundled, "bk", "squat1Reps")[0]
     with pytest.raises(BadInput, match="skeleton"):

@@ -47,7 +47,7 @@ from pathlib import Path
 
 from shared.errors import BadInput
 
-SERVICES = ("pss", "simulator", "coach", "dialogue", "estimator")
+SERVICES = ("pss", "simulator", "coach", "dialogue", "estimator", "capture")
 ROLES = SERVICES + ("cli", "dashboard", "router")
 DEFAULT_PORT = 7447
 NAME_RE = re.compile(r"[a-z][a-z0-9-]{0,40}")

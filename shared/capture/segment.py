@@ -3,44 +3,46 @@ meaningful portions by the author subjectively").
 
 **Features.** Both clips are read as the position features of a proto-symbol space built on the
 target (:class:`shared.pss.features.MotionFeatures`, group ``position``): every joint and end
-site in the body's heading frame, in body lengths, and the root's height, swing and velocity,
-so where the person stands or faces and how tall they are do not enter. Unlike a space's
-z-scores, every channel keeps the same unit (body lengths), so a joint the target barely moves
-is not magnified. Both are resampled to ``FPS``.
+site in the body's heading frame, in body lengths, and the root's height, so where the person
+stands or faces and how tall they are do not enter (the root's rates and up vector, noisy at
+rest, are left out). Each point weighs the square root of its bone's length (a knee counts more
+than a finger: a hand has seven points where a leg has four). Both are resampled to ``FPS``.
 
-**Subsequence alignment** (:func:`subsequence_dtw`, a numba kernel): dynamic time warping of the
-whole target against any stretch of the take (open begin and end; the symmetric steps with a
-slope between 1/2 and 2: (1, 1) weighted 2, (1, 2) and (2, 1) weighted 3, so the cost divided by
-``n + L`` is a mean per-frame distance, ``L`` the stretch's length, and every stretch lasts half
-to twice the target). For every frame where a stretch may end, the
-best stretch ending there and its normalised cost; a stretch must last ``SPEEDS`` times the
-target's duration (a person may be slower or faster than the demonstration).
+**Movements and rests.** A frame rests when its joints move slower than ``REST_SHARE`` of the
+target's mean speed (the displacement over ``SMOOTH`` seconds, so the jitter of a pose held still
+cancels); a rest lasts at least ``REST_MIN``. The stretches between rests are the movements; a
+repetition spans one to ``MAX_JOIN`` consecutive movements (a motion may pause inside).
 
-**Repetitions** are taken greedily: the stretch of lowest cost, then the next that overlaps no
-repetition taken (or refused) by more than ``OVERLAP`` of its length, while the cost (measured
-against the target's own spread, the mean distance of its frames from its mean pose) is below
-``THRESHOLD``. Each stretch is then checked against a **cohort** of other motions (those given as
-``background``, and standing still in the target's first or last pose): it is a repetition only
-if its cost against the target is at most ``COHORT`` times its cost against the nearest other
-motion (DTW with fixed ends, :func:`global_dtw`), so a rest or another motion is not cut into
-repetitions because it happens to be near the target. ``COHORT`` was chosen by
-``bench.segmentation`` on the tuning takes (HDM05 performer bd, targets of performer bk, cohort
-of dg: the largest F1 with the fewest cuts of other motions) and is reported on takes it was not
-chosen on. Each repetition's **confidence** is how far its cost is below the threshold and its
-cohort ratio below twice ``COHORT``. The result says whether the take holds the expected number
-of repetitions, fewer, more, or none: a different motion.
+**Shapes.** A stretch is compared as a shape (:func:`shape`): its mean pose taken away (where a
+person holds the body) and its spread scaled to one (how large they make the motion), so a
+person's posture and amplitude, which differ from the demonstration's, do not decide.
 
-**The person's own template** (``SELF_TEMPLATE``): the repetition found that is most like the
-target (lowest cohort ratio) becomes the template for a second search, since a person's
-repetitions are nearer to each other than to another body's demonstration; its result stands
-when it finds that repetition again. Chosen on the tuning takes (F1 0.35 -> 0.41 at the same one
-cut of another motion).
+**Alignment.** Each movement (or run of movements) is aligned with the whole target by dynamic
+time warping with the symmetric steps of slope 1/2 to 2 (:func:`subsequence_dtw`, a numba
+kernel; (1, 1) weighted 2, (1, 2) and (2, 1) weighted 3, so a cost divided by ``n + L`` is a mean
+per-frame distance), its ends free within ``SLACK`` seconds of the movement's ends (the way from
+a rest into the first pose is movement, not the motion). A movement longer than twice the
+target (repetitions without a rest between) gives every end's best stretch inside it.
 
-Measured (``bench/results/segmentation.json``): the same performer's repetitions are found with
-F1 0.80 and a median boundary error of 125 ms; another performer's with F1 0.56 (258 ms, 4
-stretches of other motions cut); a game studio's styles of one content, F1 0.04. The goals (F1 >= 0.95, 100 ms, no other motion ever
-cut) are not met: a person's repetitions differ from another person's demonstration more than
-raw joint positions can tell from another motion.
+**Decision.** Candidates are taken in order of their cost against the target (:func:`global_dtw`
+of the two shapes), overlapping none taken by more than ``OVERLAP``, while the cost is at most
+``MAX_COST`` and at most ``COHORT`` times the cost against the nearest of the other motions (the
+``background`` clips), so a motion near the target because it is near everything is not cut.
+Each repetition's **confidence** is how far its cohort ratio is below ``COHORT``. The result says
+whether the take holds the expected number of repetitions, fewer, more, or none: a different
+motion.
+
+``MAX_COST`` and ``COHORT`` were chosen by ``bench.segmentation`` on tuning takes only (HDM05
+performer bd, targets of bk, cohort of dg) and are reported on takes they were not chosen on
+(performer dg, a game studio's styles, a CMU performance): ``bench/results/segmentation.json``.
+Measured there: another performer's repetitions (dg's takes, bk's targets) F1 0.92 with a median
+boundary error of 92 ms, 6 takes-by-target pairs of other motions cut (of 110; 5 of them dg's
+squats taken for bk's deposit on the floor, a squat with a reach); the same performer's F1 0.97
+(75 ms, 3 cut); a CMU performance read from its two unit conventions F1 1.00 (17 ms); a game
+studio's styles of one gesture against its 'normal' style F1 0.23 (600 ms: its clips begin and
+end standing still). Goals (F1 0.95, 100 ms, no other motion cut) met for the CMU takes only.
+The previous method (open-ended DTW over the whole take on unweighted positions, a cost
+threshold) gave 0.56 / 0.80 / 0.04 on the same takes.
 """
 
 from __future__ import annotations
@@ -56,10 +58,17 @@ from shared.errors import BadInput
 FPS = 30.0  # both clips are compared at this rate
 SPEEDS = (0.5, 2.0)  # a repetition lasts this many times the target's duration (the steps' slopes)
 OVERLAP = 0.2  # a repetition may overlap one already taken by this share of its length
-THRESHOLD = 2.5  # cost / the target's spread above which a stretch is not the target
-COHORT = 0.7  # a stretch's cost against the target / against the nearest other motion, at most
+COHORT = 0.9  # a stretch's cost against the target / against the nearest other motion, at most
+MAX_COST = 0.95  # a stretch's cost against the target (as shapes: a mean distance in spreads), at most
 MAX_CHECKS = 64  # stretches checked against the other motions, at most (bounded work)
-SELF_TEMPLATE = True  # find the other repetitions with the person's own repetition most like the target
+REST_SHARE = 0.15  # a frame rests when its speed is below this share of the target's mean speed
+REST_MIN = 0.3  # seconds: a rest lasts at least this long (a shorter pause belongs to the motion)
+SMOOTH = 0.3  # seconds: the speed is a displacement over this window
+MAX_JOIN = 4  # a repetition spans this many stretches of movement at most (pauses inside a motion)
+SLACK = 0.6  # seconds a repetition's ends may lie from its stretch of movement's ends
+AMPLITUDE_FLOOR = 0.25  # a stretch smaller than this share of the target's spread is not scaled up further
+ROOT_TERMS = 6  # the position group's last columns left out: the root's up vector, velocities and yaw rate
+REST_AFTER = 0.2  # seconds of take after the last expected repetition before a live take ends (until_repeated)
 
 
 @kernel(cache=True, nogil=True)
@@ -123,9 +132,9 @@ def _distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 class Repetition:
     start: float  # seconds from the take's start
     end: float
-    cost: float  # normalised DTW cost / the target's spread
+    cost: float  # DTW cost against the target, both as shapes (a mean distance per frame, in spreads)
     confidence: float
-    cohort: float | None = None  # the cost against the target / against the nearest other motion
+    cohort: float | None = None  # the cost against the target / against the nearest other motion or standing still
 
     def to_dict(self) -> dict:
         return {k: None if v is None else round(v, 4) for k, v in asdict(self).items()}
@@ -135,15 +144,15 @@ class Repetition:
 class Segmentation:
     repetitions: list[Repetition]
     expected: int | None
-    threshold: float
-    best_other: float | None = None  # the lowest cost of a stretch not taken (how close the next one came)
+    cohort: float
+    refused: float | None = None  # the lowest cohort ratio of a stretch refused (how close the next one came)
     notes: list[str] = field(default_factory=list)
 
     @property
     def verdict(self) -> str:
         n = len(self.repetitions)
         if n == 0:
-            return "not the target: no stretch of the take is close enough to it"
+            return "not the target: no movement in the take is nearer to it than to standing still or another motion"
         if self.expected is None or n == self.expected:
             return f"{n} repetition(s) found"
         return f"{'fewer' if n < self.expected else 'more'} repetitions than expected: {n} found, {self.expected} expected"
@@ -158,14 +167,16 @@ class Segmentation:
 
     def to_dict(self) -> dict:
         return {"repetitions": [r.to_dict() for r in self.repetitions], "expected": self.expected,
-                "threshold": self.threshold, "verdict": self.verdict, "notes": list(self.notes),
-                "best_other": None if self.best_other is None else round(self.best_other, 4)}
+                "cohort": self.cohort, "verdict": self.verdict, "notes": list(self.notes),
+                "refused": None if self.refused is None else round(self.refused, 4)}
 
 
 def _positions(features, clip: Clip) -> np.ndarray:
-    """The clip's position features in body lengths (the space's z-scores undone)."""
+    """The clip's joints in the body's heading frame and the root's height, in body lengths (the
+    position group's z-scores undone, its root rates and up vector left out)."""
     x = features.encode(clip, ("position",))[:, features.feature_indices("position")]
-    return x * features.position_scale + features.position_mean
+    x = x * features.position_scale + features.position_mean
+    return np.ascontiguousarray(x[:, :-ROOT_TERMS])
 
 
 def features_of(target: Clip, clips: list[Clip], fps: float = FPS) -> list[np.ndarray]:
@@ -178,76 +189,177 @@ def features_of(target: Clip, clips: list[Clip], fps: float = FPS) -> list[np.nd
     feats = MotionFeatures.for_clips([target], sensor=False)
     if not feats.has_position:
         raise BadInput("the target's skeleton gives no joint positions to compare", field="target")
-    # velocities beside the positions were tried (weight 0.3 s): with the cohort check they turned
-    # away nearly every repetition across performers (HDM05 dg takes, bk targets)
-    return [_positions(feats, c.resample(fps)) for c in [target, *clips]]
+    w = np.sqrt(_weights(feats))
+    return [_positions(feats, c.resample(fps)) * w for c in [target, *clips]]
+
+
+def _weights(feats) -> np.ndarray:
+    """Each column's weight: its point's bone length over the body's height (a finger's point
+    weighs less than a knee's), one for the root's height."""
+    sk = feats.skeleton
+    lengths = {j.name: float(np.linalg.norm(j.offset)) for j in sk.joints}
+    lengths.update({f"{j.name}.end": float(np.linalg.norm(j.end)) for j in sk.joints if j.end is not None})
+    names = feats.position_feature_names[:-ROOT_TERMS - 1]
+    w = [lengths.get(n[4:n.index(")")], 0.0) for n in names]
+    w = np.asarray(w) / max(max(w), 1e-9)
+    return np.append(w, 1.0)
 
 
 def _spread(x: np.ndarray) -> float:
+    """The mean distance of a stretch's frames from its mean pose."""
     return float(np.mean(np.linalg.norm(x - x.mean(axis=0), axis=1)))
 
 
-def _find(a: np.ndarray, b: np.ndarray, others: list, threshold: float, cohort: float):
-    """Stretches of ``b`` that are repetitions of ``a`` (module docstring): (start, end, cost,
-    cohort ratio) in frames, and the lowest cost of a stretch not taken."""
+def shape(x: np.ndarray, floor: float = 1e-6) -> np.ndarray:
+    """A stretch as a shape: its mean pose taken away (where a person holds the body) and its
+    spread scaled to one (how large they make the motion), the spread floored at ``floor``."""
+    y = x - x.mean(axis=0)
+    return y / max(_spread(y), floor)
+
+
+def speed(x: np.ndarray, fps: float) -> np.ndarray:
+    """Per-frame speed of the body's joints (body lengths per second): the displacement over
+    ``SMOOTH`` seconds centred on the frame, so the jitter of a pose held still cancels while a
+    movement does not."""
+    h = max(int(round(SMOOTH * fps / 2)), 1)
+    idx = np.arange(len(x))
+    lo, hi = np.clip(idx - h, 0, len(x) - 1), np.clip(idx + h, 0, len(x) - 1)
+    return np.linalg.norm(x[hi] - x[lo], axis=1) / np.maximum(hi - lo, 1) * fps
+
+
+def movements(b: np.ndarray, level: float, fps: float) -> list[tuple[int, int]]:
+    """The stretches of ``b`` between rests, (start, end) in frames (end exclusive): a rest is a run
+    of frames slower than ``level`` lasting at least ``REST_MIN`` (or touching the take's ends)."""
+    still = np.concatenate([[False], speed(b, fps) < level, [False]])
+    edges = np.flatnonzero(np.diff(still.astype(np.int8)))
+    min_rest = max(int(round(REST_MIN * fps)), 1)
+    rests = [(int(s), int(e)) for s, e in zip(edges[::2], edges[1::2])
+             if e - s >= min_rest or s == 0 or e == len(b)]
+    out, prev = [], 0
+    for s, e in rests:
+        if s > prev:
+            out.append((prev, s))
+        prev = e
+    if prev < len(b):
+        out.append((prev, len(b)))
+    return out
+
+
+def _aligned(a: np.ndarray, b: np.ndarray, s: int, e: int, slack: int, floor: float) -> list[tuple[int, int]]:
+    """Where the whole target aligns best with the movement ``b[s:e]`` (both as shapes, the
+    movement's mean and spread used for the frames around it): stretches starting within
+    ``slack`` frames of ``s`` and ending within ``slack`` of ``e``; for a movement longer than
+    the target's slowest repetition (repetitions without a rest between), every end's best
+    stretch inside it. (start, end exclusive) in frames."""
+    lo, hi = max(s - slack, 0), min(e + slack, len(b))
+    part = b[s:e]
+    window = (b[lo:hi] - part.mean(axis=0)) / max(_spread(part), floor)
+    cost = _distances(a, window)
+    n = len(a)
+    several = e - s > SPEEDS[1] * n + 2 * slack  # several repetitions in one movement: start anywhere
+    if not several:
+        cost[0, s + slack - lo + 1:] = np.inf  # the target's first frame within slack of the start
+    acc, start = subsequence_dtw(cost)
+    norm = np.where(np.isfinite(acc), acc / (n + np.arange(hi - lo) - start + 1), np.inf)
+    if several:
+        return [(lo + int(start[j]), lo + j + 1) for j in np.flatnonzero(np.isfinite(norm))]
+    ends = np.arange(hi - lo)
+    ok = np.isfinite(norm) & (ends >= e - slack - lo - 1)
+    if not ok.any():
+        return []
+    j = int(np.argmin(np.where(ok, norm, np.inf)))
+    return [(lo + int(start[j]), lo + j + 1)]
+
+
+def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], cohort: float, max_cost: float, fps: float):
+    """Repetitions of the target ``a`` among the movements of the take ``b`` (module docstring):
+    (start, end exclusive, cost, cohort ratio) in frames, and the lowest ratio refused."""
     spread = _spread(a)
-    others = others + [(np.repeat(a[k:k + 1], len(a), axis=0), spread) for k in (0, len(a) - 1)]
-    n, m = len(a), len(b)
-    acc, start = subsequence_dtw(_distances(a, b))
-    length = np.arange(m) - start + 1
-    norm = np.where(np.isfinite(acc), acc / (n + length) / spread, np.inf)
-    taken: list[tuple[int, int, float, float]] = []
-    refused: list[tuple[int, int]] = []  # stretches the cohort check found nearer another motion
-    best_other = None
-    checks = 0
-    for j in np.argsort(norm, kind="stable"):
-        c = float(norm[j])
-        if not np.isfinite(c) or c > threshold:
-            best_other = c if np.isfinite(c) else best_other
-            break
-        s = int(start[j])
-        span = j - s + 1
-        if any(min(j, e) - max(s, b0) + 1 > OVERLAP * span for b0, e, *_ in taken + refused):
+    floor = AMPLITUDE_FLOOR * spread
+    moves = movements(b, REST_SHARE * float(np.mean(speed(a, fps))), fps)
+    A = shape(a)
+    slack = int(round(SLACK * fps))
+    n = len(a)
+    stretches = set()
+    for i in range(len(moves)):
+        for k in range(i, min(i + MAX_JOIN, len(moves))):
+            s, e = moves[i][0], moves[k][1]
+            if k > i and e - s > SPEEDS[1] * n + 2 * slack:
+                break
+            if e - s + 2 * slack >= SPEEDS[0] * n:
+                stretches.update(_aligned(A, b, s, e, slack, floor))
+    scored = []
+    for s, e in stretches:
+        if not SPEEDS[0] * n <= e - s <= SPEEDS[1] * n:
             continue
-        checks += 1
-        if checks > MAX_CHECKS:
+        scored.append((global_dtw(_distances(A, shape(b[s:e], floor))), s, e))
+    cands = []  # (cost, start, end, cohort ratio, shape)
+    for c, s, e in sorted(scored)[:MAX_CHECKS]:
+        if not c <= max_cost:
             break
-        stretch = b[s:j + 1]
-        nearest = min(global_dtw(_distances(o, stretch)) / sp for o, sp in others)
-        ratio = c / max(nearest, 1e-12)
-        if ratio > cohort:
-            refused.append((s, int(j)))
-            best_other = c if best_other is None else best_other
+        stretch = shape(b[s:e], floor)
+        nearest = min((global_dtw(_distances(o, stretch)) for o in others), default=np.inf)
+        cands.append((c, s, e, c / max(nearest, 1e-12), stretch))
+    taken = _greedy(cands, [x[0] for x in cands], lambda x: x[3] <= cohort)
+    return sorted((x[1], x[2], x[0], x[3]) for x in taken), min((x[3] for x in cands if x[3] > cohort), default=None)
+
+
+def _greedy(cands: list, key: list[float], accept) -> list:
+    """Candidates taken in the order of ``key`` if ``accept``-ed and overlapping none taken by
+    more than ``OVERLAP`` of their length."""
+    taken = []
+    for k in np.argsort(key, kind="stable"):
+        x = cands[k]
+        if not accept(x):
             continue
-        taken.append((s, int(j), c, ratio))
-    return sorted(taken), best_other
+        s, e = x[1], x[2]
+        if any(min(e, y[2]) - max(s, y[1]) > OVERLAP * (e - s) for y in taken):
+            continue
+        taken.append(x)
+    return taken
 
 
 def segment(take: Clip, target: Clip, expected: int | None = 5, background: list[Clip] | None = None,
-            threshold: float = THRESHOLD, cohort: float = COHORT, fps: float = FPS) -> Segmentation:
+            cohort: float = COHORT, max_cost: float | None = None, fps: float = FPS) -> Segmentation:
     """The repetitions of ``target`` in ``take`` (module docstring); ``background``: other
     motions a stretch must be nearer to the target than (the cohort check)."""
     if take.n_frames < 2 or target.n_frames < 2:
         raise BadInput("the take and the target need at least two frames each")
     if expected is not None and expected < 1:
         raise BadInput(f"expected repetitions must be at least 1, got {expected}", field="expected")
-    background = list(background or [])
-    a, b, *others = features_of(target, [take, *background], fps)
+    a, b, *others = features_of(target, [take, *(background or [])], fps)
     if _spread(a) < 1e-6:
         raise BadInput("the target does not move: nothing to find", field="target")
-    others = [(o, _spread(o)) for o in others if len(o) > 1 and _spread(o) > 1e-6]
-    taken, best_other = _find(a, b, others, threshold, cohort)
-    if SELF_TEMPLATE and taken:
-        # the person's own repetition most like the target becomes the template: their other
-        # repetitions are nearer to it than to the demonstration of another body
-        s0, e0, *_ = min(taken, key=lambda t: t[3])
-        seed = b[s0:e0 + 1]
-        if _spread(seed) > 1e-6:
-            own, _ = _find(seed, b, others, threshold, cohort)
-            if any(s <= s0 + OVERLAP * (e0 - s0) and e >= e0 - OVERLAP * (e0 - s0) for s, e, *_ in own):
-                taken = own
-    reps = []
-    for s_, e, c, ratio in taken:
-        conf = min(1.0 - c / threshold, 1.0 - ratio / (2 * cohort))
-        reps.append(Repetition(s_ / fps, (e + 1) / fps, c, max(0.0, conf), ratio))
-    return Segmentation(reps, expected, threshold, best_other)
+    others = [shape(o) for o in others if len(o) > 1 and _spread(o) > 1e-6]
+    taken, best_refused = _find(a, b, others, cohort, MAX_COST if max_cost is None else max_cost, fps)
+    reps = [Repetition(s / fps, e / fps, c, max(0.0, 1.0 - ratio / cohort), ratio) for s, e, c, ratio in taken]
+    return Segmentation(reps, expected, cohort, best_refused)
+
+
+def until_repeated(target: Clip, expected: int, rest_after: float = REST_AFTER, background: list[Clip] | None = None):
+    """A check for :func:`shared.capture.stream.record`'s ``until``: the take ends once the
+    ``expected`` repetitions of ``target`` are seen, with ``rest_after`` seconds of take after the
+    last (a person done repeating, on a source that never stops). While the take's last
+    ``rest_after`` seconds move (the person is still repeating) the check costs only their
+    speed; the take is cut only once its end rests. The check keeps the take it last cut and what
+    it found as ``enough.last`` (clip, segmentation): when it ends the take, that is the whole take,
+    already cut."""
+    a = features_of(target, [])[0]
+    level = REST_SHARE * float(np.mean(speed(a, FPS)))
+
+    def enough(clip: Clip) -> str | None:
+        if clip.duration < 1.0:
+            return None
+        tail = clip.frames(max(clip.n_frames - int(round((rest_after + SMOOTH) * clip.fps)) - 1, 0))
+        v = speed(features_of(target, [tail])[1], FPS)
+        # a frame's speed spans SMOOTH / 2 either side: the last rest_after - SMOOTH / 2 of it rest
+        if len(v) and v[-max(int(round((rest_after - SMOOTH / 2) * FPS)), 1):].max() >= level:
+            return None
+        seen = segment(clip, target, expected=expected, background=background)
+        enough.last = (clip, seen)
+        if len(seen.repetitions) >= expected and clip.duration - seen.repetitions[-1].end >= rest_after:
+            return f"{len(seen.repetitions)} repetitions seen"
+        return None
+
+    enough.last = None
+    return enough

@@ -240,13 +240,16 @@ def _channels(header: list[str]) -> int:
 
 def record(source: str, out: Path, *, seconds: float | None = None, frames: int | None = None,
            skeleton: Path | None = None, fps: float | None = None, idle: float = 2.0, reconnect: int = 0,
-           connect_timeout: float = 5.0, until=None, check_every: float = 0.25) -> Take:
+           connect_timeout: float = 5.0, until=None, check_every: float = 0.25, on_frame=None,
+           stop_when: threading.Event | None = None) -> Take:
     """Record a take from a live BVH stream (module docstring) into ``out`` (a .bvh file),
     until ``seconds`` or ``frames`` (whichever first), the source stops, or its skeleton
     changes. ``skeleton``: a BVH file whose header the stream's lines follow (a stream without
     a header); ``fps`` its rate (else the file's).
     ``until(clip)``: called with the take so far every ``check_every`` seconds of frames; the
-    take ends when it returns a reason (a source that never stops: a person done repeating)."""
+    take ends when it returns a reason (a source that never stops: a person done repeating).
+    ``on_frame(index, values, frame_time)``: called with every frame kept (values as floats);
+    ``stop_when``: an event that ends the take when set (checked at every line)."""
     host, port = parse_source(source)
     if seconds is None and frames is None:
         raise BadInput("say how long to record: seconds or frames", field="seconds")
@@ -255,6 +258,8 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
     frame_time = 1.0 / fps if fps else file_frame_time
     events: list[str] = []
     rows: list[str] = []
+    values: list[list[float]] = []  # the rows as numbers, for the take so far (:class:`_SoFar`)
+    so_far = _SoFar()
     dropped = skipped = reconnects = 0
     ended = ""
     deadline = None if seconds is None else time.monotonic() + seconds
@@ -284,6 +289,9 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
         stop = False
         with conn:
             while True:
+                if stop_when is not None and stop_when.is_set():
+                    ended, stop = "stopped on request", True
+                    break
                 if deadline is not None and time.monotonic() >= deadline:
                     ended, stop = f"{seconds:g} s recorded", True
                     break
@@ -346,7 +354,7 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                                    "(--skeleton)", field="skeleton")
                 values = text.split()
                 try:
-                    [float(v) for v in values]
+                    numbers = [float(v) for v in values]
                     ok = len(values) == _channels(header)
                 except ValueError:
                     ok = False
@@ -364,9 +372,12 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                                   f"({(now - last_arrival) * 1000:.0f} ms without a frame)")
                 last_arrival = last_frame = now
                 rows.append(text)
+                values.append(numbers)
+                if on_frame is not None:
+                    on_frame(len(rows) - 1, numbers, frame_time)
                 step = max(int(round(check_every / (frame_time or 1 / 30))), 1)
                 if until is not None and len(rows) % step == 0:
-                    reason = until(_clip_of(header, rows, frame_time, Path(out)))
+                    reason = until(so_far.clip(header, rows, values, frame_time, Path(out)))
                     last_arrival = time.monotonic()  # the check's own time is no gap in the stream
                     if reason:
                         ended, stop = str(reason), True
@@ -392,6 +403,26 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, lambda f: f.write(text.encode("latin-1")))
     return Take(out, load_clip(out), len(rows), events, dropped, skipped, reconnects, ended, last_frame, ended_at)
+
+
+class _SoFar:
+    """The take so far as a clip, for ``until``: read once through the BVH reader (conventions
+    and all) and, where the reader kept the stream's numbers as they are (checked on the frames
+    read), later as the same clip with the new numbers, without writing and reading a file."""
+
+    def __init__(self):
+        self.template: Clip | None = None
+        self.header: list[str] | None = None
+
+    def clip(self, header: list[str], rows: list[str], values: list[list[float]], frame_time, out: Path) -> Clip:
+        import numpy as np
+
+        if self.template is not None and self.header is header:
+            return self.template.with_data(np.asarray(values, dtype=float))
+        c = _clip_of(header, rows, frame_time, out)
+        same = c.data.shape == (len(values), len(values[0])) and np.allclose(c.data, np.asarray(values), atol=1e-9)
+        self.template, self.header = (c, header) if same else (None, None)
+        return c
 
 
 def _clip_of(header: list[str], rows: list[str], frame_time: float | None, out: Path) -> Clip:

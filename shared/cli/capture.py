@@ -1,4 +1,5 @@
-"""CLI of live capture: ``capture serve | record | segment`` (shared/capture).
+"""CLI of live capture: ``capture serve | record | segment`` (shared/capture, no cluster needed) and
+``capture take | takes | stop | cut`` (the capture service, `make up`).
 
 A take recorded from a capture suit's live BVH stream (or a clip replayed as one) is cut into
 the repetitions of a target, written as files that ``study attempt`` and ``coach attempt`` take:
@@ -114,4 +115,140 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
                        + (f" -> {files[k - 1]}" if files else ""))
         typer.echo(result.verdict)
     if not result.repetitions:
+        raise typer.Exit(1)
+
+
+# ---------------------------------------------------------------- the capture service (`make up`)
+def _take_line(info: dict) -> str:
+    text = f"{info['take']}: {info['state']}, {info['frames']} frames ({info['seconds']:.1f} s) from {info['source']}"
+    if info.get("ended"):
+        text += f"; {info['ended']}"
+    if info.get("error"):
+        text += f"; {info['error']}"
+    return text
+
+
+@capture_app.command("take")
+def capture_take(name: str = typer.Argument(..., help="The take's name (letters, digits, '_', '.', '-')."),
+                 source: Optional[str] = typer.Option(None, help="The live source the service connects to: "
+                                                                 "tcp://HOST:PORT (a capture suit, `capture serve`)."),
+                 replay: list[Path] = typer.Option([], help="Clips the service plays through a loopback port instead "
+                                                            "of a live source (one per connection); repeat the option."),
+                 target: Optional[Path] = typer.Option(None, help="With --expected: end the take once that many "
+                                                                  "repetitions of this motion are seen."),
+                 expected: Optional[int] = typer.Option(None, help="Repetitions that end the take (with --target)."),
+                 seconds: float = typer.Option(120.0, help="The take's longest duration."),
+                 idle: float = typer.Option(2.0, help="Seconds without a frame that end the take."),
+                 reconnect: int = typer.Option(0, help="Connect again this many times when the source stops."),
+                 skeleton: Optional[Path] = typer.Option(None, help="A BVH file whose skeleton the stream follows (a "
+                                                                     "stream without a header)."),
+                 replace: bool = typer.Option(False, "--replace", help="Record over a finished take of that name."),
+                 wait: bool = typer.Option(True, "--wait/--no-wait", help="Wait for the take to end, showing its frames."),
+                 as_json: bool = typer.Option(False, "--json", help="Print the take's state as JSON.")):
+    """Record a take on the capture service (needs `make up`): its frames are published on the bus
+    as they arrive (the dashboard shows them); dropped or missing frames, a source that stops or
+    comes back and a skeleton that changes are in its events."""
+    from shared.cli.cluster import _client, _wire
+
+    if (source is None) == (not replay):
+        _fail("give either --source tcp://HOST:PORT or --replay FILE (one or more)")
+    msg: dict = {"take": name, "seconds": seconds, "idle": idle, "reconnect": reconnect, "replace": replace}
+    if source is not None:
+        msg["source"] = source
+    else:
+        msg["replay"] = [_wire(read_clip(p)) for p in replay]
+    if (target is None) != (expected is None):
+        _fail("--target and --expected go together: the take ends once that many repetitions are seen")
+    if target is not None:
+        msg["target"], msg["expected"] = _wire(read_clip(target)), expected
+    if skeleton is not None:
+        try:
+            msg["skeleton"] = skeleton.read_text(encoding="latin-1")
+        except OSError as e:
+            _fail(f"{skeleton}: {e.strerror or e}")
+    with _client() as c:
+        info = c.request("capture", "record", msg)
+        typer.echo(_take_line(info), err=True)
+        if wait:
+            from rich.progress import Progress, SpinnerColumn, TextColumn
+
+            deadline = time.monotonic() + seconds + idle * (reconnect + 1) + 60
+            with Progress(SpinnerColumn(), TextColumn("{task.description}"), transient=True) as prog:
+                task = prog.add_task("recording", total=None)
+                while info["state"] == "recording" and time.monotonic() < deadline:
+                    time.sleep(0.25)
+                    info = c.request("capture", "status", {"take": name})
+                    prog.update(task, description=f"recording {name}: {info['frames']} frames ({info['seconds']:.1f} s)")
+            if info["state"] == "recording":
+                info = c.request("capture", "stop", {"take": name})
+    if as_json:
+        typer.echo(json.dumps(info, indent=1))
+    else:
+        for e in info["events"]:
+            typer.echo(f"  {e}", err=True)
+        typer.echo(_take_line(info))
+    if info["state"] == "failed":
+        raise typer.Exit(1)
+
+
+@capture_app.command("takes")
+def capture_takes(as_json: bool = typer.Option(False, "--json", help="Print as JSON.")):
+    """Every take on the capture service, recording or kept."""
+    from shared.cli.cluster import _client
+
+    with _client() as c:
+        takes = c.request("capture", "list", {})["takes"]
+    if as_json:
+        typer.echo(json.dumps(takes, indent=1))
+        return
+    for t in takes:
+        typer.echo(_take_line(t))
+    if not takes:
+        typer.echo("no takes yet (record one with `mirrorcoach capture take NAME --source ...`)", err=True)
+
+
+@capture_app.command("stop")
+def capture_stop(name: str = typer.Argument(..., help="The take to end (its frames are kept).")):
+    """End a take the capture service is recording."""
+    from shared.cli.cluster import _client
+
+    with _client() as c:
+        typer.echo(_take_line(c.request("capture", "stop", {"take": name})))
+
+
+@capture_app.command("cut")
+def capture_cut(name: str = typer.Argument(..., help="A finished take on the capture service."),
+                target: Path = typer.Option(..., help="The target motion whose repetitions to find."),
+                expected: int = typer.Option(5, help="Repetitions the person was asked for."),
+                background: list[Path] = typer.Option([], help="Other motions a repetition must be nearer to the target "
+                                                                "than; repeat the option."),
+                out: Optional[Path] = typer.Option(None, help="Write the take as take.bvh and each repetition as "
+                                                              "rep1.bvh, rep2.bvh, ... here."),
+                as_json: bool = typer.Option(False, "--json", help="Print the result as JSON.")):
+    """Find the repetitions of a target in a take the capture service recorded (each with a
+    confidence) and, with --out, write the take and the repetitions as files."""
+    from schemas.common import clip_from_wire
+    from shared.cli.cluster import _client, _wire
+    from shared.io import save_clip
+
+    msg = {"take": name, "target": _wire(read_clip(target)), "expected": expected,
+           "background": [_wire(read_clip(b)) for b in background]}
+    with _client() as c:
+        r = c.request("capture", "segment", msg)
+        whole = c.request("capture", "clip", {"take": name})["clip"] if out is not None else None
+    files = []
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        save_clip(clip_from_wire(whole), out / "take.bvh")
+        for k, part in enumerate(r["clips"], 1):
+            save_clip(clip_from_wire(part), out / f"rep{k}.bvh")
+            files.append(str(out / f"rep{k}.bvh"))
+    if as_json:
+        typer.echo(json.dumps({k: v for k, v in r.items() if k != "clips"} | {"files": files}, indent=1))
+    else:
+        for k, rep in enumerate(r["repetitions"], 1):
+            typer.echo(f"rep {k}: {rep['start']:.2f}-{rep['end']:.2f} s, confidence {rep['confidence']:.2f}"
+                       + (f" -> {files[k - 1]}" if files else ""))
+        typer.echo(r["verdict"])
+    if not r["repetitions"]:
         raise typer.Exit(1)

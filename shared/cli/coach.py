@@ -190,3 +190,76 @@ def coach_list():
     with _client() as c:
         for s in c.request("coach", "list")["sessions"]:
             typer.echo(f"{s['session']:<24} {s['trials']} trial(s)  {s.get('learner') or 'person'}")
+
+
+@coach_app.command("live")
+def coach_live(session: str = typer.Argument(..., help="A session started with `coach start --person` (or a new one: "
+                                                       "started here with the default policy)."),
+               target: Path = typer.Option(..., help="The session's target motion (its repetitions are cut from each "
+                                                     "take)."),
+               source: str = typer.Option(..., help="The live source the capture service connects to: tcp://HOST:PORT."),
+               trials: int = typer.Option(4, min=1, max=50, help="Trials to run."),
+               expected: int = typer.Option(5, min=1, max=50, help="Repetitions in each take."),
+               idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
+               seconds: float = typer.Option(120.0, help="A take's longest duration."),
+               retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
+               out: Optional[Path] = typer.Option(None, help="The session's folder: takes, demonstrations and spoken "
+                                                             "adverbs (default: ./live-SESSION)."),
+               say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb into a .wav beside each "
+                                                                     "demonstration."),
+               aloud: bool = typer.Option(False, "--aloud", help="Also play it through the speakers (aplay)."),
+               skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+    """Coach a person live (needs `make up`): each trial's take is recorded from the source by the
+    capture service until the expected repetitions are seen, cut into them and sent to the coach;
+    the next demonstration is shown in the dashboard and written to the session's folder, and the
+    adverb said into a .wav beside it. Type r (redo the take), s (stop: skip the rest) or q (quit
+    after this trial) and Enter while it runs."""
+    from schemas.common import clip_from_wire
+    from shared.cli.live import Controls, ready_line, save_take, take_and_cut
+    from shared.bus.client import RemoteError
+    from shared.cli.study import _say
+    from shared.io import save_clip
+
+    folder = out or Path(f"live-{session}")
+    folder.mkdir(parents=True, exist_ok=True)
+    tgt = read_clip(target, skeleton=skeleton)
+    with _client() as c:
+        try:
+            info = c.request("coach", "state", {"session": session})
+        except RemoteError as e:
+            if e.code != "not_found":
+                raise
+            info = c.request("coach", "start", {"session": session, "target": _wire(tgt),
+                                                "policy": _policy("fixed", 2.0, "table", False, None)})
+            typer.echo(f"started session {session} (policy fixed, alpha 2, the adverbs of Table 4.1)", err=True)
+    if info.get("learner"):
+        _fail(f"session {session} coaches the simulated learner {info['learner']}; start one with --person")
+    controls = Controls(folder)
+    msg = {"source": source, "seconds": seconds, "idle": idle, "target": _wire(tgt), "expected": expected,
+           "check_every": 0.1}
+    for k in range(trials):
+        trial = len(info.get("trials", [])) + 1
+        typer.echo(f"trial {trial}: recording from {source}")
+        with _client() as c:
+            got = take_and_cut(c, f"{session}_trial{trial}", msg, controls, retries, lambda t: typer.echo(t, err=True))
+            if got.get("word") == "skip":
+                typer.echo("stopped on request (skip)")
+                return
+            if got["result"] is None:
+                _fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {trial}")
+            clips = [clip_from_wire(x) for x in got["result"]["clips"]]
+            r = c.request("coach", "attempt", {"session": session, "clips": [_wire(a) for a in clips]})
+            demo = clip_from_wire(r["emphatic"]).resample(clips[0].fps)
+            file = folder / f"{session}_trial{r['trial'] + 1}.{'bvh' if demo.skeleton is not None else 'npz'}"
+            save_clip(demo, file)
+            _print_trial(r, file)
+            if say and r.get("adverb"):
+                _say(r["adverb"], file.with_suffix(".wav"), aloud)
+            line = ready_line(got["info"])
+            if line:
+                typer.echo(line, err=True)
+            save_take(c, got["name"], folder / "takes" / f"{got['name']}.bvh")
+            info = c.request("coach", "state", {"session": session})
+        if controls.quit:
+            typer.echo("stopped on request (`coach live` again to go on)")
+            return

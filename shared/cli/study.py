@@ -5,7 +5,6 @@ See :mod:`shared.study` for the folder, the counterbalanced plan and why no tria
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 from typing import Optional
 
@@ -20,7 +19,6 @@ study_app = typer.Typer(help="Run the thesis's studies with people: participants
 app.add_typer(study_app, name="study")
 
 FOLDER = typer.Argument(..., help="The study's folder (made by `study init`).")
-REST_AFTER = 0.3  # seconds of take after the last expected repetition before a live take ends
 
 
 def _study(folder: Path) -> tuple[dict, list[dict]]:
@@ -250,12 +248,23 @@ def study_attempt(folder: Path = FOLDER,
     _trial(folder, participant, attempts, say, aloud)
 
 
-def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: bool = False) -> dict:
-    """One trial (the coach scores the attempt and decides the next demonstration and adverb),
-    logged; the next demonstration written to show/ and the adverb said beside it."""
-    from schemas.common import clip_from_wire
+def _start_session(c, folder: Path, p: dict, participant: str, case: int) -> None:
+    """The coach's session of a participant's case (its first trial), started afresh."""
     from shared.io import load_clip
-    from shared.study import append, next_step, policy, session_name, trial_event
+    from shared.study import policy, session_name
+
+    c.request("coach", "start", {"session": session_name(p["study"], participant, case),
+                                 "target": _wire(load_clip(folder / "target.npz")),
+                                 "policy": policy(p, participant, case), "replace": True})
+
+
+def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: bool = False,
+           started: bool = False) -> dict:
+    """One trial (the coach scores the attempt and decides the next demonstration and adverb),
+    logged; the next demonstration written to show/ and the adverb said beside it. ``started``:
+    a first trial's session was started already (while the person performed)."""
+    from schemas.common import clip_from_wire
+    from shared.study import append, next_step, session_name, trial_event
 
     p, events = _study(folder)
     with _client() as c:
@@ -264,9 +273,8 @@ def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: boo
         if step is None:
             _fail(f"{participant} has done every case")
         case, name = step["case"], session_name(p["study"], participant, step["case"])
-        if step["trial"] == 1:
-            c.request("coach", "start", {"session": name, "target": _wire(load_clip(folder / "target.npz")),
-                                         "policy": policy(p, participant, case), "replace": True})
+        if step["trial"] == 1 and not started:
+            _start_session(c, folder, p, participant, case)
         r = c.request("coach", "attempt", {"session": name, "clips": [_wire(a) for a in attempts]})
     last = step["trial"] == p["trials"]
     shown = None if last else str(_save_shown(folder, f"{participant}_case{case}_trial{step['trial'] + 1}",
@@ -281,71 +289,103 @@ def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: boo
             "adverb": r.get("adverb"), "d_p": r["d_p"]}
 
 
+def _control(folder: Path, word: str) -> None:
+    _study(folder)  # a study's folder, or a clear error
+    with open(folder / ".control", "a") as f:
+        f.write(word + "\n")
+    typer.echo(f"asked the running `study run` in {folder} to {word}")
+
+
+@study_app.command("redo")
+def study_redo(folder: Path = FOLDER):
+    """Record the current trial's take again (the running `study run` stops the take it is
+    recording, or the one just cut before it is scored, and records anew). Same as typing r."""
+    _control(folder, "redo")
+
+
+@study_app.command("skip")
+def study_skip(folder: Path = FOLDER):
+    """Leave the current participant's trials for later: the running `study run` moves on to the
+    next participant (a later `study run` comes back to them). Same as typing s."""
+    _control(folder, "skip")
+
+
+@study_app.command("quit")
+def study_quit(folder: Path = FOLDER):
+    """Stop the running `study run` once the trial in progress is done (nothing is lost). Same as
+    typing q."""
+    _control(folder, "quit")
+
+
 @study_app.command("run")
 def study_run(folder: Path = FOLDER,
-              source: str = typer.Option(..., help="The live source: tcp://HOST:PORT (a capture suit's BVH stream, or "
-                                                   "`capture serve`)."),
+              source: str = typer.Option(..., help="The live source the capture service connects to: tcp://HOST:PORT "
+                                                   "(a capture suit's BVH stream, or `capture serve`)."),
               participant: Optional[str] = typer.Option(None, help="Only this participant's trials."),
               steps: Optional[int] = typer.Option(None, help="Run this many trials, then stop (default: all)."),
               expected: int = typer.Option(5, help="Repetitions in each take."),
               idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
               seconds: float = typer.Option(120.0, help="A take's longest duration."),
               retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
-              check_every: float = typer.Option(0.25, help="Seconds of take between looks for the expected "
+              check_every: float = typer.Option(0.1, help="Seconds of take between looks for the expected "
                                                            "repetitions (the take ends once they are all seen)."),
               say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav."),
               aloud: bool = typer.Option(False, "--aloud", help="Also play it through the speakers (aplay).")):
-    """The study, live: trial after trial, the take is recorded from the source until it stops,
-    cut into its repetitions, scored by the coach, the next demonstration written to show/ and the
-    adverb said into a .wav beside it. Every take is kept in takes/; the log, CSV and reports are
-    those of `study attempt`."""
-    from shared.capture.segment import segment
-    from shared.capture.stream import record
+    """The study, live (needs `make up`): trial after trial, the capture service records the take
+    from the source until the expected repetitions are seen (or the source stops), cuts it into
+    its repetitions; the coach scores them and decides the next demonstration (shown in the
+    dashboard and written to show/) and adverb (said into a .wav beside it). Every take is kept in
+    takes/; the log, CSV and reports are those of `study attempt`. While it runs, type r (redo the
+    take), s (skip to the next participant) or q (quit after this trial) and Enter, or run
+    `study redo | skip | quit FOLDER` from another terminal."""
+    from schemas.common import clip_from_wire
+    from shared.cli.live import Controls, ready_line, save_take, take_and_cut
     from shared.io import load_clip
     from shared.study import next_step
 
-    target = load_clip(folder / "target.npz")
-
-    def repeated_enough(clip) -> str | None:
-        """The take ends once the expected repetitions are seen, with a moment of rest after the last."""
-        if clip.duration < 1.0:
-            return None
-        seen = segment(clip, target, expected=expected)
-        if len(seen.repetitions) >= expected and clip.duration - seen.repetitions[-1].end >= REST_AFTER:
-            return f"{len(seen.repetitions)} repetitions seen"
-        return None
-
+    target = _wire(load_clip(folder / "target.npz"))
+    controls = Controls(folder)
+    skipped: set[str] = set()
     done = 0
     while steps is None or done < steps:
         p, events = _study(folder)
         with _client() as c:
             events = _reconcile(c, folder, p, events)
-        step = next_step(p, events, participant)
+        who_left = [participant] if participant else [w for w in p["participants"] if w not in skipped]
+        step = next((x for w in who_left if (x := next_step(p, events, w)) is not None), None)
         if step is None:
-            typer.echo("nothing left: every case of every participant is done")
+            typer.echo("nothing left: every case of every participant is done" if not skipped else
+                       f"nothing left in this run ({', '.join(sorted(skipped))} skipped: `study run` again for them)")
             return
         who, case, n = step["participant"], step["case"], step["trial"]
         typer.echo(f"{who}, case {case}, trial {n}: recording from {source}")
-        for attempt in range(retries + 1):
-            out = folder / "takes" / f"{who}_case{case}_trial{n}_{attempt + 1}.bvh"
-            take = record(source, out, seconds=seconds, idle=idle, until=repeated_enough, check_every=check_every)
-            for e in take.events:
-                typer.echo(f"  {e}", err=True)
-            if not take.frames:
-                _fail(f"the source at {source} gave no frames ({take.ended})")
-            result = segment(take.clip, target, expected=expected)
-            typer.echo(f"  take {out.name}: {take.frames} frames, {result.verdict}", err=True)
-            if result.repetitions:
-                break
-        else:
+        msg = {"source": source, "seconds": seconds, "idle": idle, "target": target, "expected": expected,
+               "check_every": check_every}
+        with _client() as c:
+            if n == 1:  # the coach is ready before the person has finished the take
+                _start_session(c, folder, p, who, case)
+            got = take_and_cut(c, f"{who}_case{case}_trial{n}", msg, controls, retries, lambda t: typer.echo(t, err=True))
+        if got.get("word") == "skip":
+            typer.echo(f"  {who}: skipped on request (their trials are left for a later `study run`)")
+            skipped.add(who)
+            if participant:
+                return
+            continue
+        if got["result"] is None:
             _fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {n} of {who}")
-        _trial(folder, who, result.cut(take.clip), say, aloud)
-        if take.last_frame is not None:
-            now = time.monotonic()
-            typer.echo(f"  next demonstration and adverb ready {now - take.last_frame:.2f} s after the "
-                       f"take's last frame ({take.ended_at - take.last_frame:.2f} s of it until the take ended: "
-                       f"{take.ended}; ready at {now:.3f})", err=True)
+        _trial(folder, who, [clip_from_wire(x) for x in got["result"]["clips"]], say, aloud, started=n == 1)
+        line = ready_line(got["info"])
+        if line:
+            typer.echo(line, err=True)
+        with _client() as c:  # kept beside the study, after the person has their next demonstration
+            save_take(c, got["name"], folder / "takes" / f"{got['name']}.bvh")
         done += 1
+        word = controls.next()  # a redo or skip typed now is for the next trial
+        if word is not None:
+            controls.q.put(word)
+        if controls.quit:
+            typer.echo("stopped on request (`study run` again to go on)")
+            return
 
 
 def _cut(take, target, expected: int) -> list:
