@@ -70,7 +70,8 @@ def main(argv=None) -> int:
     found = re.findall(r"frames, (\d+) repetition\(s\) found|fewer repetitions than expected: (\d+) found", r.stderr)
     trials = r.stdout.count("recording from")
     res = {"after_fifth_repetition_s": {"median": float(np.median(after_fifth)), "max": float(np.max(after_fifth)),
-                                        "n": len(after_fifth)} if after_fifth else None,
+                                        "n": len(after_fifth), "each": [round(x, 3) for x in after_fifth]}
+           if after_fifth else None,
            "trials": trials, "seconds": seconds, "idle_s": IDLE, "takes_speed": 4.0,
            "ready_after_last_frame_s": {"median": float(np.median(ready)), "max": float(np.max(ready))} if ready else None,
            "until_the_take_ended_s": {"median": float(np.median(waited))} if waited else None,

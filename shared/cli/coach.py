@@ -215,7 +215,7 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
     adverb said into a .wav beside it. Type r (redo the take), s (stop: skip the rest) or q (quit
     after this trial) and Enter while it runs."""
     from schemas.common import clip_from_wire
-    from shared.cli.live import Controls, ready_line, save_take, take_and_cut
+    from shared.cli.live import Controls, ready_line, save_take, take_and_cut, warm
     from shared.bus.client import RemoteError
     from shared.cli.study import _say
     from shared.io import save_clip
@@ -223,6 +223,7 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
     folder = out or Path(f"live-{session}")
     folder.mkdir(parents=True, exist_ok=True)
     tgt = read_clip(target, skeleton=skeleton)
+    warm(tgt)
     with _client() as c:
         try:
             info = c.request("coach", "state", {"session": session})

@@ -339,11 +339,13 @@ def study_run(folder: Path = FOLDER,
     take), s (skip to the next participant) or q (quit after this trial) and Enter, or run
     `study redo | skip | quit FOLDER` from another terminal."""
     from schemas.common import clip_from_wire
-    from shared.cli.live import Controls, ready_line, save_take, take_and_cut
+    from shared.cli.live import Controls, ready_line, save_take, take_and_cut, warm
     from shared.io import load_clip
     from shared.study import next_step
 
-    target = _wire(load_clip(folder / "target.npz"))
+    target_clip = load_clip(folder / "target.npz")
+    warm(target_clip)
+    target = _wire(target_clip)
     controls = Controls(folder)
     skipped: set[str] = set()
     done = 0
