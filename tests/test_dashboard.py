@@ -62,13 +62,15 @@ def test_the_demo_recording_in_the_real_viewer(viewer_ok, demo_recording, tmp_pa
         for trial in (1, 4):  # any trial plays back: the middle of trial 1 and of trial 4
             v.show_tab("session demo")
             v.set_time("playback", trial * k + k // 2)
-            shots[f"body{trial}"] = v.screenshot(tmp_path / f"body{trial}.png", view="target | attempt | emphatic")
+            shots[f"body{trial}"] = v.screenshot(tmp_path / f"body{trial}.png", view="target | attempt | emphatic",
+                                                 origin="/sessions/demo/body")
             shots[f"session{trial}"] = v.screenshot(tmp_path / f"session{trial}.png")
             assert v.reports() == []
         # the live take's trial (replayed through the capture service): its next demonstration shown
         v.show_tab("session demo-person")
         v.set_time("playback", k + k // 2)
-        shots["live1"] = v.screenshot(tmp_path / "live1.png", view="target | attempt | emphatic")
+        shots["live1"] = v.screenshot(tmp_path / "live1.png", view="target | attempt | emphatic",
+                                      origin="/sessions/demo-person/body")
         assert v.reports() == []
         v.show_tab("estimate demo")
         v.set_time("set", lines["set"][1])

@@ -177,13 +177,15 @@ class HeadlessViewer:
         """``(view, severity, summary)`` of every view that failed to visualize something."""
         return [(v.name, r.severity, r.summary) for v in self.views() for r in v.reports]
 
-    def screenshot(self, path, view: str | None = None) -> Path:
-        """The whole viewer, or one view (by name) of the tab on screen, as a PNG."""
+    def screenshot(self, path, view: str | None = None, origin: str | None = None) -> Path:
+        """The whole viewer, or one view of the tab on screen, as a PNG: by name, and by its origin
+        (the entity path it shows) where several tabs have a view of that name."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         view_id = None
-        if view is not None:
-            view_id = next(v.view_id for v in self.views() if v.name == view)
+        if view is not None or origin is not None:
+            view_id = next(v.view_id for v in self.views()
+                           if (view is None or v.name == view) and (origin is None or v.origin == origin))
         self.client.save_screenshot(str(path.absolute()), view_id=view_id)
         return path
 
