@@ -296,13 +296,20 @@ def private_home(s: Settings) -> None:
 
 
 def router_port_taken(endpoint: str) -> str | None:
-    """Why the router could not listen on ``endpoint`` (``tcp/HOST:PORT``), or None when it can:
+    """Why the router could not listen on ``endpoint``, or None when it can: for ``tcp/HOST:PORT``
     a trial bind on the same address, as the router would (SO_REUSEADDR, so connections of a
-    cluster just stopped do not count)."""
+    cluster just stopped do not count); for a socket, a router answering on it (a file left by a
+    killed router is removed when the router starts)."""
     import socket
 
-    from shared.bus.config import parse_endpoint
+    from shared.bus.config import parse_endpoint, socket_in_use, socket_path
 
+    sock = socket_path(endpoint)
+    if sock is not None:
+        if socket_in_use(sock):
+            return (f"a router already listens on {sock}: a cluster whose supervisor died left it; stop it "
+                    f"(`mirrorcoach down`), or use another MIRRORCOACH_HOME")
+        return None
     proto, host, port = parse_endpoint(endpoint)
     if proto != "tcp":
         return None

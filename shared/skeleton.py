@@ -285,7 +285,10 @@ class Skeleton:
 
     @classmethod
     def from_json(cls, text: str) -> "Skeleton":
-        d = json.loads(text)
+        try:
+            d = json.loads(text)
+        except RecursionError:  # a payload nested past the parser's stack: refused like any bad JSON
+            raise ValueError("the skeleton JSON nests too deeply") from None
         return cls(
             name=str(d["name"]),
             joints=[Joint.from_dict(j) for j in d["joints"]],

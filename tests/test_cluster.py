@@ -41,6 +41,68 @@ def cluster(tmp_path):
     assert "router stopped" in (logs / "router.log").read_text()
 
 
+def _connects_as_nobody(family, address) -> bool | None:
+    """Whether uid ``nobody`` can connect to ``address`` (a forked child drops to it); None when
+    this process cannot change uid (not root)."""
+    import pwd
+    import socket
+
+    if os.geteuid() != 0:
+        return None
+    nobody = pwd.getpwnam("nobody")
+    pid = os.fork()
+    if pid == 0:  # the child: another user of this machine
+        code = 3
+        try:
+            os.setgroups([])
+            os.setgid(nobody.pw_gid)
+            os.setuid(nobody.pw_uid)
+            with socket.socket(family, socket.SOCK_STREAM) as sock:
+                sock.settimeout(2.0)
+                try:
+                    sock.connect(address)
+                    code = 0
+                except OSError:
+                    code = 1
+        finally:
+            os._exit(code)
+    return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 0
+
+
+def test_the_default_cluster_is_closed_to_other_users(tmp_path, bundled):
+    """`up` without MIRRORCOACH_ROUTER: the router listens on a socket in the 0700 home, 0600; the
+    CLI works through it; another local user (uid nobody) cannot connect to it, where a TCP port
+    on 127.0.0.1 lets them in. A router killed with SIGKILL leaves its socket file: the
+    supervisor's new router replaces it and the cluster answers again."""
+    import socket
+
+    env = cluster_env(tmp_path / "home")
+    del env["MIRRORCOACH_ROUTER"]
+    sock = tmp_path / "home" / "run" / "router.sock"
+    try:
+        r = cli(env, "up")
+        assert r.returncode == 0 and f"unixsock-stream/{sock}" in r.stdout + r.stderr, r.stdout + r.stderr
+        assert (tmp_path / "home").stat().st_mode & 0o777 == 0o700 and sock.stat().st_mode & 0o077 == 0
+        assert cli(env, "space", "list").returncode == 0
+        tcp = socket.create_server(("127.0.0.1", 0))
+        with tcp:
+            seen = _connects_as_nobody(socket.AF_INET, ("127.0.0.1", tcp.getsockname()[1]))
+            if seen is None:
+                pytest.skip("not root: cannot run a client as another user here")
+            assert seen is True  # the check can fail: a loopback port is open to another user
+        assert _connects_as_nobody(socket.AF_UNIX, str(sock)) is False
+        router = int((tmp_path / "home" / "run" / "router.pid").read_text().split()[0])
+        os.kill(router, signal.SIGKILL)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            time.sleep(1.0)
+            if cli(env, "space", "list").returncode == 0:
+                break
+        assert cli(env, "space", "list").returncode == 0, (tmp_path / "home" / "logs" / "router.log").read_text()[-2000:]
+    finally:
+        cli(env, "down")
+
+
 def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     env = cluster
     st = cli(env, "status", "--json")

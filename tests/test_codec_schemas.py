@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import msgpack
 import numpy as np
+import os
+
 import pytest
 
 from schemas import CONTRACTS
@@ -103,6 +105,8 @@ def test_clip_wire_round_trip(bundled):
     assert np.array_equal(back.data, c.data) and back.skeleton == c.skeleton
     with pytest.raises(BadInput, match="skeleton"):
         clip_from_wire({**clip_to_wire(c), "skeleton": "{not json"})
+    with pytest.raises(BadInput, match="nests too deeply"):  # not a RecursionError reported as internal
+        clip_from_wire({**clip_to_wire(c), "skeleton": "[" * 100_000 + "]" * 100_000})
 
 
 def test_settings_accept_loopback_only():
@@ -110,8 +114,23 @@ def test_settings_accept_loopback_only():
     for bad in ("tcp/0.0.0.0:7447", "tcp/192.168.1.4:7447", "tcp/example.com:7447", "7447", "tcp/127.0.0.1:70000"):
         with pytest.raises(BadInput):
             check_loopback(bad)
+    for bad in ("unixsock-stream/relative.sock", "unixsock-stream//" + "x" * 200):
+        with pytest.raises(BadInput, match="absolute path"):
+            check_loopback(bad)
     with pytest.raises(BadInput, match="PREFIX"):
         Settings(prefix="a/b")
+
+
+def test_the_default_router_is_a_socket_in_the_home_or_a_short_one_of_the_user(tmp_path):
+    """Without MIRRORCOACH_ROUTER the cluster listens on its home's socket; a home too deep for
+    a socket path gets one in /tmp/mirrorcoach-<uid>, a different one per home."""
+    from shared.bus.config import default_router
+
+    assert Settings(router="", home=tmp_path).router == f"unixsock-stream/{tmp_path}/run/router.sock"
+    deep, other = tmp_path / ("d" * 60) / ("e" * 60), tmp_path / ("d" * 60) / ("f" * 60)
+    r = default_router(deep)
+    assert r.startswith(f"unixsock-stream//tmp/mirrorcoach-{os.getuid()}/") and r != default_router(other)
+    assert check_loopback(r) == r
     assert Settings(prefix="mc2").key("pss", "build") == "mc2/pss/build"
 
 

@@ -3,7 +3,10 @@
 ================================  ==========================  ===========================================
 variable                          default                     meaning
 ================================  ==========================  ===========================================
-``MIRRORCOACH_ROUTER``            ``tcp/127.0.0.1:7447``      the router's endpoint (loopback only)
+``MIRRORCOACH_ROUTER``            a socket in the home        the router's endpoint: by default the Unix
+                                                              socket ``<home>/run/router.sock`` (its
+                                                              user's alone); or ``tcp/127.0.0.1:PORT``
+                                                              (loopback only, open to every local user)
 ``MIRRORCOACH_PREFIX``            ``mc``                      first segment of every key
 ``MIRRORCOACH_HOME``              ``./var``                   data (``data/<service>``), logs, pid files
 ``MIRRORCOACH_MAX_PAYLOAD``       ``67108864`` (64 MiB)       largest request a service accepts, bytes
@@ -31,8 +34,13 @@ variable                          default                     meaning
 ================================  ==========================  ===========================================
 
 The embedded default topology (DESIGN.md "Bus conventions"): one router-mode Zenoh session
-listening on the loopback endpoint, every service and the CLI as clients connecting to it,
-multicast and gossip scouting off, so nothing binds or talks beyond 127.0.0.1.
+listening on a Unix socket in the cluster's home, every service and the CLI as clients connecting
+to it, multicast and gossip scouting off, so nothing binds a network port. The home is 0700 and
+the socket 0600, so another user of the machine can neither reach the socket nor connect to it:
+a TCP port on 127.0.0.1 (``MIRRORCOACH_ROUTER=tcp/127.0.0.1:PORT``, as the tests and benchmarks
+use) is open to every local user, who could then call, answer in a service's place or listen.
+A home whose socket path would pass the system's limit (107 bytes) gets its socket in
+``/tmp/mirrorcoach-<uid>/`` (0700) instead, named after the home.
 """
 
 from __future__ import annotations
@@ -63,6 +71,56 @@ def _env_num(name: str, default, kind=int):
         raise BadInput(f"{name}={raw!r} is not a number") from None
 
 
+SOCKET = "unixsock-stream/"
+MAX_SOCKET_PATH = 107  # bytes of a Unix socket's path (sun_path, with its terminating zero)
+
+
+def socket_path(endpoint: str) -> Path | None:
+    """The socket file of a ``unixsock-stream/PATH`` endpoint, or None for any other."""
+    return Path(endpoint[len(SOCKET):]) if endpoint.startswith(SOCKET) else None
+
+
+def default_router(home: Path) -> str:
+    """The cluster's own socket: ``<home>/run/router.sock``, or, where that path is too long for a
+    socket, one in ``/tmp/mirrorcoach-<uid>`` named after the home."""
+    import hashlib
+
+    path = home / "run" / "router.sock"
+    if len(os.fsencode(str(path))) > MAX_SOCKET_PATH:
+        digest = hashlib.sha256(os.fsencode(str(home))).hexdigest()[:16]
+        path = Path(f"/tmp/mirrorcoach-{os.getuid()}") / f"{digest}.sock"
+    return f"{SOCKET}{path}"
+
+
+def socket_in_use(path: Path) -> bool:
+    """Whether a process listens on the socket file ``path`` (a file left by a router killed
+    with SIGKILL is not in use)."""
+    import socket
+
+    if not path.exists():
+        return False
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+        sock.settimeout(1.0)
+        try:
+            sock.connect(str(path))
+            return True
+        except OSError:
+            return False
+
+
+def prepare_socket(path: Path) -> None:
+    """The folder of the router's socket made the user's alone (0700, refused when another user
+    owns it), and a socket file left by a killed router removed."""
+    folder = path.parent
+    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+    st = folder.stat()
+    if st.st_uid != os.getuid():
+        raise BadInput(f"the router's socket folder {folder} belongs to another user: not safe to listen there")
+    folder.chmod(0o700)
+    if path.exists() and not socket_in_use(path):
+        path.unlink()
+
+
 def parse_endpoint(endpoint: str) -> tuple[str, str, int]:
     """``tcp/127.0.0.1:7447`` -> ``("tcp", "127.0.0.1", 7447)`` (``[::1]`` without brackets)."""
     m = re.fullmatch(r"(tcp|udp)/\[?([^\]]+?)\]?:(\d{1,5})", endpoint)
@@ -72,7 +130,13 @@ def parse_endpoint(endpoint: str) -> tuple[str, str, int]:
 
 
 def check_loopback(endpoint: str) -> str:
-    """``tcp/127.0.0.1:7447`` -> itself; anything not on loopback is refused."""
+    """``tcp/127.0.0.1:7447`` or ``unixsock-stream/ABSOLUTE_PATH`` -> itself; anything not on this
+    machine is refused."""
+    path = socket_path(endpoint)
+    if path is not None:
+        if not path.is_absolute() or len(os.fsencode(str(path))) > MAX_SOCKET_PATH:
+            raise BadInput(f"endpoint {endpoint!r}: a socket needs an absolute path of at most {MAX_SOCKET_PATH} bytes")
+        return endpoint
     _, host, port = parse_endpoint(endpoint)
     if not 0 < port < 65536:
         raise BadInput(f"endpoint {endpoint!r}: port out of range")
@@ -87,7 +151,7 @@ def check_loopback(endpoint: str) -> str:
 
 @dataclass
 class Settings:
-    router: str = field(default_factory=lambda: _env("MIRRORCOACH_ROUTER", "tcp/127.0.0.1:7447"))
+    router: str = field(default_factory=lambda: _env("MIRRORCOACH_ROUTER", ""))  # "": the home's socket
     prefix: str = field(default_factory=lambda: _env("MIRRORCOACH_PREFIX", "mc"))
     home: Path = field(default_factory=lambda: Path(_env("MIRRORCOACH_HOME", "var")).absolute())
     max_payload: int = field(default_factory=lambda: _env_num("MIRRORCOACH_MAX_PAYLOAD", DEFAULT_MAX_PAYLOAD))
@@ -114,6 +178,7 @@ class Settings:
                                f"prefix is {self.identity.prefix!r}; unset one")
             self.prefix, self.router = self.identity.prefix, ", ".join(self.identity.routers)
         else:
+            self.router = self.router or default_router(self.home)
             check_loopback(self.router)
         if not 1 <= self.workers <= 64:
             raise BadInput(f"MIRRORCOACH_WORKERS must be 1..64, got {self.workers}")

@@ -83,8 +83,8 @@ class RefusalLog:
 def main() -> int:
     import zenoh
 
-    from shared.bus.config import Settings, router_config
-    from shared.errors import MirrorcoachError
+    from shared.bus.config import Settings, prepare_socket, router_config, socket_path
+    from shared.errors import BadInput, MirrorcoachError
 
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s router %(levelname)s %(message)s")
     try:
@@ -96,6 +96,14 @@ def main() -> int:
     if settings.identity is not None:
         RefusalLog()
         zenoh.init_log_from_env_or(ZENOH_LOG)
+    sock = socket_path(settings.router) if settings.identity is None else None
+    if sock is not None:
+        try:
+            prepare_socket(sock)
+        except (BadInput, OSError) as e:
+            print(f"error: cannot listen on {settings.router}: {getattr(e, 'message', e)}", file=sys.stderr)
+            return 2
+        os.umask(0o077)  # the socket file is its user's alone (0600)
     try:
         session = zenoh.open(config)
     except zenoh.ZError as e:
