@@ -135,3 +135,29 @@ def test_study_aeu_fits_thresholds_from_a_coach_seat_and_a_study_uses_them(bundl
     r = run("study", "init", tmp_path / "s8", "--target", bundled / SQUAT, "--participants", "2", "--cases", "8",
             "--seed", "1")
     assert r.returncode == 2 and "study aeu" in r.stderr
+
+
+def test_a_reply_that_breaks_its_contract_is_an_error_not_a_traceback(tmp_path):
+    """Something answering `pss/list` in the service's place with a reply its contract does not
+    allow: the client refuses the reply and the CLI says so in one line."""
+    import time
+
+    import zenoh
+
+    from shared.bus.config import client_config
+    from shared.codec import pack
+    from tests.conftest import REPO, cluster_env, running, settings_of
+
+    env = cluster_env(tmp_path / "home")
+    with running(env):
+        s = settings_of(env)
+        session = zenoh.open(client_config(s))
+        try:
+            impostor = session.declare_queryable(s.key("pss", "list"), lambda q: q.reply(q.key_expr, pack({"spaces": 7})))
+            time.sleep(0.5)
+            r = subprocess.run([sys.executable, "-m", "shared.cli", "space", "list"], capture_output=True, text=True,
+                               env=env, cwd=REPO, timeout=120)
+            impostor.undeclare()
+        finally:
+            session.close()
+    assert r.returncode != 0 and "does not match its contract" in r.stderr and "Traceback" not in r.stderr, r.stderr

@@ -80,7 +80,7 @@ class Client:
         replies = self.session.get(self.settings.key(service, verb), payload=payload, timeout=timeout)
         for r in replies:
             if r.ok is not None:
-                return unpack(r.ok.payload.to_bytes(), arrays=self.arrays)
+                return self._checked(service, verb, unpack(r.ok.payload.to_bytes(), arrays=self.arrays))
             raw = r.err.payload.to_bytes()
             if raw == b"Timeout":  # Zenoh's own reply when nothing answered in time
                 break
@@ -92,6 +92,27 @@ class Client:
             except MirrorcoachError:
                 raise RemoteError("internal", f"{service} sent an unreadable error: {raw[:200]!r}") from None
         raise self._no_answer(service, verb, timeout, time.monotonic() - t0)
+
+    def _checked(self, service: str, verb: str, reply) -> dict:
+        """A reply checked against its contract like any request (defaults filled in): a reply
+        that does not match (an old or wrong service, or one answering in its place) is an error
+        that says so, never a KeyError further on. With ``arrays="lists"`` (a command that starts
+        without numpy, which the contracts need) only its being a map is checked."""
+        problem = None if isinstance(reply, dict) else f"a reply is a map, got {type(reply).__name__}"
+        if problem is None and self.arrays == "numpy":
+            from schemas import CONTRACTS
+
+            contract = CONTRACTS.get(service)
+            ep = None if contract is None else contract.ENDPOINTS.get(verb)
+            try:
+                reply = reply if ep is None else ep.reply.validate(reply)
+            except BadInput as e:
+                problem = e.message
+        if problem is not None:
+            raise RemoteError("internal", f"the reply of {service}/{verb} does not match its contract ({problem}): "
+                                          f"an older or wrong {service}, or something answering in its place",
+                              {"service": service, "verb": verb})
+        return reply
 
     def _router_listens(self) -> bool:
         """Whether a new session reaches the router now (this session notices a dead router
