@@ -242,7 +242,9 @@ class Supervisor:
 
 # ---------------------------------------------------------------------------- commands
 def status(settings: Settings | None = None) -> list[dict]:
-    """One row per process of the plan: name, pid (from the supervisor's pid files), alive."""
+    """One row per process of the plan: name, pid (from the supervisor's pid files), alive, and
+    its state: alive, frozen (stopped by SIGSTOP), restarting (its supervisor starts it again) or
+    down (a process that runs and holds no token on the bus counts as down)."""
     from shared.bus.client import Client, Unavailable
 
     s = settings or Settings()
@@ -262,9 +264,13 @@ def status(settings: Settings | None = None) -> list[dict]:
                 rows.append({"name": p.name, "pid": None, "alive": p.name in alive})
         return rows
     rows = [{"name": "supervisor", "pid": read_pid(s.run_dir / "supervisor.pid"), "alive": supervisor_running(s)}]
+    rows[0]["state"] = "alive" if rows[0]["alive"] else "down"
     for p in plan:
         up = router_up if p.name == "router" else p.name in alive
-        rows.append({"name": p.name, "pid": read_pid(s.run_dir / f"{p.name}.pid"), "alive": up})
+        # not alive on the bus: frozen (SIGSTOP), restarting (its supervisor runs) or down, from the pid files
+        state = "alive" if up else local_state(s, p.name)[0]
+        rows.append({"name": p.name, "pid": read_pid(s.run_dir / f"{p.name}.pid"), "alive": up,
+                     "state": "down" if state == "running" else state})
     return rows
 
 

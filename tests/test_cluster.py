@@ -476,8 +476,20 @@ def test_no_answer_names_its_cause(tmp_path):
             try:
                 got, msg = cause(c)
                 assert got == "frozen" and "frozen" in msg, msg
+                # `status` says so too once the frozen process's token has lapsed (not DOWN)
+                deadline, row = time.monotonic() + 30, None
+                while time.monotonic() < deadline:
+                    row = next(x for x in json.loads(cli(env, "status", "--json").stdout) if x["name"] == "pss")
+                    if not row["alive"]:
+                        break
+                    time.sleep(1.0)
+                assert row is not None and not row["alive"] and row["state"] == "frozen", row
+                assert "FROZEN" in cli(env, "status").stdout
             finally:
                 os.kill(pid("pss"), signal.SIGCONT)
+            deadline = time.monotonic() + 60  # a process frozen past its lease links to the router again
+            while "pss" not in c.alive() and time.monotonic() < deadline:
+                time.sleep(0.5)
             assert "spaces" in c.request("pss", "list", timeout=60)
             sup = pid("supervisor")
             os.kill(sup, signal.SIGSTOP)  # hold the restart, so the cause stays what it is

@@ -259,7 +259,8 @@ def space_delete(name: str = typer.Argument(..., help="Space name.")):
 # ---------------------------------------------------------------------------- cluster
 @app.command("status")
 def status(as_json: bool = typer.Option(False, "--json")):
-    """Each process of the cluster and whether it is alive (exit 1 if any is down)."""
+    """Each process of the cluster: alive, FROZEN (stopped by SIGSTOP), RESTARTING or DOWN (exit 1
+    if any is not alive)."""
     from shared.cluster import status as cluster_status
 
     rows = cluster_status()
@@ -267,7 +268,8 @@ def status(as_json: bool = typer.Option(False, "--json")):
         typer.echo(json.dumps(rows))
     else:
         for r in rows:
-            typer.echo(f"{r['name']:<12} {'alive' if r['alive'] else 'DOWN':<6} pid {r['pid'] or '-'}")
+            state = r.get("state", "alive" if r["alive"] else "down")
+            typer.echo(f"{r['name']:<12} {state if r['alive'] else state.upper():<10} pid {r['pid'] or '-'}")
     if not all(r["alive"] for r in rows):
         raise typer.Exit(1)
 
