@@ -146,6 +146,15 @@ def test_deploy_init_makes_a_ca_and_one_identity_per_process(tmp_path):
     assert r.returncode == 2 and "NAME=ADDRESS" in r.stderr
     r = run(["deploy", "init", tmp_path / "e", "--router", "hub=10.0.0.1", "--identity", "x:root"])
     assert r.returncode == 2 and "role must be one of" in r.stderr
+    # a name cannot be given the rights of another: names issued by the CA, and role names, are refused
+    more = tmp_path / "more"
+    for spec, why in (("hub:cli", "already issued 'hub' (a router)"), ("pss-a:cli", "already issued 'pss-a' (a pss)"),
+                      ("router:cli", "named after another role"), ("pss:cli", "named after another role")):
+        r = run(["deploy", "init", more, "--router", "hub2=10.0.0.2", "--ca", out / "ca", "--identity", spec])
+        assert r.returncode == 2 and why in r.stderr and not more.exists(), (spec, r.stderr)
+    r = run(["deploy", "init", more, "--router", "hub2=10.0.0.2", "--ca", out / "ca", "--identity", "ops:cli"])
+    assert r.returncode == 0, r.stderr
+    assert json.loads((out / "ca" / "issued.json").read_text())["ops"] == "cli"
     # `up` is the loopback cluster's; a deployed host runs its own processes
     r = run(["up"], env=env_for(out / "cli", tmp_path / "home"))
     assert r.returncode == 2 and "loopback cluster only" in r.stdout + r.stderr

@@ -327,6 +327,11 @@ def init(out, routers: list[str], identities: list[str], prefix: str = "mc", day
     dup = sorted({n for n in names if names.count(n) > 1} | ({"ca"} & set(names)))
     if dup:
         raise BadInput(f"identity names must be unique and not 'ca': {', '.join(dup)}", field="identity")
+    reserved = sorted(n for n, role in ids if n in ROLES and n != role) + sorted(n for n, _, _ in rs if n in ROLES and
+                                                                             n != "router")
+    if reserved:
+        raise BadInput(f"an identity may not be named after another role ({', '.join(reserved)}): the access control "
+                       "matches certificates by name", field="identity")
     existing = [n for n in names if (out / n).exists()]
     if existing:
         raise BadInput(f"{out}: {', '.join(existing)} already exist; use a new folder (keys are never overwritten)",
@@ -338,12 +343,19 @@ def init(out, routers: list[str], identities: list[str], prefix: str = "mc", day
             ca_cert = x509.load_pem_x509_certificate((ca_dir / "ca.pem").read_bytes())
         except (OSError, ValueError) as e:
             raise BadInput(f"--ca {ca_dir}: cannot read ca.key and ca.pem ({e})", field="ca") from None
+        issued = issued_names(ca_dir)
+        again = [n for n in names if n in issued]
+        if again:
+            raise BadInput(f"this CA has already issued {', '.join(f'{n!r} (a {issued[n]})' for n in again)}: the "
+                           "access control matches certificates by name, so a second certificate of that name would "
+                           "have the first one's rights; choose another name", field="identity")
     else:
         if (out / "ca").exists():
             raise BadInput(f"{out / 'ca'} exists; to add identities to that cluster pass --ca {out / 'ca'}", field="ca")
         ca_key, ca_cert = make_ca(days)
         _write(out / "ca" / "ca.key", _pem(ca_key), private=True)
         _write(out / "ca" / "ca.pem", _pem(ca_cert))
+        ca_dir, issued = out / "ca", {}
     mms = (max_message_size or DEFAULT_MAX_PAYLOAD + (1 << 20))
     endpoints = [_endpoint(a, p) for _, a, p in rs]
     members: dict[str, list[str]] = {r: [] for r in ROLES}
@@ -366,4 +378,29 @@ def init(out, routers: list[str], identities: list[str], prefix: str = "mc", day
         _write(folder / "identity.json", (json.dumps(meta, indent=2) + "\n").encode())
         cfg = zenoh_config(ident, mms, lease_ms, section if role == "router" else None)
         _write(folder / "zenoh.json5", (json.dumps(cfg, indent=2) + "\n").encode())
+    issued.update({name: role for name, role, _, _ in plan})
+    (ca_dir / ISSUED).write_text(json.dumps(issued, indent=1, sort_keys=True) + "\n")
     return {name: role for name, role, _, _ in plan}
+
+
+ISSUED = "issued.json"  # beside ca.key: every name the CA has signed, and its role
+
+
+def issued_names(ca_dir: Path) -> dict[str, str]:
+    """Every name the CA in ``ca_dir`` has issued a certificate to, and its role: its
+    ``issued.json``, and for a CA made before that file the identities in the folder beside it."""
+    out: dict[str, str] = {}
+    registry = Path(ca_dir) / ISSUED
+    if registry.exists():
+        try:
+            out.update(json.loads(registry.read_text()))
+        except (OSError, ValueError) as e:
+            raise BadInput(f"{registry}: cannot read the CA's list of issued names ({e})", field="ca") from None
+    for d in Path(ca_dir).parent.iterdir():
+        meta = d / "identity.json"
+        if meta.is_file():
+            try:
+                out.setdefault(d.name, json.loads(meta.read_text())["role"])
+            except (OSError, ValueError, KeyError):
+                continue
+    return out
