@@ -155,6 +155,9 @@ class Client:
         if not alive and state == "restarting":
             return Unavailable(f"service {service} is restarting ({detail}); retry in a few seconds",
                                cause="restarting", **where)
+        if not alive and state == "running":  # started again by its supervisor, not on the bus yet
+            return Unavailable(f"service {service} is starting ({detail}, not yet on the bus); retry in a few seconds",
+                               cause="restarting", **where)
         if not alive:
             return Unavailable(f"service {service} is not running (start it with `make up`)", cause="not_running",
                                **where)
