@@ -97,6 +97,16 @@ def test_the_demo_recording_in_the_real_viewer(viewer_ok, demo_recording, tmp_pa
     assert np.abs(a - b).sum() > 0
 
 
+def test_the_demo_recording_says_what_the_live_take_did(demo_recording):
+    """The capture service's take events reach the cluster tab: the demo's live take started and
+    ended, with its source and why it ended."""
+    from shared.observe.recording import read
+
+    lines = [str(v) for row in read(demo_recording)["/cluster/captures"] for k, v in row.items() if k.endswith(":text")]
+    assert any("take demo-live: recording" in x for x in lines), lines
+    assert any("take demo-live: done" in x and "replay of 1 clip(s)" in x for x in lines), lines
+
+
 def test_live_streaming_of_two_sessions_at_once(viewer_ok, bundled, tmp_path):
     from shared.bus.client import Client
     from shared.observe.viewer import HeadlessViewer
@@ -136,7 +146,7 @@ def test_dashboard_screenshot_from_the_cli(viewer_ok, demo_recording, tmp_path):
                         str(tmp_path / "shots")], cwd=REPO, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     files = sorted(p.name for p in (tmp_path / "shots").glob("*.png"))
-    assert files == ["cluster.png", "estimate_demo.png", "session_demo.png", "spaces.png"]
+    assert files == ["cluster.png", "estimate_demo.png", "session_demo-person.png", "session_demo.png", "spaces.png"]
     assert all((tmp_path / "shots" / f).stat().st_size > 30_000 for f in files)
 
 

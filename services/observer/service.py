@@ -114,6 +114,8 @@ class Observer:
             dash.progress(ev)
         elif service == "dialogue" and topic == "transcript":
             dash.transcript(ev)
+        elif service == "capture" and topic == "take":
+            dash.capture_take(ev)
         elif topic == "request":
             dash.request(ev)
 

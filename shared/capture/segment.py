@@ -332,7 +332,8 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
         raise BadInput("the target does not move: nothing to find", field="target")
     others = [shape(o) for o in others if len(o) > 1 and _spread(o) > 1e-6]
     taken, best_refused = _find(a, b, others, cohort, MAX_COST if max_cost is None else max_cost, fps)
-    reps = [Repetition(s / fps, e / fps, c, max(0.0, 1.0 - ratio / cohort), ratio) for s, e, c, ratio in taken]
+    reps = [Repetition(float(s / fps), float(e / fps), float(c), max(0.0, 1.0 - float(ratio) / cohort), float(ratio))
+            for s, e, c, ratio in taken]
     return Segmentation(reps, expected, cohort, best_refused)
 
 

@@ -146,7 +146,7 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
                  wait: bool = typer.Option(True, "--wait/--no-wait", help="Wait for the take to end, showing its frames."),
                  as_json: bool = typer.Option(False, "--json", help="Print the take's state as JSON.")):
     """Record a take on the capture service (needs `make up`): its frames are published on the bus
-    as they arrive (the dashboard shows them); dropped or missing frames, a source that stops or
+    as they arrive (events/capture/frames); dropped or missing frames, a source that stops or
     comes back and a skeleton that changes are in its events."""
     from shared.cli.cluster import _client, _wire
 

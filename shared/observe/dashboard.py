@@ -25,7 +25,9 @@ Entities and timelines (each kind of data on the timelines where it belongs):
 * ``spaces/<space>``: any other space, coloured by class, one label per class;
 * ``estimates/<e>/{k_other,k_self,symbol_error,scale}`` per conversation set (timeline ``set``),
   ``estimates/<e>/transcript`` with each line on the set it belongs to, ``estimates/<e>/space``;
-* ``cluster/warnings`` and ``cluster/latency/<service>/<verb>`` on the log time only.
+* ``cluster/warnings`` and ``cluster/latency/<service>/<verb>`` on the log time only;
+* ``cluster/captures``: one line per live take's start and end (the capture service: its
+  source, frames, why it ended or failed), on the log time.
 """
 
 from __future__ import annotations
@@ -67,7 +69,8 @@ alpha, and the coach's words per trial with the reason alpha was lowered.
 
 **Estimates** (switch the timeline to `set`): the other's felt symbol against the self's
 estimate, the torque scale, the transcript of each conversation set. **Spaces**: every other
-space, coloured by class. **Cluster**: failed requests and latencies.
+space, coloured by class. **Cluster**: failed requests, live capture takes (started, ended, why)
+and latencies.
 """
 
 
@@ -202,6 +205,7 @@ class Dashboard:
         tabs.append(rrb.Horizontal(
             rrb.TextDocumentView(origin="readme", name="about these views"),
             rrb.Vertical(rrb.TextLogView(origin="cluster/warnings", name="failed requests", columns=_text_columns()),
+                         rrb.TextLogView(origin="cluster/captures", name="capture takes", columns=_text_columns()),
                          rrb.TextLogView(origin="estimates", name="every transcript", columns=_text_columns("set")),
                          rrb.TimeSeriesView(origin="cluster/latency", name="request latency (ms)",
                                             plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop))),
@@ -455,6 +459,17 @@ class Dashboard:
         extra = f" (k = {line['k']})" if line.get("k") else (f" ({line['answer']})" if line.get("answer") else "")
         level = "WARN" if line.get("understood") is False or line["kind"] == "note" else "INFO"
         self.rec.log(f"estimates/{d}/transcript", rr.TextLog(f"{who}: {line['text']}{extra}", level=level))
+
+    def capture_take(self, ev: dict) -> None:
+        """A live take started, ended or failed (the capture service's take event)."""
+        self.rec.reset_time()
+        text = f"take {ev['take']}: {ev['state']}, {ev['frames']} frames ({ev['seconds']:.1f} s) from {ev['source']}"
+        if ev.get("ended"):
+            text += f"; {ev['ended']}"
+        if ev.get("error"):
+            text += f"; {ev['error']}"
+        level = "ERROR" if ev["state"] == "failed" else ("WARN" if ev.get("dropped") or ev.get("skipped") else "INFO")
+        self.rec.log("cluster/captures", rr.TextLog(text, level=level))
 
     def request(self, ev: dict) -> None:
         self.rec.reset_time()
