@@ -100,6 +100,9 @@ def test_refusals_are_coded_errors(capture_service, client_of, squats, tmp_path)
     assert code("record", {"take": "x", "source": "tcp://127.0.0.1:9", "replay": [clip_to_wire(squats[0])]})[0] == \
         "bad_request"
     assert code("record", {"take": "x", "replay": [clip_to_wire(squats[0])], "expected": 2})[0] == "bad_request"
+    assert code("record", {"take": "x", "replay": [clip_to_wire(squats[0])], "expected": 2,
+                           "target": clip_to_wire(squats[0], with_skeleton=False)}) == \
+        ("bad_request", "the target needs its skeleton to find its repetitions")
     # nothing listens on the port: the take fails with the reason, never hangs
     c.request("capture", "record", {"take": "gone", "source": "tcp://127.0.0.1:9"})
     info = _wait_done(c, "gone")

@@ -13,6 +13,7 @@ service stopped under is marked failed, never left recording.
 from __future__ import annotations
 
 import json
+import os
 import tempfile
 import threading
 import time
@@ -119,14 +120,15 @@ def make_service(settings: Settings | None = None) -> Service:
             if time.monotonic() - rec.sent_at >= BLOCK:
                 flush(rec, frame_rate[0])
 
-        until = target = None
-        if req.get("target") is not None and req.get("expected"):
-            target = clip_from_wire(req["target"])
-            until = until_repeated(target, req["expected"])
-        header = None
+        until = target = header = None
         try:
+            if req.get("target") is not None and req.get("expected"):
+                target = clip_from_wire(req["target"])
+                until = until_repeated(target, req["expected"])
             if req.get("skeleton"):
-                header = Path(tempfile.mkstemp(prefix=".header-", suffix=".bvh", dir=root)[1])
+                fd, name = tempfile.mkstemp(prefix=".header-", suffix=".bvh", dir=root)
+                os.close(fd)
+                header = Path(name)
                 header.write_text(req["skeleton"], encoding="latin-1")
             result = record(source, root / f"{take}.bvh", seconds=req["seconds"], idle=req["idle"],
                             reconnect=req["reconnect"], skeleton=header, fps=req.get("fps"), until=until,
@@ -171,6 +173,8 @@ def make_service(settings: Settings | None = None) -> Service:
             raise BadInput("give either source (tcp://HOST:PORT) or replay (clips)", field="source")
         if req.get("expected") and req.get("target") is None:
             raise BadInput("expected repetitions end a take only with the target to find", field="target")
+        if req.get("target") is not None and clip_from_wire(req["target"]).skeleton is None:
+            raise BadInput("the target needs its skeleton to find its repetitions", field="target")
         server = None
         if req.get("source") is not None:
             parse_source(req["source"])
