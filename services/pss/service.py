@@ -31,6 +31,19 @@ def space_info(name: str, space: ProtoSymbolSpace) -> dict:
     return info
 
 
+def _warm() -> None:
+    """Load the compiled kernels of training, distances and the embedding once at start (0.4 s of
+    loading cached machine code), so that the first request does not pay for them: a person's
+    first trial waits on the coach, which waits on this."""
+    from shared.pss.distance import distance_matrix
+    from shared.pss.hmm import fit_hmm
+    from shared.pss.mds import smacof
+
+    r = np.random.default_rng(0)
+    models = [fit_hmm([r.random((12, 3))], 3, n_iter=2) for _ in range(3)]
+    smacof(distance_matrix(models), 2, max_iter=2)
+
+
 def make_service(settings: Settings | None = None) -> Service:
     settings = settings or Settings()
     # recognition's calibration uses scikit-learn, whose OpenMP pool loads with it: loaded here,
@@ -38,6 +51,7 @@ def make_service(settings: Settings | None = None) -> Service:
     import sklearn.covariance  # noqa: F401
     import sklearn.linear_model  # noqa: F401
 
+    _warm()
     store = SpaceStore(settings.data_dir("pss"))
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings, workers=settings.workers)
 
