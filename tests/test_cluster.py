@@ -76,12 +76,15 @@ def test_the_default_cluster_is_closed_to_other_users(tmp_path, bundled):
     supervisor's new router replaces it and the cluster answers again."""
     import socket
 
+    from shared.bus.config import default_router, socket_path
+
     env = cluster_env(tmp_path / "home")
     del env["MIRRORCOACH_ROUTER"]
-    sock = tmp_path / "home" / "run" / "router.sock"
+    endpoint = default_router(tmp_path / "home")  # the home's socket (or the user's, for a deep home)
+    sock = socket_path(endpoint)
     try:
         r = cli(env, "up")
-        assert r.returncode == 0 and f"unixsock-stream/{sock}" in r.stdout + r.stderr, r.stdout + r.stderr
+        assert r.returncode == 0 and endpoint in r.stdout + r.stderr, r.stdout + r.stderr
         assert (tmp_path / "home").stat().st_mode & 0o777 == 0o700 and sock.stat().st_mode & 0o077 == 0
         assert cli(env, "space", "list").returncode == 0
         tcp = socket.create_server(("127.0.0.1", 0))
