@@ -33,7 +33,8 @@ whether the take holds the expected number of repetitions, fewer, more, or none:
 motion.
 
 ``MAX_COST`` and ``COHORT`` were chosen by ``bench.segmentation`` on tuning takes only (HDM05
-performer bd, targets of bk, cohort of dg) and are reported on takes they were not chosen on
+performer bd, targets of bk, cohort of dg; ``REST_SHARE`` 0.1-0.25 and ``SLACK`` 0.4-0.9 s were
+tried there too: the values here had the largest F1 with the fewest cuts) and are reported on takes they were not chosen on
 (performer dg, a game studio's styles, a CMU performance): ``bench/results/segmentation.json``.
 Measured there: another performer's repetitions (dg's takes, bk's targets) F1 0.92 with a median
 boundary error of 92 ms, 6 takes-by-target pairs of other motions cut (of 110; 5 of them dg's
