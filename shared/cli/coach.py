@@ -215,9 +215,9 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
     adverb said into a .wav beside it. Type r (redo the take), s (stop: skip the rest) or q (quit
     after this trial) and Enter while it runs."""
     from schemas.common import clip_from_wire
-    from shared.cli.live import Controls, ready_line, save_take, take_and_cut, warm
     from shared.bus.client import RemoteError
-    from shared.cli.study import _say
+    from shared.cli.live import Controls, ready_line, save_take, take_and_cut, warm
+    from shared.cli.live import say as say_adverb
     from shared.io import save_clip
 
     folder = out or Path(f"live-{session}")
@@ -238,7 +238,7 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
     controls = Controls(folder)
     msg = {"source": source, "seconds": seconds, "idle": idle, "target": _wire(tgt), "expected": expected,
            "check_every": 0.1}
-    for k in range(trials):
+    for _ in range(trials):
         trial = len(info.get("trials", [])) + 1
         typer.echo(f"trial {trial}: recording from {source}")
         with _client() as c:
@@ -255,7 +255,7 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
             save_clip(demo, file)
             _print_trial(r, file)
             if say and r.get("adverb"):
-                _say(r["adverb"], file.with_suffix(".wav"), aloud)
+                say_adverb(r["adverb"], file.with_suffix(".wav"), aloud)
             line = ready_line(got["info"])
             if line:
                 typer.echo(line, err=True)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import typer
+
 
 class Controls:
     """What the person at the keyboard asks of a running `study run`: a line typed on its terminal
@@ -148,3 +150,16 @@ def ready_line(info: dict) -> str | None:
     return (f"  next demonstration and adverb ready {now_unix - info['last_frame_at']:.2f} s after the take's last "
             f"frame ({info['ended_at'] - info['last_frame_at']:.2f} s of it until the take ended: {info['ended']}; "
             f"ready at {now:.3f})")
+
+
+def say(adverb: str, path: Path, aloud: bool = False) -> None:
+    """The adverb said into ``path`` and, with ``aloud``, through the speakers (a printed note,
+    never a failure, without an engine or a player)."""
+    from shared.capture.speech import NoSpeech, speak
+
+    try:
+        speech = speak(adverb, path, play=aloud)
+        typer.echo(f"said \"{adverb}\" into {path} ({speech.seconds:.1f} s)" + (f"; {speech.note}" if speech.note else "")
+                   + ("; played" if speech.played else ""), err=True)
+    except NoSpeech as e:
+        typer.echo(f"not said aloud: {e.message}", err=True)

@@ -284,7 +284,9 @@ def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: boo
     typer.echo(f"{participant}, case {case}, trial {step['trial']}: d_p {r['d_p']:.1f}"
                + ("; case done" if last else f"; next: show {shown}" + (f' and say "{r["adverb"]}"' if r.get("adverb") else "")))
     if say and not last and r.get("adverb"):
-        _say(r["adverb"], Path(shown).with_suffix(".wav"), aloud)
+        from shared.cli.live import say as say_adverb
+
+        say_adverb(r["adverb"], Path(shown).with_suffix(".wav"), aloud)
     return {"participant": participant, "case": case, "trial": step["trial"], "last": last, "shown": shown,
             "adverb": r.get("adverb"), "d_p": r["d_p"]}
 
@@ -399,19 +401,6 @@ def _cut(take, target, expected: int) -> list:
     if not result.repetitions:
         _fail(f"no repetition of the target in {take.name}: {result.verdict}")
     return result.cut(take)
-
-
-def _say(adverb: str, path: Path, aloud: bool = False) -> None:
-    """The adverb said into ``path`` and, with ``aloud``, through the speakers (a printed note,
-    never a failure, without an engine or a player)."""
-    from shared.capture.speech import NoSpeech, speak
-
-    try:
-        speech = speak(adverb, path, play=aloud)
-        typer.echo(f"said \"{adverb}\" into {path} ({speech.seconds:.1f} s)" + (f"; {speech.note}" if speech.note else "")
-                   + ("; played" if speech.played else ""), err=True)
-    except NoSpeech as e:
-        typer.echo(f"not said aloud: {e.message}", err=True)
 
 
 @study_app.command("seat")
