@@ -397,7 +397,7 @@ def _wait_gone(env, timeout=60.0) -> list[int]:
 
 
 def test_the_supervisor_owns_its_children(tmp_path):
-    """Issue 17, row 7: kill -9 of the supervisor orphaned all its children, `up` then started
+    """Kill -9 of the supervisor once orphaned all its children, `up` then started
     duplicates and said "cluster up", and two `up` at once ran 12 services."""
     from shared.cluster import load_plan
 

@@ -180,18 +180,32 @@ def _positions(features, clip: Clip) -> np.ndarray:
     return np.ascontiguousarray(x[:, :-ROOT_TERMS])
 
 
+class Reader:
+    """The target's feature map, built once: reads any clip on the target's skeleton as the
+    position features (module docstring), weighted, at ``fps``; ``target`` its own, read once."""
+
+    def __init__(self, target: Clip, fps: float = FPS):
+        from shared.pss.features import MotionFeatures
+
+        if target.skeleton is None:
+            raise BadInput("segmentation needs clips with a skeleton (AMC, BVH or NPZ from them)", field="clip")
+        self.feats = MotionFeatures.for_clips([target], sensor=False)
+        if not self.feats.has_position:
+            raise BadInput("the target's skeleton gives no joint positions to compare", field="target")
+        self.fps, self.w = fps, np.sqrt(_weights(self.feats))
+        self.target = self.read(target)
+
+    def read(self, clip: Clip) -> np.ndarray:
+        if clip.skeleton is None:
+            raise BadInput("segmentation needs clips with a skeleton (AMC, BVH or NPZ from them)", field="clip")
+        return _positions(self.feats, clip.resample(self.fps)) * self.w
+
+
 def features_of(target: Clip, clips: list[Clip], fps: float = FPS) -> list[np.ndarray]:
     """The position features (module docstring) of the target and each clip, at ``fps``, all
     read on the target's skeleton."""
-    from shared.pss.features import MotionFeatures
-
-    if target.skeleton is None or any(c.skeleton is None for c in clips):
-        raise BadInput("segmentation needs clips with a skeleton (AMC, BVH or NPZ from them)", field="clip")
-    feats = MotionFeatures.for_clips([target], sensor=False)
-    if not feats.has_position:
-        raise BadInput("the target's skeleton gives no joint positions to compare", field="target")
-    w = np.sqrt(_weights(feats))
-    return [_positions(feats, c.resample(fps)) * w for c in [target, *clips]]
+    reader = Reader(target, fps)
+    return [reader.target, *(reader.read(c) for c in clips)]
 
 
 def _weights(feats) -> np.ndarray:
@@ -321,14 +335,17 @@ def _greedy(cands: list, key: list[float], accept) -> list:
 
 
 def segment(take: Clip, target: Clip, expected: int | None = 5, background: list[Clip] | None = None,
-            cohort: float = COHORT, max_cost: float | None = None, fps: float = FPS) -> Segmentation:
+            cohort: float = COHORT, max_cost: float | None = None, fps: float = FPS,
+            reader: Reader | None = None) -> Segmentation:
     """The repetitions of ``target`` in ``take`` (module docstring); ``background``: other
-    motions a stretch must be nearer to the target than (the cohort check)."""
+    motions a stretch must be nearer to the target than (the cohort check); ``reader``: the
+    target's :class:`Reader` when the caller has one (checks of a growing take)."""
     if take.n_frames < 2 or target.n_frames < 2:
         raise BadInput("the take and the target need at least two frames each")
     if expected is not None and expected < 1:
         raise BadInput(f"expected repetitions must be at least 1, got {expected}", field="expected")
-    a, b, *others = features_of(target, [take, *(background or [])], fps)
+    reader = reader or Reader(target, fps)
+    a, b, *others = reader.target, *(reader.read(c) for c in [take, *(background or [])])
     if _spread(a) < 1e-6:
         raise BadInput("the target does not move: nothing to find", field="target")
     others = [shape(o) for o in others if len(o) > 1 and _spread(o) > 1e-6]
@@ -346,18 +363,18 @@ def until_repeated(target: Clip, expected: int, rest_after: float = REST_AFTER, 
     speed; the take is cut only once its end rests. The check keeps the take it last cut and what
     it found as ``enough.last`` (clip, segmentation): when it ends the take, that is the whole take,
     already cut."""
-    a = features_of(target, [])[0]
-    level = REST_SHARE * float(np.mean(speed(a, FPS)))
+    reader = Reader(target)
+    level = REST_SHARE * float(np.mean(speed(reader.target, FPS)))
 
     def enough(clip: Clip) -> str | None:
         if clip.duration < 1.0:
             return None
         tail = clip.frames(max(clip.n_frames - int(round((rest_after + SMOOTH) * clip.fps)) - 1, 0))
-        v = speed(features_of(target, [tail])[1], FPS)
+        v = speed(reader.read(tail), FPS)
         # a frame's speed spans SMOOTH / 2 either side: the last rest_after - SMOOTH / 2 of it rest
         if len(v) and v[-max(int(round((rest_after - SMOOTH / 2) * FPS)), 1):].max() >= level:
             return None
-        seen = segment(clip, target, expected=expected, background=background)
+        seen = segment(clip, target, expected=expected, background=background, reader=reader)
         enough.last = (clip, seen)
         if len(seen.repetitions) >= expected and clip.duration - seen.repetitions[-1].end >= rest_after:
             return f"{len(seen.repetitions)} repetitions seen"
