@@ -68,7 +68,9 @@ def test_a_live_source_the_service_connects_to_and_a_take_stopped_on_request(cap
     c = client_of(env)
     with ReplaySource(squats[0], loop=True, connections=1) as src:
         c.request("capture", "record", {"take": "live", "source": src.address, "seconds": 60})
-        time.sleep(1.5)
+        deadline = time.monotonic() + 30  # frames arriving, however slow the machine
+        while c.request("capture", "status", {"take": "live"})["frames"] <= 10 and time.monotonic() < deadline:
+            time.sleep(0.1)
         info = c.request("capture", "stop", {"take": "live"})
     assert info["state"] == "done" and info["ended"] == "stopped on request" and info["frames"] > 10, info
     take, _ = join([squats[1]] * 2, seed=5)
