@@ -16,7 +16,7 @@ def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of
     from shared.io import find_clips, load_clip
     from shared.observe.recording import read
 
-    env = cluster_env(tmp_path / "home", MIRRORCOACH_RECORDING_MB=0.5, MIRRORCOACH_RECORDINGS=3)
+    env = cluster_env(tmp_path / "home", MIRRORCOACH_RECORDING_MB=2, MIRRORCOACH_RECORDINGS=3)
     recordings = tmp_path / "home" / "recordings"
     with running(env, "pss", "observer") as procs:
         c = client_of(env)
@@ -25,7 +25,7 @@ def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of
         c.request("pss", "build", {"space": "seen", "clips": [clip_to_wire(x) for x in clips]})
         target = clip_to_wire(clips[0])
         log = lambda: procs.log("observer")  # noqa: E731
-        for i in range(300):  # session events until the recording has rotated four times (paced: the
+        for i in range(600):  # session events until the recording has rotated four times (paced: the
             c.session.put(s.key("events", "coach", "session"), pack({"v": 1, "session": f"s{i}", "target": target}))
             if log().count("recording to") >= 5:  # observer draws each in about 0.1 s)
                 break
@@ -37,7 +37,9 @@ def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of
     latest = (recordings / "latest.rrd").resolve()
     assert latest == max(files, key=lambda p: p.stat().st_mtime)
     for f in files[:-1]:  # rotated at the size limit (checked once a second: a little over it)
-        assert f.stat().st_size < 6 * 2**20, (f, f.stat().st_size)
+        assert f.stat().st_size < 2 * 2 * 2**20, (f, f.stat().st_size)
+    carried_mb = [float(x) for x in re.findall(r"\(([\d.]+) MB carried on\)", log())]
+    assert len(carried_mb) >= 4 and max(carried_mb) <= 1.0, carried_mb  # a new file starts with half the limit at most
     data = read(latest)  # the newest file starts with what is still true: the space, the newest sessions
     assert "/spaces/seen/points" in data
     carried = {p.split("/")[2] for p in data if p.startswith("/sessions/") and p.endswith("/body/target")}
@@ -78,3 +80,20 @@ def test_the_dashboard_keeps_a_bounded_number_of_sessions(tmp_path, bundled):
     assert len(tabs) == 2 * MAX_KEPT + 1
     d.close()
     assert "/sessions/s0/body/target" in read(tmp_path / "r.rrd")  # what was drawn stays in the recording
+
+
+def test_request_events_draw_only_the_contracts_verbs(tmp_path, monkeypatch):
+    """Malformed requests name verbs of their own; the dashboard's entities (and the observer's
+    memory) must not grow with them: every verb outside the service's contract is one entity."""
+    from services.observer.service import Observer
+    from shared.observe.dashboard import Dashboard
+    from shared.observe.recording import read
+
+    monkeypatch.setenv("MIRRORCOACH_HOME", str(tmp_path))
+    o, d = Observer(), Dashboard(tmp_path / "r.rrd")
+    for i in range(50):
+        for service, verb in (("pss", f"nope{i}"), ("pss", "list"), ("intruder", f"x{i}")):
+            o.handle(d, f"mc/events/{service}/request", pack({"service": service, "verb": verb, "ms": 1.0, "code": "ok"}))
+    d.close()
+    latency = {p for p in read(tmp_path / "r.rrd") if p.startswith("/cluster/latency/")}
+    assert latency == {"/cluster/latency/pss/list", "/cluster/latency/pss/unknown_verb"}, latency

@@ -25,6 +25,7 @@ from schemas.common import clip_from_wire
 from shared.bus.config import Settings, client_config
 from shared.codec import unpack
 from shared.errors import BadInput, MirrorcoachError
+from shared.observe.dashboard import MAX_KEPT, Dashboard
 
 log = logging.getLogger("mirrorcoach.observer")
 
@@ -39,6 +40,9 @@ class Observer:
         self.spaces: OrderedDict[str, dict] = OrderedDict()
         self.queued_bytes, self.dropped = 0, 0
         self.max_queued = self.s.observer_queue_mb * 2**20
+        #: a closed recording's size over its size while open: rerun writes an index of its chunks when
+        #: a file is closed (0.6-0.7 of the data in rerun 0.41); measured again at every rotation
+        self.closing_growth = 1.75
         self.queued_lock = threading.Lock()
 
     def enqueue(self, sample) -> None:
@@ -77,16 +81,18 @@ class Observer:
 
     def rotate(self, dash, path):
         """Past ``MIRRORCOACH_RECORDING_MB``: go on in a new recording that starts with what is
-        still true (each session's target and path, each space's proto-symbols)."""
-        from shared.observe.dashboard import Dashboard
-
+        still true, not its history (the newest sessions' targets, the spaces' latest proto-symbols),
+        in at most half the limit, so the new file starts small."""
+        open_bytes = dash.file_bytes()
         new_path = self.recording_path()
         new = Dashboard(new_path, os.environ.get("MIRRORCOACH_RERUN_URL") or None)
         dash.close()
-        new.continue_from(dash)
-        for ev in self.spaces.values():
-            new.space(ev)
-        log.info("recording %s passed %g MB; recording to %s", path.name, self.s.recording_mb, new_path.name)
+        if open_bytes:  # what closing added (rerun's index), for the next file's estimate
+            self.closing_growth = max(1.0, path.stat().st_size / open_bytes)
+        new.continue_from(dash, budget_bytes=self.s.recording_mb * 2**20 / 2 / self.closing_growth,
+                          spaces=list(self.spaces.values()))
+        log.info("recording %s passed %g MB (%.2f MB closed); recording to %s (%.2f MB carried on)", path.name,
+                 self.s.recording_mb, path.stat().st_size / 2**20, new_path.name, new.file_bytes() / 2**20)
         return new, new_path
 
     def handle(self, dash, key: str, payload: bytes) -> None:
@@ -108,7 +114,7 @@ class Observer:
             self.spaces.pop(ev["space"], None)  # the latest state of each space, for the next recording
             if ev["change"] != "deleted" and ev.get("info"):
                 self.spaces[ev["space"]] = ev
-                while len(self.spaces) > 1000:
+                while len(self.spaces) > MAX_KEPT:
                     self.spaces.popitem(last=False)
         elif service == "estimator" and topic == "progress":
             dash.progress(ev)
@@ -116,13 +122,12 @@ class Observer:
             dash.transcript(ev)
         elif service == "capture" and topic == "take":
             dash.capture_take(ev)
-        elif topic == "request":
-            dash.request(ev)
+        elif topic == "request" and contract is not None:  # the entities stay bounded: a service and
+            verb = ev.get("verb") if ev.get("verb") in contract.ENDPOINTS else "unknown_verb"  # verb each
+            dash.request({**ev, "service": service, "verb": verb})  # of the contracts, never a caller's
 
     def run(self) -> int:
         import zenoh
-
-        from shared.observe.dashboard import Dashboard
 
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: self.stop.set())
@@ -132,13 +137,18 @@ class Observer:
         sub = session.declare_subscriber(self.s.key("events", "**"), self.enqueue)
         token = session.liveliness().declare_token(self.s.key("alive", "observer"))
         log.info("observer up; recording to %s", path)
-        limit, next_check = self.s.recording_mb * 2**20, 0.0
+        limit, next_check, start = self.s.recording_mb * 2**20, 0.0, 0
         try:
             while not (self.stop.is_set() and self.q.empty()):
-                if time.monotonic() >= next_check:  # the file's size, once a second
-                    next_check = time.monotonic() + 1.0
-                    if path.exists() and path.stat().st_size > limit:
-                        dash, path = self.rotate(dash, path)
+                layout = dash.layout_ready()  # a changed layout goes out at most every LAYOUT_EVERY_S
+                if layout or time.monotonic() >= next_check:  # and the file's size, as it will be closed
+                    next_check = time.monotonic() + 0.5  # (rerun adds an index), twice a second
+                    size = (dash.file_bytes() + (dash.layout_bytes() if layout else 0)) * self.closing_growth
+                    if size > limit and size - start > limit / 2:  # (carried state must grow first)
+                        dash, path = self.rotate(dash, path)  # the layout goes to the new file
+                        start = dash.file_bytes() * self.closing_growth
+                    elif layout:
+                        dash.send_layout()
                 try:
                     key, payload = self.q.get(timeout=0.2)
                 except queue.Empty:

@@ -23,7 +23,8 @@ variable                          default                     meaning
                                                               its own limit, at most this); past it the
                                                               request stops at a safe point: ``unavailable``
 ``MIRRORCOACH_RECORDING_MB``      ``64``                      the observer starts a new recording when
-                                                              its file passes this size
+                                                              its file passes this size (at least 2: the
+                                                              layout of 16 sessions alone takes ~1 MB)
 ``MIRRORCOACH_RECORDINGS``        ``10``                      recordings kept (the oldest are deleted)
 ``MIRRORCOACH_OBSERVER_QUEUE_MB`` ``256``                     events waiting for the observer; more are
                                                               dropped (counted in its log)
@@ -189,9 +190,9 @@ class Settings:
                            f"got {self.queue} and {self.queue_mb}")
         if not 0 < self.time_limit <= 1e6:
             raise BadInput(f"MIRRORCOACH_TIME_LIMIT must be positive seconds, got {self.time_limit}")
-        if not (0 < self.recording_mb <= 1e6 and 1 <= self.recordings <= 10_000 and 0 < self.observer_queue_mb <= 1e6):
-            raise BadInput(f"MIRRORCOACH_RECORDING_MB and MIRRORCOACH_OBSERVER_QUEUE_MB must be positive and "
-                           f"MIRRORCOACH_RECORDINGS 1..10000, got {self.recording_mb}, {self.observer_queue_mb} and "
+        if not (2 <= self.recording_mb <= 1e6 and 1 <= self.recordings <= 10_000 and 0 < self.observer_queue_mb <= 1e6):
+            raise BadInput(f"MIRRORCOACH_RECORDING_MB must be at least 2 (a dashboard's layout takes up to ~1 MB), "
+                           f"MIRRORCOACH_OBSERVER_QUEUE_MB positive and MIRRORCOACH_RECORDINGS 1..10000, got {self.recording_mb}, {self.observer_queue_mb} and "
                            f"{self.recordings}")
         if not re.fullmatch(r"[A-Za-z0-9_-]{1,32}", self.prefix):
             raise BadInput(f"MIRRORCOACH_PREFIX {self.prefix!r} must be 1-32 letters, digits, '_' or '-'")

@@ -330,7 +330,8 @@ class Service:
             ms = 1e3 * (time.perf_counter() - t0)
             log.info("%s %s %.1f ms", verb, code, ms)
             try:
-                self.publish("request", {"service": self.name, "verb": verb, "ms": ms, "code": code})
+                known = verb if verb in self.endpoints else "(unknown verb)"  # a caller cannot mint names
+                self.publish("request", {"service": self.name, "verb": known, "ms": ms, "code": code})
             except Exception:  # observability must never break a reply
                 pass
 

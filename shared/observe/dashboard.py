@@ -32,6 +32,9 @@ Entities and timelines (each kind of data on the timelines where it belongs):
 
 from __future__ import annotations
 
+import time
+from pathlib import Path
+
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
@@ -53,6 +56,10 @@ PLAYBACK_FPS = 30.0
 #: bounded over a long run; a new recording (rotation) starts with the newest CARRY_OVER sessions
 MAX_KEPT = 16
 CARRY_OVER = 4
+#: the layout (blueprint) is sent at most this often: a blueprint costs about 55 KB per session tab
+#: in the file (rerun writes each view's properties as their own chunks), so sending it on every new
+#: session made the layout most of a long run's recording (0.9 MB per session at 16 tabs)
+LAYOUT_EVERY_S = 2.0
 
 README = """# mirrorcoach dashboard
 
@@ -127,6 +134,13 @@ def _series_style(rec, entity: str, name: str, colour, markers: bool = True) -> 
     rec.log(entity, *parts, static=True)
 
 
+def _views(layout) -> int:
+    """The number of views in a layout or a container (what a layout's size in the file grows with)."""
+    if isinstance(layout, rrb.Blueprint):
+        layout = layout.root_container
+    return sum(_views(x) if isinstance(x, rrb.Container) else 1 for x in layout.contents)
+
+
 def _xyz(p) -> list[float]:
     p = list(p)[:3]
     return [float(v) for v in p] + [0.0] * (3 - len(p))
@@ -154,10 +168,14 @@ class Dashboard:
         self.trials: dict[str, int] = {}  # trials completed per session
         self.pending: dict[str, dict] = {}  # a session's space event that came before the session
         self.curves: dict[str, list[str]] = {}
+        self.path = None if path is None else Path(path)
+        self.view_bytes = 0.0  # measured when a layout is written to the file
+        self._layout_due, self._layout_sent = False, float("-inf")
         self.rec.log("readme", rr.TextDocument(README, media_type=rr.MediaType.MARKDOWN), static=True)
         self._layout()
 
     def close(self) -> None:
+        self.send_layout(force=True)
         self.rec.flush()
         self.rec.disconnect()
 
@@ -215,7 +233,29 @@ class Dashboard:
                              rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"))
 
     def _layout(self) -> None:
-        self.rec.send_blueprint(self.blueprint())
+        """The layout changed (a tab came or went): :meth:`send_layout` sends it (the observer, at
+        most every ``LAYOUT_EVERY_S``; :meth:`close` in any case)."""
+        self._layout_due = True
+
+    def layout_ready(self) -> bool:
+        """The layout changed and ``LAYOUT_EVERY_S`` has passed since the last one was sent."""
+        return self._layout_due and time.monotonic() - self._layout_sent >= LAYOUT_EVERY_S
+
+    def layout_bytes(self) -> float:
+        """What sending the layout now would add to the file (0 until one has been measured)."""
+        return _views(self.blueprint()) * self.view_bytes
+
+    def send_layout(self, force: bool = False) -> bool:
+        """Send the layout if it changed and ``LAYOUT_EVERY_S`` has passed (or ``force``)."""
+        if not (self.layout_ready() or (force and self._layout_due)):
+            return False
+        blueprint = self.blueprint()
+        before = self.file_bytes() if self.path is not None else 0
+        self.rec.send_blueprint(blueprint)
+        if self.path is not None:  # what a view costs in the file, for the rotation's estimates
+            self.view_bytes = max(self.view_bytes, (self.file_bytes() - before) / max(1, _views(blueprint)))
+        self._layout_due, self._layout_sent = False, time.monotonic()
+        return True
 
     # ------------------------------------------------------------------ helpers
     def _at(self, **times) -> None:
@@ -311,17 +351,46 @@ class Dashboard:
         self.poses[session] = self._pose(session, target)  # drawn again in every trial's block, computed once
         self._people(session, "target", self.poses[session], 0)
 
-    def continue_from(self, old: "Dashboard") -> None:
-        """A new recording goes on from ``old``: the newest ``CARRY_OVER`` sessions' targets and
-        paths so far, the estimates and spaces it knew."""
-        keep = list(old.targets)[-CARRY_OVER:]
-        for name in ("targets", "frames", "poses", "paths", "emphatic", "trials", "curves"):
-            setattr(self, name, {s: v for s, v in getattr(old, name).items() if s in keep})
-        self.spaces, self.estimates, self.pending = old.spaces, old.estimates, old.pending
-        for session, target in self.targets.items():
-            self._session_series(session)
-            self._show_target(session, target)
-        self._layout()
+    def continue_from(self, old: "Dashboard", budget_bytes: float | None = None, spaces=()) -> None:
+        """A new recording goes on from ``old`` with what is still true, not its history: the
+        newest session's target, ``spaces`` (the latest event of each, newest first), older
+        sessions' targets (at most ``CARRY_OVER`` in all), the estimates' tabs, and the layout.
+        With ``budget_bytes`` (and a file) nothing more is carried once the file and the layout it
+        will need would pass it, so a new file starts small (the newest session always goes on)."""
+        self.view_bytes = view_bytes = max(old.view_bytes, self.view_bytes)
+        self.estimates, self.pending = dict(old.estimates), dict(old.pending)
+        self.spaces = {}
+
+        def fits(extra_views: int) -> bool:
+            if budget_bytes is None or self.path is None:
+                return True
+            layout = (_views(self.blueprint()) + extra_views) * view_bytes
+            return self.file_bytes() + layout <= budget_bytes
+
+        def carry(s: str) -> None:
+            for name in ("targets", "frames", "poses", "paths", "emphatic", "trials", "curves"):
+                getattr(self, name)[s] = getattr(old, name)[s]
+            self._session_series(s)
+            self._show_target(s, self.targets[s])
+
+        newest_first = list(reversed(list(old.targets)[-CARRY_OVER:]))
+        if newest_first:  # the newest session always; then the spaces (small); then older sessions
+            carry(newest_first[0])
+        for ev in reversed(list(spaces)[-MAX_KEPT:]):
+            if not fits(1):
+                break
+            self.space(ev)
+        for s in newest_first[1:]:
+            if not fits(_views(old._session_tab(s))):
+                break
+            carry(s)
+        self.targets = {s: self.targets[s] for s in old.targets if s in self.targets}  # in order of arrival
+        self.send_layout(force=True)
+
+    def file_bytes(self) -> int:
+        """The recording file's size with everything logged so far written (rerun batches in memory)."""
+        self.rec.flush()
+        return self.path.stat().st_size if self.path is not None and self.path.exists() else 0
 
     def _forget_oldest(self) -> None:
         """At most ``MAX_KEPT`` sessions, estimates and spaces (the oldest go first)."""
