@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import tempfile
 from contextlib import contextmanager
@@ -33,12 +34,18 @@ def private_cluster(prefix: str):
     from shared.cluster import down, up
 
     s = Settings()
-    if up(s) != 0:
-        raise SystemExit(f"the benchmark cluster did not start; see {s.log_dir}")
+    previous = signal.signal(signal.SIGTERM, _stop)  # a benchmark stopped with kill stops its cluster too
     try:
+        if up(s) != 0:
+            raise SystemExit(f"the benchmark cluster did not start; see {s.log_dir}")
         yield s
     finally:
         down(s)
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _stop(*_) -> None:
+    raise SystemExit("stopped (SIGTERM)")
 
 
 def parse_args(doc: str, argv=None, extra=None):
