@@ -24,7 +24,10 @@ import importlib  # noqa: E402
 import logging  # noqa: E402
 import sys  # noqa: E402
 
+from shared.bus.budget import one_arena  # noqa: E402
 from shared.errors import MirrorcoachError  # noqa: E402
+
+one_arena()  # before any worker thread: memory a large request freed goes back to the system
 
 log = logging.getLogger("mirrorcoach.runner")
 

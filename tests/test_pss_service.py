@@ -318,7 +318,7 @@ def test_an_oversize_request_is_dropped_before_it_is_read_whole(pss_service, bui
     with Client(s) as rogue:
         with pytest.raises(Unavailable) as e:
             rogue.request_raw("pss", "list", b"\x80" + b"x" * size, timeout=10)
-        assert e.value.details["cause"] == "timeout", e.value.message
+        assert e.value.details["cause"] == "oversize" and "100 MiB" in e.value.message, e.value.message
     for pid, kb in before.items():
         assert _rss_kb(pid) - kb < 30 * 1024, (pid, kb, _rss_kb(pid))  # nowhere near 100 MiB kept
     s.max_payload = int(env["MIRRORCOACH_MAX_PAYLOAD"])
@@ -377,5 +377,30 @@ def test_a_saturated_service_answers_unavailable_at_once(tmp_path_factory, dev_s
         # every refusal came while the build still ran (it held the only worker for seconds)
         assert events.index("build done") > max(i for i, e in enumerate(events) if e == "unavailable"), events
         assert "Traceback" not in procs.log("pss")
+    finally:
+        serve.close()
+
+
+def test_a_request_that_never_fits_the_memory_budget_is_refused_up_front(tmp_path_factory, clips):
+    """A generation's working memory is estimated before it starts (frames x features); one
+    larger than what the budget leaves beside the service is refused at once, saying how much
+    it needs and how to fit; a small one on the same service runs."""
+    from shared.bus.client import Client, RemoteError
+    from tests.conftest import _serve, settings_of
+
+    serve = _serve(tmp_path_factory, "pss", MIRRORCOACH_MEMORY_MB=700)
+    env, procs = next(serve)
+    try:
+        with Client(settings_of(env)) as c:
+            c.request("pss", "build", {"space": "b", "clips": [clip_to_wire(x) for x in clips[0][:3]]})
+            mix = {clips[0][0].name: 1.0}
+            t0 = time.monotonic()
+            with pytest.raises(RemoteError) as e:
+                c.request("pss", "generate", {"space": "b", "mix": mix, "frames": 100_000})
+            assert e.value.code == "bad_request" and e.value.details["cause"] == "too_large", e.value.message
+            assert "MIRRORCOACH_MEMORY_MB=700" in e.value.message and time.monotonic() - t0 < 5
+            small = c.request("pss", "generate", {"space": "b", "mix": mix, "frames": 500})
+            assert small["clip"]["data"].shape[0] == 500
+        assert "memory: " in procs.log("pss") and "Traceback" not in procs.log("pss")
     finally:
         serve.close()

@@ -44,6 +44,10 @@ def _warm() -> None:
     smacof(distance_matrix(models), 2, max_iter=2)
 
 
+#: a generation without ``frames`` takes the expected durations: a few seconds of motion
+DEFAULT_FRAMES_ESTIMATE = 2000
+
+
 def make_service(settings: Settings | None = None) -> Service:
     settings = settings or Settings()
     # recognition's calibration uses scikit-learn, whose OpenMP pool loads with it: loaded here,
@@ -113,6 +117,13 @@ def make_service(settings: Settings | None = None) -> Service:
                 "confidence": float(rec.confidence), "novelty": float(rec.novelty), "label_in_space": rec.label_in_space,
                 "point": np.asarray(rec.point, float), "stress": float(rec.stress), "seconds": float(rec.seconds),
                 "nearest": [{"name": n, "label": lab, "distance": float(d)} for n, lab, d in rec.nearest]}
+
+    @svc.cost("generate")
+    def generate_cost(req):
+        """Working memory of a generation: 8 bytes x 3 per feature and frame (bench.budget: the
+        library peaks at 2.1 x the feature frames; the reply's clip and its packing add the rest)."""
+        frames = req["frames"] or DEFAULT_FRAMES_ESTIMATE
+        return 8 * 3 * frames * store.get(req["space"]).features.n_features
 
     @svc.handler("generate")
     def generate(req):

@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 
 from shared.bus.config import Settings, client_config
-from shared.codec import pack, unpack
+from shared.codec import DEFAULT_MAX_PAYLOAD, pack, unpack
 from shared.errors import BadInput, Forbidden, MirrorcoachError, Unavailable
 
 __all__ = ["Client", "RemoteError", "Unavailable"]
@@ -91,7 +91,7 @@ class Client:
                 raise
             except MirrorcoachError:
                 raise RemoteError("internal", f"{service} sent an unreadable error: {raw[:200]!r}") from None
-        raise self._no_answer(service, verb, timeout, time.monotonic() - t0)
+        raise self._no_answer(service, verb, timeout, time.monotonic() - t0, len(payload))
 
     def _checked(self, service: str, verb: str, reply) -> dict:
         """A reply checked against its contract like any request (defaults filled in): a reply
@@ -125,7 +125,7 @@ class Client:
         except zenoh.ZError:
             return False
 
-    def _no_answer(self, service: str, verb: str, timeout: float, waited: float) -> Unavailable:
+    def _no_answer(self, service: str, verb: str, timeout: float, waited: float, size: int = 0) -> Unavailable:
         """Why nothing answered, named (issue 17, row 12): the router is gone, the service is
         frozen, restarting, not running, or alive but slower than the timeout."""
         from shared.cluster import local_state
@@ -161,6 +161,11 @@ class Client:
         if not alive:
             return Unavailable(f"service {service} is not running (start it with `make up`)", cause="not_running",
                                **where)
+        if waited >= 0.9 * timeout and size > DEFAULT_MAX_PAYLOAD:  # a router set lower drops it unread, silently
+            return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s: the request was "
+                               f"{size / 2**20:.0f} MiB, more than the {DEFAULT_MAX_PAYLOAD / 2**20:.0f} MiB a cluster "
+                               f"accepts by default; a router whose MIRRORCOACH_MAX_PAYLOAD is lower than this "
+                               f"client's drops it unread", cause="oversize", timeout=timeout, size=size, **where)
         if waited >= 0.9 * timeout:
             return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s", cause="timeout",
                                timeout=timeout, **where)

@@ -17,6 +17,12 @@ variable                          default                     meaning
                                                               workers; more get ``unavailable`` at once
 ``MIRRORCOACH_QUEUE_MB``          ``512``                     bytes of waiting requests a service keeps
                                                               (one request is always taken when idle)
+``MIRRORCOACH_MEMORY_MB``         ``1536``                    memory of one service process (below the
+                                                              unit's MemoryMax=2G and the compose limit):
+                                                              requests run while their estimated working
+                                                              memory fits beside what the service holds,
+                                                              wait for it, or are refused when it never
+                                                              can (``shared/bus/budget.py``)
 ``MIRRORCOACH_WAITING``           ``32``                      questions to people a service keeps open at
                                                               once (verbs that wait, on their own pool)
 ``MIRRORCOACH_TIME_LIMIT``        ``600``                     seconds any request may run (each verb declares
@@ -159,6 +165,7 @@ class Settings:
     timeout: float = field(default_factory=lambda: _env_num("MIRRORCOACH_TIMEOUT", 120.0, float))
     workers: int = field(default_factory=lambda: _env_num("MIRRORCOACH_WORKERS", 4))
     queue: int = field(default_factory=lambda: _env_num("MIRRORCOACH_QUEUE", 256))
+    memory_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_MEMORY_MB", 1536.0, float))
     queue_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_QUEUE_MB", 512.0, float))
     waiting: int = field(default_factory=lambda: _env_num("MIRRORCOACH_WAITING", 32))
     time_limit: float = field(default_factory=lambda: _env_num("MIRRORCOACH_TIME_LIMIT", 600.0, float))
@@ -188,6 +195,8 @@ class Settings:
         if not 0 <= self.queue <= 100_000 or not 0 < self.queue_mb <= 1e6:
             raise BadInput(f"MIRRORCOACH_QUEUE must be 0..100000 and MIRRORCOACH_QUEUE_MB positive, "
                            f"got {self.queue} and {self.queue_mb}")
+        if not 128 <= self.memory_mb <= 1e7:
+            raise BadInput(f"MIRRORCOACH_MEMORY_MB must be 128..10000000 (MB per service process), got {self.memory_mb}")
         if not 0 < self.time_limit <= 1e6:
             raise BadInput(f"MIRRORCOACH_TIME_LIMIT must be positive seconds, got {self.time_limit}")
         if not (2 <= self.recording_mb <= 1e6 and 1 <= self.recordings <= 10_000 and 0 < self.observer_queue_mb <= 1e6):

@@ -47,6 +47,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 from schemas.base import Endpoint, Message
+from shared.bus.budget import MB, MemoryBudget
 from shared.bus.config import Settings, client_config
 from shared.codec import pack, unpack
 from shared.deadline import time_limit
@@ -61,6 +62,15 @@ def error_payload(code: str, message: str, details: dict | None = None) -> bytes
     for k, v in (details or {}).items():
         safe[str(k)] = v if isinstance(v, (str, int, float, bool, type(None))) else str(v)
     return pack({"code": code, "message": message, "details": safe})
+
+
+#: a request's working memory when its service has no estimate of its own: this many times its
+#: payload (measured by bench.budget: a recognition peaks at 6x its clip in the library, plus the
+#: reply and the space's caches on first use)
+PAYLOAD_FACTOR = 7
+#: every request in flight also holds its payload twice (as received and decoded) outside its
+#: reservation, also while it waits for memory
+PAYLOAD_HELD = 2
 
 
 class Service:
@@ -83,6 +93,8 @@ class Service:
         self.events = events or {}
         self.settings = settings or Settings()
         self.handlers: dict[str, Callable[[dict], dict]] = {}
+        self.costs: dict[str, Callable[[dict], float]] = {}
+        self.budget = MemoryBudget(name, self.settings.memory_mb, held=lambda: PAYLOAD_HELD * self._inflight_bytes)
         self.on_stop: list[Callable[[], None]] = []
         self.on_promote: list[Callable[[], None]] = []  # deployed: before this instance starts to lead
         self.leading = False
@@ -121,16 +133,25 @@ class Service:
             return self._client
 
     # ------------------------------------------------------------------ declaration
-    def handler(self, verb: str):
-        """Decorator: ``@service.handler("build") def build(req: dict) -> dict``."""
+    def _declare(self, table: dict, verb: str):
         if verb not in self.endpoints:
             raise ValueError(f"{verb!r} is not a verb of the {self.name} contract")
 
         def deco(fn):
-            self.handlers[verb] = fn
+            table[verb] = fn
             return fn
 
         return deco
+
+    def handler(self, verb: str):
+        """Decorator: ``@service.handler("build") def build(req: dict) -> dict``."""
+        return self._declare(self.handlers, verb)
+
+    def cost(self, verb: str):
+        """Decorator: ``@service.cost("generate") def _(req: dict) -> float``, the bytes of working
+        memory a request of ``verb`` needs (:mod:`shared.bus.budget`), when more than
+        ``PAYLOAD_FACTOR`` times its payload (the estimate of every other verb)."""
+        return self._declare(self.costs, verb)
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> "Service":
@@ -143,6 +164,7 @@ class Service:
         if any(ep.waits for ep in self.endpoints.values()):
             self._wait_pool = ThreadPoolExecutor(self.settings.waiting, thread_name_prefix=f"{self.name}-waiting")
         self._session = zenoh.open(client_config(self.settings, wait=True))
+        self.budget.measure_baseline()  # the service as it waits: code, caches, its Zenoh session
         for topic in list(self.events) + ["request"]:
             self._publishers[topic] = self._session.declare_publisher(
                 self.settings.key("events", self.name, topic), congestion_control=zenoh.CongestionControl.BLOCK)
@@ -152,7 +174,12 @@ class Service:
             self.leading = True
         else:
             threading.Thread(target=self._leadership, name=f"{self.name}-leadership", daemon=True).start()
-        log.info("service %s up on %s (prefix %s)", self.name, self.settings.router, self.settings.prefix)
+        log.info("service %s up on %s (prefix %s); memory: %.0f MB held, %.0f MB of MIRRORCOACH_MEMORY_MB=%.0f for "
+                 "requests", self.name, self.settings.router, self.settings.prefix, self.budget.baseline / MB,
+                 self.budget.available / MB, self.settings.memory_mb)
+        if self.budget.available < 64 * MB:
+            log.warning("MIRRORCOACH_MEMORY_MB=%.0f leaves %s only %.0f MB for requests: large ones will be refused",
+                        self.settings.memory_mb, self.name, self.budget.available / MB)
         return self
 
     # ------------------------------------------------------------------ leadership (deployed)
@@ -343,13 +370,15 @@ class Service:
         msg = unpack(payload, self.settings.max_payload) if payload else {}
         req = ep.request.validate(msg)
         limit = None if ep.waits else min(ep.time_limit_s, self.settings.time_limit)
-        with time_limit(limit, f"{self.name}/{verb}"):
-            out = self.handlers[verb](req)
-        try:
-            out = ep.reply.validate(out)
-        except BadInput as e:  # our own reply is off-contract: a bug, not the caller's fault
-            raise RuntimeError(f"reply does not match {ep.reply.name}: {e.message}") from None
-        return pack({"v": ep.reply.version, **out})
+        cost = max(PAYLOAD_FACTOR * len(payload), self.costs[verb](req) if verb in self.costs else 0.0)
+        with self.budget.reserve(cost, f"{self.name}/{verb}", own_held=PAYLOAD_HELD * len(payload)):  # the reply is packed inside: it costs too
+            with time_limit(limit, f"{self.name}/{verb}"):
+                out = self.handlers[verb](req)
+            try:
+                out = ep.reply.validate(out)
+            except BadInput as e:  # our own reply is off-contract: a bug, not the caller's fault
+                raise RuntimeError(f"reply does not match {ep.reply.name}: {e.message}") from None
+            return pack({"v": ep.reply.version, **out})
 
 
 class OneWriter:

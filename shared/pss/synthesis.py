@@ -157,20 +157,21 @@ def monte_carlo_trajectory(model: LeftToRightHMM, n_frames: int | None = None, *
         length = len(path)
         src = np.linspace(0.0, 1.0, length) if length > 1 else np.zeros(1)
         mu = model.means[path]
-        for _ in range(n_outputs):
+        summed = np.zeros((length, d))  # the outputs of one path share its time normalisation, which is
+        for _ in range(n_outputs):  # linear: summed first, normalised once (30x less work, same result)
             z = rng.standard_normal((length, d))
             if chol is None:
-                o = mu + z * np.sqrt(model.covars[path])
+                summed += mu + z * np.sqrt(model.covars[path])
             else:
-                o = mu + np.einsum("tij,tj->ti", chol[path], z)
-            if length == 1:
-                acc += o
-            else:
-                pos = np.interp(grid, src, np.arange(length))
-                lo = np.floor(pos).astype(int)
-                hi = np.minimum(lo + 1, length - 1)
-                frac = (pos - lo)[:, None]
-                acc += (1 - frac) * o[lo] + frac * o[hi]
+                summed += mu + np.einsum("tij,tj->ti", chol[path], z)
+        if length == 1:
+            acc += summed
+        else:
+            pos = np.interp(grid, src, np.arange(length))
+            lo = np.floor(pos).astype(int)
+            hi = np.minimum(lo + 1, length - 1)
+            frac = (pos - lo)[:, None]
+            acc += (1 - frac) * summed[lo] + frac * summed[hi]
     out = acc / (n_paths * n_outputs)
     if smooth > 0:
         from scipy.ndimage import gaussian_filter1d

@@ -1,0 +1,131 @@
+"""A service's memory budget: requests are admitted by their estimated working memory.
+
+Each process gets ``MIRRORCOACH_MEMORY_MB`` (default 1536, below the systemd unit's
+``MemoryMax=2G`` and the compose file's 2 GB). What the process holds once it is ready (its
+code, its caches) is its baseline; requests share the rest. A request's cost is estimated
+before its work starts (:meth:`Endpoint.cost <schemas.base.Endpoint>` or the service's own
+estimate from the request: frames x channels x what the verb does with them, measured by
+``python -m bench.budget``); it runs when its cost fits beside the requests in progress, waits
+for memory (bounded) when it does not fit now, and is refused up front when it can never fit.
+After a large request the C allocator is asked to return freed memory to the system
+(``malloc_trim``): freed blocks otherwise stay in the worker threads' arenas.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import gc
+import logging
+import ctypes.util
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from shared.errors import BadInput, Unavailable
+
+log = logging.getLogger("mirrorcoach.budget")
+MB = 2**20
+#: a request whose estimate is above this is followed by a trim of the allocator's free memory
+TRIM_ABOVE = 16 * MB
+_libc = None
+M_ARENA_MAX = -8  # glibc's mallopt parameter
+
+
+def rss_bytes() -> int:
+    """This process's resident memory (0 where /proc is missing)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+def _glibc():
+    global _libc
+    if _libc is None:
+        try:
+            _libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+            _libc.malloc_trim.argtypes = [ctypes.c_size_t]
+            _libc.mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+        except (OSError, AttributeError):  # not glibc: its allocator manages itself
+            _libc = False
+    return _libc
+
+
+def trim() -> None:
+    """Return the allocator's free memory to the system (glibc's ``malloc_trim``; elsewhere nothing)."""
+    if _glibc():
+        _libc.malloc_trim(0)
+
+
+def one_arena() -> None:
+    """Every thread allocates from one arena (glibc's ``M_ARENA_MAX``; call before the worker
+    threads start). With an arena per worker thread, four large requests at once left 50-80 MB
+    in arenas that a trim could not return; with one, memory went back to its level (the workers
+    hold the GIL for most of their work, so they rarely wait for the allocator)."""
+    if _glibc():
+        _libc.mallopt(M_ARENA_MAX, 1)
+
+
+class MemoryBudget:
+    """``total_mb`` for the whole process; requests share what the baseline leaves."""
+
+    def __init__(self, service: str, total_mb: float, wait_s: float = 60.0, held=lambda: 0):
+        """``held()``: bytes the requests in flight hold outside their reservations (their payloads,
+        as received and decoded, while they wait for memory)."""
+        self.service = service
+        self.held = held
+        self.total = int(total_mb * MB)
+        self.wait_s = wait_s
+        self.baseline = 0
+        self.reserved = 0
+        self.largest = 0  # the largest estimate admitted so far (for the log and tests)
+        self._cond = threading.Condition()
+        self.measure_baseline()
+
+    def measure_baseline(self) -> None:
+        """What the process holds now (call once it is ready: modules loaded, caches warm)."""
+        self.baseline = rss_bytes()
+
+    @property
+    def available(self) -> int:
+        return max(0, self.total - self.baseline)
+
+    @contextmanager
+    def reserve(self, cost: float, what: str, own_held: int = 0):
+        """Hold ``cost`` bytes of the budget while the block runs; wait (at most ``wait_s``) while
+        others hold too much; refuse at once a cost that can never fit (``own_held``: what this
+        request holds outside its reservation, its payload)."""
+        cost = int(max(0.0, cost))
+        if cost + own_held > self.available:
+            raise BadInput(f"{what} needs about {cost / MB:.0f} MB of working memory; {self.service}'s budget leaves "
+                           f"{self.available / MB:.0f} MB for requests (MIRRORCOACH_MEMORY_MB={self.total / MB:.0f}, "
+                           f"{self.baseline / MB:.0f} MB held by the service itself): send less at once (a shorter "
+                           f"clip, fewer clips or frames) or raise MIRRORCOACH_MEMORY_MB",
+                           cause="too_large", needed_mb=round(cost / MB), available_mb=round(self.available / MB))
+        deadline = time.monotonic() + self.wait_s
+        with self._cond:
+            if self.reserved + cost + self.held() > self.available:
+                log.info("%s waits for memory: needs %.0f MB, %.0f MB held by requests in progress of %.0f MB", what,
+                         cost / MB, (self.reserved + self.held()) / MB, self.available / MB)
+            while self.reserved + cost + self.held() > self.available:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise Unavailable(f"{self.service} is busy: {self.reserved / MB:.0f} MB of its "
+                                      f"{self.available / MB:.0f} MB are held by requests in progress and {what} needs "
+                                      f"{cost / MB:.0f} MB; retry later", cause="memory", service=self.service)
+                self._cond.wait(left)
+            self.reserved += cost
+            self.largest = max(self.largest, cost)
+        try:
+            yield
+        finally:
+            with self._cond:
+                self.reserved -= cost
+                self._cond.notify_all()
+            if cost > TRIM_ABOVE:  # cycles holding arrays (a traceback's frames) freed first
+                gc.collect()
+                trim()
