@@ -123,14 +123,15 @@ def test_deploy_init_makes_a_ca_and_one_identity_per_process(tmp_path):
         names[name] = cert.subject.rfc4514_string()
         meta = json.loads((folder / "identity.json").read_text())
         assert meta["routers"] == ["tls/10.0.0.1:7447"] and meta["name"] == name
-    assert names["pss-b"] == "CN=pss-b" and stat.S_IMODE((out / "ca" / "ca.key").stat().st_mode) == 0o600
+    assert names["pss-b"] == "OU=pss,CN=pss-b.pss" and stat.S_IMODE((out / "ca" / "ca.key").stat().st_mode) == 0o600
     hub = x509.load_pem_x509_certificate((out / "hub" / "cert.pem").read_bytes())
     sans = hub.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     assert "10.0.0.1" in {str(ip) for ip in sans.get_values_for_type(x509.IPAddress)}
     acl = json.loads((out / "hub" / "zenoh.json5").read_text())["access_control"]
     assert acl["default_permission"] == "deny"
     subjects = {s["id"]: s["cert_common_names"] for s in acl["subjects"]}
-    assert subjects["pss"] == ["pss-a", "pss-b"] and subjects["dashboard"] == ["dashboard"]
+    assert subjects["pss"] == ["pss-a.pss", "pss-b.pss"] and subjects["dashboard"] == ["dashboard.dashboard"]
+    assert subjects["router"] == ["hub.router"]  # the role is in the certificate: a name alone carries none
     rules = {r["id"]: r for r in acl["rules"]}
     dash = [rules[i] for p in acl["policies"] if p["subjects"] == ["dashboard"] for i in p["rules"]]
     assert not any(set(r["messages"]) & {"query", "declare_queryable"} for r in dash)
@@ -342,14 +343,35 @@ def test_the_secured_cluster_serves_its_roles_and_refuses_the_rest(secured, tmp_
     assert r.returncode == 2 and "dashboard role" in r.stderr
     log = wait_for(lambda: (lambda t: t if "simulator may not Put" in t else None)(procs.log("router")), 10,
                    "refusals in the router's log")
-    assert "REFUSED dashboard may not Query (ingress) on mc/coach/start" in log
-    assert "REFUSED dashboard may not Declare Queryable (ingress) on mc/pss/*" in log
-    assert "REFUSED dashboard may not Put (ingress) on mc/events/coach/trial" in log
-    assert "REFUSED cli may not Declare Queryable (ingress) on mc/coach/*" in log
-    assert "REFUSED simulator may not Declare Queryable (ingress) on mc/pss/*" in log
-    assert "REFUSED simulator may not Put (ingress) on mc/events/coach/trial" in log
+    assert "REFUSED dashboard.dashboard may not Query (ingress) on mc/coach/start" in log
+    assert "REFUSED dashboard.dashboard may not Declare Queryable (ingress) on mc/pss/*" in log
+    assert "REFUSED dashboard.dashboard may not Put (ingress) on mc/events/coach/trial" in log
+    assert "REFUSED cli.cli may not Declare Queryable (ingress) on mc/coach/*" in log
+    assert "REFUSED simulator.simulator may not Declare Queryable (ingress) on mc/pss/*" in log
+    assert "REFUSED simulator.simulator may not Put (ingress) on mc/events/coach/trial" in log
     # the services' own work was never refused anything (the simulator's refusals above are the test's)
-    assert not any(f"REFUSED {n} " in log for n in ("pss", "coach"))
+    assert not any(f"REFUSED {n}.{n} " in log for n in ("pss", "coach"))
+
+    # a forged liveliness token (a CLI posing as pss) and a certificate of the CA that no role
+    # names (issued after the router's access control was written): refused, and each one line
+    ghost = tmp_path / "ghost"
+    assert run(["deploy", "init", ghost, "--router", f"r2={host_port}", "--ca", out / "ca", "--identity",
+                "ghost:cli"]).returncode == 0
+    c = _raw_session(out / "cli")
+    try:
+        token = c.liveliness().declare_token("mc/alive/pss")
+        g = _raw_session(ghost / "ghost")
+        try:
+            assert not any(x.ok is not None for x in g.get("mc/pss/list", payload=b"\x80", timeout=3.0))
+        finally:
+            g.close()
+        token.undeclare()
+    finally:
+        c.close()
+    log = wait_for(lambda: (lambda t: t if "ghost.cli:" in t and "on mc/alive/pss" in t else None)(
+        procs.log("router")), 10, "the forged token and the unknown certificate in the router's log")
+    assert "REFUSED cli.cli may not Liveliness Token (ingress) on mc/alive/pss" in log, log[-3000:]
+    assert "REFUSED ghost.cli: a certificate of this cluster's CA whose name is in no role" in log, log[-3000:]
 
 
 def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):

@@ -6,7 +6,7 @@
   operator and is never copied to a host);
 * ``OUT/<identity>/`` for every **identity** (one per service instance, per client, per
   router): ``cert.pem`` and ``key.pem`` (its own key pair, EC P-256, the certificate's common
-  name is the identity's name), ``ca.pem``, ``identity.json`` (name, role, prefix, routers) and
+  name is ``<name>.<role>``, :func:`cert_name`), ``ca.pem``, ``identity.json`` (name, role, prefix, routers) and
   ``zenoh.json5``, the complete Zenoh config of that process.
 
 Point a process at its folder with ``MIRRORCOACH_DEPLOY=OUT/<identity>``; nothing else changes.
@@ -16,7 +16,9 @@ Security, when on (it is off on the loopback default, which stays as it was):
 * every link is TLS with **mutual authentication** (``transport.link.tls``, ``enable_mtls``,
   ``protocols: ["tls"]``): a process without a certificate of this CA cannot open a session;
 * the router enforces Zenoh's ``access_control`` (default ``deny``) with one subject per
-  **role**, matched by ``cert_common_names``. What each role may do (:data:`ROLES`):
+  **role**, matched by ``cert_common_names``; a certificate's common name carries its role
+  (``pss-a.pss``, ``alice.cli``), so no name an operator chooses can carry another role's
+  rights. What each role may do (:data:`ROLES`):
 
   ======================  =======================================================================
   role                    may
@@ -61,7 +63,7 @@ CERT_FILES = ("cert.pem", "key.pem", "ca.pem")
 class Identity:
     """One process's place in a deployed cluster (``identity.json``)."""
 
-    name: str  # the certificate's common name
+    name: str  # the identity's name (its certificate's common name is cert_name(name, role))
     role: str  # one of ROLES
     prefix: str
     routers: list[str]  # tls/ADDR:PORT endpoints of the cluster's routers
@@ -71,6 +73,12 @@ class Identity:
     @property
     def service(self) -> str | None:
         return self.role if self.role in SERVICES else None
+
+
+def cert_name(name: str, role: str) -> str:
+    """The common name of an identity's certificate, ``<name>.<role>``: the access control matches
+    it, so the role is bound in the certificate; a name alone (``router``) carries no rights."""
+    return f"{name}.{role}"
 
 
 def check_name(name: str, what: str = "identity") -> str:
@@ -136,8 +144,9 @@ def make_ca(days: int, cn: str = "mirrorcoach cluster CA"):
     return key, cert
 
 
-def issue(ca_key, ca_cert, cn: str, hosts: list[str], days: int):
-    """A leaf certificate for ``cn`` (client and server use), valid for ``hosts`` (SANs)."""
+def issue(ca_key, ca_cert, cn: str, hosts: list[str], days: int, role: str | None = None):
+    """A leaf certificate for ``cn`` (client and server use), valid for ``hosts`` (SANs); its
+    subject also names ``role`` (organizational unit), for a person reading it."""
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -150,7 +159,10 @@ def issue(ca_key, ca_cert, cn: str, hosts: list[str], days: int):
             sans.append(x509.IPAddress(ipaddress.ip_address(h)))
         except ValueError:
             sans.append(x509.DNSName(h))
-    cert = (x509.CertificateBuilder().subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)]))
+    subject = [x509.NameAttribute(NameOID.COMMON_NAME, cn)]
+    if role is not None:
+        subject.append(x509.NameAttribute(NameOID.ORGANIZATIONAL_UNIT_NAME, role))
+    cert = (x509.CertificateBuilder().subject_name(x509.Name(subject))
             .issuer_name(ca_cert.subject).public_key(key.public_key()).serial_number(x509.random_serial_number())
             .not_valid_before(_now() - _dt.timedelta(minutes=5)).not_valid_after(_now() + _dt.timedelta(days=days))
             .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
@@ -360,14 +372,14 @@ def init(out, routers: list[str], identities: list[str], prefix: str = "mc", day
     endpoints = [_endpoint(a, p) for _, a, p in rs]
     members: dict[str, list[str]] = {r: [] for r in ROLES}
     for n, _, _ in rs:
-        members["router"].append(n)
+        members["router"].append(cert_name(n, "router"))
     for n, role in ids:
-        members[role].append(n)
+        members[role].append(cert_name(n, role))
     section = acl(prefix, members)
     plan = [(n, "router", [a], [_endpoint(a, p)]) for n, a, p in rs] + [(n, role, [], None) for n, role in ids]
     for name, role, hosts, listen in plan:
         folder = out / name
-        key, cert = issue(ca_key, ca_cert, name, hosts, days)
+        key, cert = issue(ca_key, ca_cert, cert_name(name, role), hosts, days, role)
         _write(folder / "key.pem", _pem(key), private=True)
         _write(folder / "cert.pem", _pem(cert))
         _write(folder / "ca.pem", _pem(ca_cert))

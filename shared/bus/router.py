@@ -24,6 +24,11 @@ ZENOH_LOG = "warn,zenoh::net::routing::interceptor::access_control=trace,zenoh_l
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 _DENIED = re.compile(r"CertCommonName\((?P<cn>[^)]*)\).* is unauthorized to (?P<what>.+?) \((?P<flow>ingress|egress)\) "
                      r"on (?P<key>\S+)")
+_WHO = re.compile(r"(?P<zid>[0-9a-f]{8,32}) on \S*CertCommonName\((?P<cn>[^)]*)\)")
+_CACHED = re.compile(r"Using cached result: (?P<zid>[0-9a-f]{8,32}) is unauthorized to (?P<what>.+?) "
+                     r"\((?P<flow>ingress|egress)\) on (?P<key>\S+)")
+_ACCEPTED = re.compile(r"Accepted TLS connection on \S+: (?P<peer>\S+)\. Common Name: (?P<cn>[^.\s][^\s]*?)\.?$")
+_NO_SUBJECT = re.compile(r"(?P<zid>[0-9a-f]{8,32}) did not match any configured ACL subject")
 _THREAD = re.compile(r"ThreadId\(\d+\)")
 _CACHING = re.compile(r"caching permissions for `(?P<key>[^`]*)`")
 _TLS_FAIL = re.compile(r"(?i)alert|handshake|certificate|invalid|unknown|error|fail")
@@ -32,19 +37,23 @@ _HINT = re.compile(r"\s*Hint: increase the system open file limit\.?")  # Zenoh'
 
 class RefusalLog:
     """Reads what Zenoh's Rust logger writes (to stdout, fd 1, here through a pipe) and keeps, on
-    stderr: warnings and errors,
-    each access-control refusal as ``refused: <common name> may not <what> (<flow>) on <key>``,
-    and failed TLS handshakes as ``refused a TLS connection: ...``. The rest (Zenoh's trace of
-    every *allowed* decision) is dropped, so the log stays small."""
+    stderr: warnings and errors; each access-control refusal as ``REFUSED <common name> may not
+    <what> (<flow>) on <key>`` (also a decision Zenoh logs by session id only, after it cached a
+    key's permissions: the name comes from the session's earlier lines); a certificate of the CA
+    whose name is in no role (``REFUSED <name>: ... in no role``); and failed TLS handshakes as
+    ``REFUSED a TLS connection: ...``. The rest (Zenoh's trace of every *allowed* decision) is
+    dropped, so the log stays small."""
 
     def __init__(self):
         self.out = os.fdopen(os.dup(2), "w", buffering=1)
+        self._seen: dict[tuple, int] = {}
+        self._caching: dict[str, str] = {}  # thread -> the key whose permissions it is caching
+        self._names: dict[str, str] = {}  # a session's id -> its certificate's common name
+        self._accepted: dict[str, str] = {}  # thread -> the common name of the TLS link it just accepted
         r, w = os.pipe()
         os.dup2(w, 1)
         os.close(w)
         self._r = r
-        self._seen: dict[tuple, int] = {}
-        self._caching: dict[str, str] = {}  # thread -> the key whose permissions it is caching
         threading.Thread(target=self._pump, name="refusal-log", daemon=True).start()
 
     def _pump(self) -> None:
@@ -56,28 +65,53 @@ class RefusalLog:
     def keep(self, line: str) -> None:
         thread = _THREAD.search(line)
         thread = thread.group(0) if thread else ""
+        who = _WHO.search(line)
+        if who:  # a session's id and its certificate's name, for the decisions that give the id only
+            self._names[who["zid"]] = who["cn"]
+        accepted = _ACCEPTED.search(line)
+        if accepted:  # the access control's next line on this thread is about this certificate
+            self._accepted[thread] = accepted["cn"]
+            return
         c = _CACHING.search(line)
         if c:  # this thread then evaluates every kind of message on that key once: not decisions
             self._caching[thread] = c["key"]
             return
         if " is authorized to " in line:  # allowed: nothing to log (a caching block goes on)
             return
+        nobody = _NO_SUBJECT.search(line)
+        if nobody:  # signed by the cluster's CA, but in no role of the access control
+            cn = self._accepted.pop(thread, None) or "?"
+            self._names[nobody["zid"]] = cn
+            self._refused(line, (cn, "subject"), f"{cn}: a certificate of this cluster's CA whose name is in no role "
+                                                 "of the access control; every message of it is denied")
+            return
         m = _DENIED.search(line)
         if m and m["key"] == self._caching.get(thread) and "cached result" not in line:
             return
         self._caching.pop(thread, None)
+        cached = None if m else _CACHED.search(line)
+        if cached:  # the decision itself, after a caching block: the name from the session's id
+            m, cn = cached, self._names.get(cached["zid"], cached["zid"][:8])
+        elif m:
+            cn = m["cn"] or "?"
         if m:
-            k = (m["cn"], m["what"], m["flow"], m["key"])
-            n = self._seen[k] = self._seen.get(k, 0) + 1
-            if n <= 20 or n % 1000 == 0:  # a flood of one refusal cannot fill the disk
-                self.out.write(f"{line[:27]} router REFUSED {m['cn'] or '?'} may not {m['what']} ({m['flow']}) on "
-                               f"{m['key']}" + (f" ({n} times)" if n > 20 else "") + "\n")
+            self._refused(line, (cn, m["what"], m["flow"], m["key"]),
+                          f"{cn} may not {m['what']} ({m['flow']}) on {m['key']}")
             return
         if "zenoh_link_tls" in line and "Accepted TLS connection" not in line and _TLS_FAIL.search(line):
             what = _HINT.sub("", line.split("zenoh_link_tls::unicast:", 1)[-1]).strip()
             self.out.write(f"{line[:27]} router REFUSED a TLS connection: {what}\n")
         elif " WARN " in line or " ERROR " in line:
             self.out.write(line + "\n")
+
+    def _refused(self, line: str, key: tuple, text: str) -> None:
+        """One line per refusal; a flood of one refusal is counted, so it cannot fill the disk."""
+        n = self._seen[key] = self._seen.get(key, 0) + 1
+        if n <= 20 or n % 1000 == 0:
+            self.out.write(f"{line[:27]} router REFUSED {text}" + (f" ({n} times)" if n > 20 else "") + "\n")
+        if len(self._names) > 10_000:  # sessions come and go: the oldest names are forgotten
+            for zid in list(self._names)[:5_000]:
+                del self._names[zid]
 
 
 def main() -> int:
