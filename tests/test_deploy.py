@@ -372,6 +372,12 @@ def test_the_secured_cluster_serves_its_roles_and_refuses_the_rest(secured, tmp_
         procs.log("router")), 10, "the forged token and the unknown certificate in the router's log")
     assert "REFUSED cli.cli may not Liveliness Token (ingress) on mc/alive/pss" in log, log[-3000:]
     assert "REFUSED ghost.cli: a certificate of this cluster's CA whose name is in no role" in log, log[-3000:]
+    r = run(["deploy", "acl", out / "ca", out / "router"])  # the router's access control written again: ghost in
+    assert r.returncode == 0 and "cli cli.cli, ghost.cli" in r.stdout, r.stdout + r.stderr
+    subjects = json.loads((out / "router" / "zenoh.json5").read_text())["access_control"]["subjects"]
+    assert {s["id"]: s["cert_common_names"] for s in subjects}["cli"] == ["cli.cli", "ghost.cli"]
+    r = run(["deploy", "acl", out / "ca", out / "cli"])
+    assert r.returncode == 2 and "not of a router" in r.stderr
 
 
 def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):

@@ -398,6 +398,27 @@ def init(out, routers: list[str], identities: list[str], prefix: str = "mc", day
 ISSUED = "issued.json"  # beside ca.key: every name the CA has signed, and its role
 
 
+def refresh_acl(ca_dir, router_folder) -> dict[str, list[str]]:
+    """Write a router's access control again from every identity its CA has issued (``ca_dir``'s
+    list): identities added with ``--ca`` after the router's configuration was written get their
+    roles' rights once the router restarts. Returns ``{role: [common name, ...]}``."""
+    ident = load_identity(router_folder)
+    if ident.role != "router":
+        raise BadInput(f"{router_folder} is the identity of a {ident.role}, not of a router", field="router")
+    members: dict[str, list[str]] = {r: [] for r in ROLES}
+    for name, role in sorted(issued_names(Path(ca_dir)).items()):
+        if role in members:
+            members[role].append(cert_name(name, role))
+    path = ident.folder / "zenoh.json5"
+    try:
+        cfg = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise BadInput(f"{path}: cannot read the router's Zenoh config ({e})", field="router") from None
+    cfg["access_control"] = acl(ident.prefix, members)
+    _write(path, (json.dumps(cfg, indent=2) + "\n").encode())
+    return {r: names for r, names in members.items() if names}
+
+
 def issued_names(ca_dir: Path) -> dict[str, str]:
     """Every name the CA in ``ca_dir`` has issued a certificate to, and its role: its
     ``issued.json``, and for a CA made before that file the identities in the folder beside it."""

@@ -1,4 +1,4 @@
-"""CLI of a deployed cluster across hosts (issue 16): ``deploy init | show``.
+"""CLI of a deployed cluster across hosts: ``deploy init | acl | show``.
 
 See :mod:`shared.bus.deploy` for what the certificates and the access control allow, and
 ``deploy/README.md`` for running three hosts."""
@@ -44,6 +44,21 @@ def deploy_init(out: Path = typer.Argument(..., help="Folder for the CA and one 
     made = init(out, router, identity or DEFAULT_IDENTITIES, prefix=prefix, days=days, lease_ms=lease_ms, ca_from=ca)
     typer.echo(f"wrote {out}: " + ", ".join(f"{n} ({r})" for n, r in made.items()))
     typer.echo(f"run each process with MIRRORCOACH_DEPLOY={out}/<name>; keep {out}/ca/ca.key off the hosts")
+
+
+@deploy_app.command("acl")
+def deploy_acl(ca: Path = typer.Argument(..., help="The cluster's CA folder (its issued.json lists every identity)."),
+               router: List[Path] = typer.Argument(..., help="Router identity folder(s) to write again.")):
+    """Write routers' access control again from every identity the CA has issued.
+
+    After `deploy init NEW --ca CA --identity alice:cli`, alice is in no role of a router written
+    before her (the router logs her as refused); run this for each router and restart it."""
+    from shared.bus.deploy import refresh_acl
+
+    for folder in router:
+        members = refresh_acl(ca, folder)
+        typer.echo(f"wrote {folder / 'zenoh.json5'}: " + "; ".join(f"{r} {', '.join(n)}" for r, n in members.items()))
+    typer.echo("restart the router(s) for the new access control to apply")
 
 
 @deploy_app.command("show")
