@@ -128,6 +128,24 @@ def test_an_empty_marker_is_no_interrupted_space(tmp_path, dev_split):
     assert store.get("a").symbols and not (tmp_path / "a.pending.json").exists()
 
 
+def test_an_interrupted_replace_beside_an_intact_space_is_said_once(tmp_path, dev_split, caplog):
+    """A replace (or an add) killed half-way leaves the space as it was: the next start says so
+    in the log and lists the space without an INTERRUPTED line; a first build that never
+    finished stays listed until it is built or deleted."""
+    from shared.pss.space import ProtoSymbolSpace
+    from shared.pss.store import SpaceStore
+
+    store = SpaceStore(tmp_path)
+    store.commit("kept", ProtoSymbolSpace.build(dev_split[0][:3], dim=2))
+    (tmp_path / "kept.pending.json").write_text(json.dumps({"operation": "build", "started": 1.0}))
+    (tmp_path / "never.pending.json").write_text(json.dumps({"operation": "build", "started": 1.0}))
+    with caplog.at_level("WARNING", logger="mirrorcoach.pss"):
+        store = SpaceStore(tmp_path)
+    assert [x["space"] for x in store.interrupted()] == ["never"] and store.names() == ["kept"]
+    assert "space 'kept': a build started before the service last stopped never finished" in caplog.text
+    assert [x["space"] for x in SpaceStore(tmp_path).interrupted()] == ["never"]  # said once: the marker is gone
+
+
 def test_a_line_the_full_disk_cut_is_taken_back(small_disk):
     """The disk takes the first part of a line (the file's last page has room) and refuses the
     rest: the file is cut back to where it was, and the error is raised."""

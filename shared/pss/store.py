@@ -23,6 +23,7 @@ spaces run side by side.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 import threading
@@ -34,6 +35,16 @@ from pathlib import Path
 from shared.errors import BadInput, Conflict, NotFound
 from shared.io.atomic import atomic_write
 from shared.pss.space import ProtoSymbolSpace
+
+log = logging.getLogger("mirrorcoach.pss")
+
+
+def _operation(marker: Path) -> str:
+    try:
+        return str(json.loads(marker.read_text()).get("operation", "build"))
+    except (OSError, ValueError, AttributeError):
+        return "build"
+
 
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 JOURNAL_MAX = 32  # entries beside a space's file before the next change rewrites it whole
@@ -58,8 +69,16 @@ class SpaceStore:
         for pattern in (".*.npz.*", ".*.add.*"):  # half-written temporary files of a killed process
             for tmp in self.root.glob(pattern):
                 tmp.unlink(missing_ok=True)
-        for m in self.root.glob("*.pending.json"):  # a marker an older version could not finish writing
-            if m.stat().st_size == 0:  # (a full disk): written before any work, so no operation began
+        for m in self.root.glob("*.pending.json"):
+            name = m.name[: -len(".pending.json")]
+            if m.stat().st_size == 0:  # a marker an older version could not finish writing (a full disk):
+                m.unlink(missing_ok=True)  # written before any work, so no operation began
+            elif NAME_RE.fullmatch(name) and self.path(name).exists():
+                # a replace or an add the previous process never finished: the space is as it was
+                # before it (its file and journal are written atomically), so nothing is left to
+                # report beyond this line; its client was told when the process died
+                log.warning("space %r: a %s started before the service last stopped never finished; the space is "
+                            "as it was before it", name, _operation(m))
                 m.unlink(missing_ok=True)
 
     def forget(self) -> None:
