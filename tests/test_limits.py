@@ -9,6 +9,7 @@ import errno
 import json
 import os
 import subprocess
+import time
 import uuid
 
 import numpy as np
@@ -203,8 +204,10 @@ def test_library_code_is_limited_only_inside_a_request():
 
 
 def test_a_coaching_run_past_its_time_limit_keeps_the_trials_it_completed(tmp_path, bundled, client_of):
-    """The coach's limit (2 s, only the coach's) stops a 50-trial run between trials: the reply
-    says how many were completed and kept, the session holds exactly those, and it goes on."""
+    """The coach's limit (only the coach's) stops a 50-trial run between trials: the reply says
+    how many were completed and kept, the session holds exactly those, and it goes on. The limit
+    is set in work, not in seconds of a machine that may be loaded: about eight trials' worth, as
+    long as one trial takes on this machine now (measured first; the coach restarted with it)."""
     from shared.bus.client import RemoteError
     from shared.io import load_clip
     from tests.conftest import Processes
@@ -214,21 +217,36 @@ def test_a_coaching_run_past_its_time_limit_keeps_the_trials_it_completed(tmp_pa
     procs.start("router", "shared.bus.router")
     for name in ("pss", "simulator"):
         procs.start(name, f"services.{name}")
-    procs.env = {**env, "MIRRORCOACH_TIME_LIMIT": "2"}
-    procs.start("coach", "services.coach")
+    squat = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc")
     try:
-        procs.wait_alive({"pss", "simulator", "coach"})
         c = client_of(env)
-        squat = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc")
-        c.request("coach", "start", {"session": "long", "target": clip_to_wire(squat), "learner": "slow"})
+        limit = 2.0
+        for attempt in range(4):
+            procs.env = {**env, "MIRRORCOACH_TIME_LIMIT": f"{limit:g}"}
+            procs.start("coach", "services.coach")
+            procs.wait_alive({"pss", "simulator", "coach"})
+            session = f"long{attempt}"
+            c.request("coach", "start", {"session": session, "target": clip_to_wire(squat), "learner": f"slow{attempt}"})
+            t0 = time.monotonic()
+            try:
+                c.request("coach", "run", {"session": session, "trials": 1}, timeout=300)
+                one = time.monotonic() - t0  # a trial, warm
+            except RemoteError:
+                one = limit
+            if one <= limit / 8:
+                break
+            old = procs.procs.pop("coach")
+            old.terminate()
+            old.wait(timeout=60)
+            limit = max(2.0, 8 * one)
         with pytest.raises(RemoteError) as e:
-            c.request("coach", "run", {"session": "long", "trials": 50}, timeout=300)
+            c.request("coach", "run", {"session": session, "trials": 50}, timeout=600)
         assert e.value.code == "unavailable" and e.value.details["cause"] == "time_limit", e.value.message
         done = int(e.value.message.split("stopped; ")[1].split(" of 50")[0])
         assert 0 < done < 50 and "completed and kept" in e.value.message
-        assert len(c.request("coach", "state", {"session": "long"})["trials"]) == done
-        r = c.request("coach", "run", {"session": "long", "trials": 1})
-        assert len(r["trials"]) == done + 1
+        assert len(c.request("coach", "state", {"session": session})["trials"]) == done + 1
+        r = c.request("coach", "run", {"session": session, "trials": 1})
+        assert len(r["trials"]) == done + 2
     finally:
         procs.stop()
     assert "Traceback" not in procs.log("coach")
