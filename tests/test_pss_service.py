@@ -414,3 +414,23 @@ def test_a_request_that_never_fits_the_memory_budget_is_refused_up_front(tmp_pat
         assert "memory: " in procs.log("pss") and "Traceback" not in procs.log("pss")
     finally:
         serve.close()
+
+
+def test_a_client_that_stops_waiting_before_the_verbs_limit_is_told_it_may_still_run(pss_service, dev_split,
+                                                                                    client_of):
+    """A build may run up to its time limit (600 s); a client that waits less is told the service
+    may still be working and how to wait longer, and the space is indeed built afterwards."""
+    from shared.bus.client import Unavailable
+
+    env, _ = pss_service
+    c = client_of(env)
+    clips = [clip_to_wire(x.resample(30)) for x in dev_split[0][:14]]  # full covariances: more than 0.1 s anywhere
+    with pytest.raises(Unavailable) as e:
+        c.request("pss", "build", {"space": "slowpoke", "clips": clips, "replace": True, "covariance_type": "full"},
+                  timeout=0.1)
+    assert e.value.details["cause"] == "timeout", e.value.message
+    assert "may still be working: pss/build may run up to 600 s" in e.value.message and "--timeout 600" in e.value.message
+    deadline = time.monotonic() + 600
+    while "slowpoke" not in {s["space"] for s in c.request("pss", "list")["spaces"]} and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert c.request("pss", "info", {"space": "slowpoke"})["n_proto_symbols"] == 14

@@ -28,6 +28,20 @@ class RemoteError(MirrorcoachError):
         self.code = code
 
 
+def _may_run_longer(service: str, verb: str, timeout: float) -> str:
+    """What to say when a verb's contract lets it run longer than the client waited."""
+    try:
+        from schemas import CONTRACTS
+
+        ep = CONTRACTS[service].ENDPOINTS[verb]
+    except (ImportError, KeyError):
+        return ""
+    if ep.waits or ep.time_limit_s <= timeout:
+        return ""
+    return (f"; it may still be working: {service}/{verb} may run up to {ep.time_limit_s:g} s (its time limit), so "
+            f"wait longer with --timeout {ep.time_limit_s:g} (or MIRRORCOACH_TIMEOUT)")
+
+
 class Client:
     """A Zenoh client session for requests, liveliness and event subscriptions."""
 
@@ -167,8 +181,8 @@ class Client:
                                f"accepts by default; a router whose MIRRORCOACH_MAX_PAYLOAD is lower than this "
                                f"client's drops it unread", cause="oversize", timeout=timeout, size=size, **where)
         if waited >= 0.9 * timeout:
-            return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s", cause="timeout",
-                               timeout=timeout, **where)
+            return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s{_may_run_longer(service, verb, timeout)}",
+                               cause="timeout", timeout=timeout, **where)
         return Unavailable(f"service {service} gave no answer to {verb} (it may have restarted meanwhile); retry",
                            cause="no_answer", **where)
 
