@@ -8,7 +8,7 @@ OUT     ?= out
 # the local cluster's data, logs and pid files (see shared/bus/config.py for every variable)
 export MIRRORCOACH_HOME ?= $(CURDIR)/var
 
-.PHONY: install bytecode demo test bench reproduce up down status dashboard clean
+.PHONY: install bytecode demo test test-quick bench reproduce up down status dashboard clean
 
 $(STAMP): pyproject.toml
 	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (mirrorcoach needs Python 3.11)"; exit 1; }
@@ -46,6 +46,10 @@ test: $(STAMP)
 	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends blender \
 	    espeak-ng mesa-vulkan-drivers libvulkan1) >/dev/null 2>&1 || echo "warning: not installed; those tests will be skipped"; fi
 	$(BIN)/python -m pytest -q -p no:cacheprovider
+
+# the tests without the slowest (marked slow: whole studies, reproductions, the real viewer, failover)
+test-quick: $(STAMP)
+	$(BIN)/python -m pytest -q -p no:cacheprovider -m "not slow"
 
 bench: bytecode
 	$(BIN)/python -m bench.run --hdm05 $(HDM05) --out bench/results

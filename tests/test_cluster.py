@@ -246,6 +246,7 @@ def test_simulator_cli_on_the_cluster(cluster, bundled, tmp_path):
     assert list((tmp_path / "q").glob("*_1.npz"))
 
 
+@pytest.mark.slow
 def test_chapter3_from_the_cli(cluster, tmp_path):
     env = cluster
     assert cli(env, "other", "create", "r2", "--d", "6").returncode == 0
@@ -460,6 +461,7 @@ def _wait_dead(pid: int, timeout: float = 30.0) -> None:
         time.sleep(0.05)
 
 
+@pytest.mark.slow
 def test_no_answer_names_its_cause(tmp_path):
     """Issue 17, row 12: "service X is not running (start it with `make up`)" came also when
     the router died, the service was frozen or restarting."""
@@ -597,6 +599,7 @@ def test_sigkill_during_a_build_leaves_other_spaces_intact(cluster, dev_split, b
     assert "pss exited with code -9; restarting" in log
 
 
+@pytest.mark.slow
 def test_a_study_with_scripted_participants_and_a_coach_seat(cluster, bundled, tmp_path):
     """Issue 14: `mirrorcoach study` runs fig. 4.3 / Table 4.2 with people's own attempts
     (here: scripted participants sending real HDM05 squats), counterbalanced and seeded, keeps a
@@ -664,6 +667,7 @@ def test_a_study_with_scripted_participants_and_a_coach_seat(cluster, bundled, t
     assert step["trial"] == 1 and step["show"].endswith("target.bvh")
 
 
+@pytest.mark.slow
 def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
     """A world that does not agree with the method: learners that copy what they see. The
     report's words are computed, so emphasis must not come out as helping there, and every
@@ -746,6 +750,7 @@ def test_a_study_trial_from_a_live_take_cut_and_said_aloud(cluster, bundled, tmp
     assert r.returncode == 2 and "not both" in r.stderr
 
 
+@pytest.mark.slow
 def test_a_whole_study_runs_live_from_replayed_takes(cluster, bundled, tmp_path):
     """`study run` with a live source: 2 participants x 2 cases x 2 trials, each trial's take
     recorded from the stream, cut, scored and logged, without a file chosen by hand; the study's
@@ -777,6 +782,7 @@ def test_a_whole_study_runs_live_from_replayed_takes(cluster, bundled, tmp_path)
     assert len(rows) == 8 and {r["world"] for r in rows} == {"people"}
 
 
+@pytest.mark.slow
 def test_a_live_take_is_redone_and_a_participant_skipped_on_request(cluster, bundled, tmp_path):
     """While `study run` records, `study redo` from another terminal records the take again (the
     person stood still: the first take is never scored) and `study skip` leaves a participant for
@@ -859,6 +865,7 @@ def test_coach_live_runs_trials_from_a_live_source(cluster, bundled, tmp_path):
     assert r.returncode != 0 and "no live source" in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
+@pytest.mark.slow
 def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_path):
     """Thesis 5.4.1 with people: `--cases sweep` plans each participant's alpha sweep (without
     and with the adverb, counterbalanced like any case), `study emu2` picks each one's alpha that

@@ -47,6 +47,7 @@ def _pixels(path, colour, tol=50):
     return im, ys, xs
 
 
+@pytest.mark.slow
 def test_the_demo_recording_in_the_real_viewer(viewer_ok, demo_recording, tmp_path):
     from shared.observe.viewer import HeadlessViewer
 
@@ -107,6 +108,7 @@ def test_the_demo_recording_says_what_the_live_take_did(demo_recording):
     assert any("take demo-live: done" in x and "replay of 1 clip(s)" in x for x in lines), lines
 
 
+@pytest.mark.slow
 def test_live_streaming_of_two_sessions_at_once(viewer_ok, bundled, tmp_path):
     from shared.bus.client import Client
     from shared.observe.viewer import HeadlessViewer
@@ -141,6 +143,7 @@ def test_live_streaming_of_two_sessions_at_once(viewer_ok, bundled, tmp_path):
             subprocess.run(cli + ["down"], env=env, cwd=REPO, capture_output=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_dashboard_screenshot_from_the_cli(viewer_ok, demo_recording, tmp_path):
     r = subprocess.run([sys.executable, "-m", "shared.cli", "dashboard", str(demo_recording), "--screenshot",
                         str(tmp_path / "shots")], cwd=REPO, capture_output=True, text=True, timeout=600)

@@ -380,6 +380,7 @@ def test_the_secured_cluster_serves_its_roles_and_refuses_the_rest(secured, tmp_
     assert r.returncode == 2 and "not of a router" in r.stderr
 
 
+@pytest.mark.slow
 def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):
     """The demo's steps across three hosts over TLS; a host's link cut mid-request; a second pss
     on another host takes over; the first comes back as a standby."""

@@ -265,6 +265,7 @@ def while_building(env, dev_split, action, outlasted):
     pytest.fail(f"even a {BUILD_SIZES[-1][0]}-clip build finished before the requests made during it")
 
 
+@pytest.mark.slow
 def test_a_long_build_does_not_stall_recognition_on_another_space(pss_service, dev_split, clips, built, client_of):
     env, _ = pss_service
     c = client_of(env)
@@ -351,6 +352,7 @@ def test_an_oversize_request_is_dropped_before_it_is_read_whole(pss_service, bui
         assert "base" in {x["space"] for x in c.request("pss", "list")["spaces"]}  # the service is fine
 
 
+@pytest.mark.slow
 def test_a_saturated_service_answers_unavailable_at_once(tmp_path_factory, dev_split):
     """Issue 17, row 1: requests queued without bound behind long work. With one worker and two
     places in the queue, a long build holds the worker: two requests wait, the rest are told
