@@ -205,3 +205,24 @@ def test_bad_simulator_input_gets_clear_errors_and_the_service_stays_up(simulato
     # the learner that was shown a 1e300 demonstration still learns from a real one
     out = c.request("simulator", "learner_imitate", {"learner": "steady", "demonstration": human})
     assert all(np.isfinite(a["data"]).all() for a in out["attempts"])
+
+
+def test_a_reply_over_the_payload_limit_is_an_error_not_silence(tmp_path_factory, squat):
+    """A router drops a message over the payload limit unread, so a reply that large would leave
+    its caller waiting for nothing: the service says so instead (inverse dynamics adds the torques
+    of every joint: the reply is larger than the request)."""
+    from shared.bus.client import Client
+    from tests.conftest import _serve, settings_of
+
+    serve = _serve(tmp_path_factory, "simulator", MIRRORCOACH_MAX_PAYLOAD=120_000)
+    env, procs = next(serve)
+    try:
+        with Client(settings_of(env)) as c:
+            with pytest.raises(RemoteError) as e:
+                c.request("simulator", "perform", {"skeleton": squat.skeleton.to_json(),
+                                                   "clip": clip_to_wire(squat, with_skeleton=False)}, timeout=120)
+        assert e.value.code == "bad_request" and e.value.details["cause"] == "too_large", e.value.message
+        assert "the reply of simulator/perform is" in e.value.message and "shorter clip" in e.value.message
+        assert "Traceback" not in procs.log("simulator")
+    finally:
+        serve.close()

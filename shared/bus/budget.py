@@ -7,8 +7,10 @@ before its work starts (:meth:`Endpoint.cost <schemas.base.Endpoint>` or the ser
 estimate from the request: frames x channels x what the verb does with them, measured by
 ``python -m bench.budget``); it runs when its cost fits beside the requests in progress, waits
 for memory (bounded) when it does not fit now, and is refused up front when it can never fit.
-After a large request the C allocator is asked to return freed memory to the system
-(``malloc_trim``): freed blocks otherwise stay in the worker threads' arenas.
+After a large request is answered the C allocator is asked to return freed memory to the system
+(``malloc_trim``), and services allocate from one arena (:func:`one_arena`): freed blocks
+otherwise stay in the worker threads' arenas, and a reply's buffers are freed only once it is
+sent (trimming before that left one reply's size held: 40-370 MB).
 """
 
 from __future__ import annotations
@@ -126,6 +128,11 @@ class MemoryBudget:
             with self._cond:
                 self.reserved -= cost
                 self._cond.notify_all()
-            if cost > TRIM_ABOVE:  # cycles holding arrays (a traceback's frames) freed first
-                gc.collect()
-                trim()
+
+    @staticmethod
+    def give_back(cost: float) -> None:
+        """After a large request is answered (its reply sent and freed, not only made): cycles
+        holding arrays (a traceback's frames) collected, then the allocator's free memory returned."""
+        if cost > TRIM_ABOVE:
+            gc.collect()
+            trim()

@@ -47,7 +47,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 from schemas.base import Endpoint, Message
-from shared.bus.budget import MB, MemoryBudget
+from shared.bus.budget import MB, TRIM_ABOVE, MemoryBudget
 from shared.bus.config import Settings, client_config
 from shared.codec import pack, unpack
 from shared.deadline import time_limit
@@ -122,6 +122,7 @@ class Service:
         # stop grace): Zenoh's Python objects refuse being used from two threads at once
         # ("RuntimeError: Already borrowed"), so both take this lock
         self._publish_lock = threading.Lock()
+        self._answered = threading.local()  # per worker: the cost of the request it is answering
 
     def client(self):
         """A client of the cluster for calling other services (opened on first use, closed on stop)."""
@@ -354,6 +355,11 @@ class Service:
                     query.reply_err(error_payload("internal", f"{self.name} failed on {verb}: {type(e).__name__}: {e}"))
         finally:
             self._done(size, waits)
+            cost, self._answered.cost = getattr(self._answered, "cost", 0.0), 0.0
+            if cost > TRIM_ABOVE:  # once the reply and the request are freed (after this call returns)
+                later = threading.Timer(0.5, self.budget.give_back, args=(cost,))
+                later.daemon = True
+                later.start()
             ms = 1e3 * (time.perf_counter() - t0)
             log.info("%s %s %.1f ms", verb, code, ms)
             try:
@@ -371,6 +377,7 @@ class Service:
         req = ep.request.validate(msg)
         limit = None if ep.waits else min(ep.time_limit_s, self.settings.time_limit)
         cost = max(PAYLOAD_FACTOR * len(payload), self.costs[verb](req) if verb in self.costs else 0.0)
+        self._answered.cost = cost  # given back by _serve once the reply is sent
         with self.budget.reserve(cost, f"{self.name}/{verb}", own_held=PAYLOAD_HELD * len(payload)):  # the reply is packed inside: it costs too
             with time_limit(limit, f"{self.name}/{verb}"):
                 out = self.handlers[verb](req)
@@ -378,7 +385,13 @@ class Service:
                 out = ep.reply.validate(out)
             except BadInput as e:  # our own reply is off-contract: a bug, not the caller's fault
                 raise RuntimeError(f"reply does not match {ep.reply.name}: {e.message}") from None
-            return pack({"v": ep.reply.version, **out})
+            reply = pack({"v": ep.reply.version, **out})
+        if len(reply) > self.settings.max_payload:  # the router would drop it unread: the caller would wait
+            raise BadInput(f"the reply of {self.name}/{verb} is {len(reply) / 2**20:.0f} MiB, more than the "
+                           f"{self.settings.max_payload / 2**20:.0f} MiB a message may carry (MIRRORCOACH_MAX_PAYLOAD): "
+                           "ask for less at once (a shorter clip, fewer frames)", cause="too_large",
+                           size=len(reply), limit=self.settings.max_payload)
+        return reply
 
 
 class OneWriter:
