@@ -462,6 +462,55 @@ def _wait_dead(pid: int, timeout: float = 30.0) -> None:
 
 
 @pytest.mark.slow
+def test_a_long_request_is_waited_for_and_a_frozen_service_noticed(cluster, dev_split):
+    """Without --timeout the client waits MIRRORCOACH_TIMEOUT, extended to the verb's own limit
+    when its contract allows more (a build of seconds with the timeout at 1 s is answered), and
+    past it a watchdog notices a service frozen mid-request within seconds, not at 600 s."""
+    from shared.bus.client import Client, Unavailable
+
+    env = cluster
+    s = settings_of(env)
+    s.timeout = 1.0
+    with Client(s) as c:
+        for n in (14, 28, len(dev_split[0])):  # a build that outlasts the client's 1 s three times over here
+            clips = [clip_to_wire(x.resample(30)) for x in dev_split[0][:n]]
+            t0 = time.monotonic()
+            info = c.request("pss", "build", {"space": "long", "clips": clips, "covariance_type": "full",
+                                              "replace": True})
+            took = time.monotonic() - t0
+            assert info["n_proto_symbols"] == n  # answered although it took longer than MIRRORCOACH_TIMEOUT
+            if took > 3.0:
+                break
+        assert took > 1.0, took
+        outcome = {}
+
+        def build():
+            try:
+                c.request("pss", "build", {"space": "long", "clips": clips, "covariance_type": "full", "replace": True})
+                outcome["ok"] = True
+            except Unavailable as e:
+                outcome["error"] = e
+
+        t = threading.Thread(target=build)
+        t.start()
+        marker = Path(env["MIRRORCOACH_HOME"]) / "data" / "pss" / "long.pending.json"
+        deadline = time.monotonic() + 60
+        while not marker.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(1.5)  # past the client's 1 s: only the watchdog keeps the wait going
+        pid = int((Path(env["MIRRORCOACH_HOME"]) / "run" / "pss.pid").read_text().split()[0])
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            t0 = time.monotonic()
+            t.join(timeout=120)
+            noticed = time.monotonic() - t0
+        finally:
+            os.kill(pid, signal.SIGCONT)
+    assert "error" in outcome, outcome  # (the build takes more than 3 s: it cannot have ended in 1.5 s)
+    assert outcome["error"].details["cause"] == "frozen" and noticed < 30, (outcome, noticed)
+
+
+@pytest.mark.slow
 def test_no_answer_names_its_cause(tmp_path):
     """Issue 17, row 12: "service X is not running (start it with `make up`)" came also when
     the router died, the service was frozen or restarting."""

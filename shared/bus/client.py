@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 
 from shared.bus.config import Settings, client_config
@@ -30,16 +31,72 @@ class RemoteError(MirrorcoachError):
 
 def _may_run_longer(service: str, verb: str, timeout: float) -> str:
     """What to say when a verb's contract lets it run longer than the client waited."""
+    limit = _verb_limit(service, verb)
+    if limit is None or limit <= timeout:
+        return ""
+    return (f"; it may still be working: {service}/{verb} may run up to {limit:g} s (its time limit), so "
+            f"wait longer with --timeout {limit:g}")
+
+
+class _Watch:
+    """Ends a request's wait (its Zenoh cancellation token) at ``MIRRORCOACH_TIMEOUT``, or, when
+    the verb's contract lets it run longer, at the verb's time limit or as soon as the service is
+    no longer there to answer (looked at every ``EVERY_S`` past ``MIRRORCOACH_TIMEOUT``)."""
+
+    EVERY_S = 2.0
+
+    def __init__(self, client: "Client", service: str, verb: str, timeout: float):
+        self.client, self.service, self.verb = client, service, verb
+        self.timeout = timeout  # grows to the verb's limit once MIRRORCOACH_TIMEOUT has passed
+        self.longest = max(timeout, client.settings.time_limit, 600.0) + 30.0
+        self._stop = threading.Event()
+
+    def start(self):
+        import zenoh
+
+        self.token = zenoh.CancellationToken()
+        self._t0 = time.monotonic()
+        threading.Thread(target=self._run, name="request-watch", daemon=True).start()
+        return self.token
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _run(self) -> None:
+        if self._stop.wait(self.timeout):
+            return
+        limit = _verb_limit(self.service, self.verb)  # read only now: schemas load numpy (a slow start)
+        if limit is None or limit <= self.timeout:
+            self.token.cancel()
+            return
+        self.timeout = limit + 10.0
+        while not self._stop.wait(self.EVERY_S):
+            if time.monotonic() - self._t0 >= self.timeout or not self._still_there():
+                self.token.cancel()
+                return
+
+    def _still_there(self) -> bool:
+        if self.client.settings.identity is None:
+            from shared.cluster import local_state
+
+            state, _ = local_state(self.client.settings, self.service)
+            if state in ("frozen", "restarting"):
+                return False
+        try:
+            return self.service in self.client.alive(timeout=1.0)
+        except MirrorcoachError:
+            return False
+
+
+def _verb_limit(service: str, verb: str) -> float | None:
+    """The time limit of a verb that does not wait for a person (``None``: unknown or waits)."""
     try:
         from schemas import CONTRACTS
 
         ep = CONTRACTS[service].ENDPOINTS[verb]
     except (ImportError, KeyError):
-        return ""
-    if ep.waits or ep.time_limit_s <= timeout:
-        return ""
-    return (f"; it may still be working: {service}/{verb} may run up to {ep.time_limit_s:g} s (its time limit), so "
-            f"wait longer with --timeout {ep.time_limit_s:g} (or MIRRORCOACH_TIMEOUT)")
+        return None
+    return None if ep.waits else float(ep.time_limit_s)
 
 
 class Client:
@@ -81,7 +138,14 @@ class Client:
 
     # ------------------------------------------------------------------ requests
     def request_raw(self, service: str, verb: str, payload: bytes, timeout: float | None = None) -> dict:
-        timeout = self.settings.timeout if timeout is None else timeout
+        """Send ``payload``; the decoded reply map. Without ``timeout``, the wait is
+        ``MIRRORCOACH_TIMEOUT``, extended to the verb's own time limit when its contract allows it
+        to work longer (a large build): past ``MIRRORCOACH_TIMEOUT`` a watchdog looks every 2 s
+        whether the service is still there (frozen, restarting, gone: the wait ends at once)."""
+        watch = None
+        if timeout is None:
+            timeout = self.settings.timeout
+            watch = _Watch(self, service, verb, timeout)
         if len(payload) > self.settings.max_payload:  # the router would drop it after 64 MiB: say so now
             raise BadInput(f"the request is {len(payload) / 2**20:.1f} MiB; services accept at most "
                            f"{self.settings.max_payload / 2**20:.0f} MiB (MIRRORCOACH_MAX_PAYLOAD)",
@@ -91,7 +155,23 @@ class Client:
             raise Forbidden(f"identity {ident.name!r} has the dashboard role: it may only watch events, not call "
                             f"{service}/{verb}", identity=ident.name, role=ident.role)
         t0 = time.monotonic()
-        replies = self.session.get(self.settings.key(service, verb), payload=payload, timeout=timeout)
+        if watch is None:
+            replies = self.session.get(self.settings.key(service, verb), payload=payload, timeout=timeout)
+        else:  # Zenoh waits for the longest a verb may run; the watchdog ends the wait earlier
+            replies = self.session.get(self.settings.key(service, verb), payload=payload,
+                                       timeout=watch.longest, cancellation_token=watch.start())
+        try:
+            reply = self._first_reply(service, verb, replies)
+        finally:
+            if watch is not None:
+                watch.stop()
+                timeout = watch.timeout  # what the wait came to be: the verb's limit, or the default
+        if reply is not None:
+            return reply
+        raise self._no_answer(service, verb, timeout, time.monotonic() - t0, len(payload))
+
+    def _first_reply(self, service: str, verb: str, replies) -> dict | None:
+        """The first reply, checked; a remote error raised; ``None`` when none came."""
         for r in replies:
             if r.ok is not None:
                 return self._checked(service, verb, unpack(r.ok.payload.to_bytes(), arrays=self.arrays))
@@ -105,7 +185,7 @@ class Client:
                 raise
             except MirrorcoachError:
                 raise RemoteError("internal", f"{service} sent an unreadable error: {raw[:200]!r}") from None
-        raise self._no_answer(service, verb, timeout, time.monotonic() - t0, len(payload))
+        return None
 
     def _checked(self, service: str, verb: str, reply) -> dict:
         """A reply checked against its contract like any request (defaults filled in): a reply

@@ -10,7 +10,11 @@ variable                          default                     meaning
 ``MIRRORCOACH_PREFIX``            ``mc``                      first segment of every key
 ``MIRRORCOACH_HOME``              ``./var``                   data (``data/<service>``), logs, pid files
 ``MIRRORCOACH_MAX_PAYLOAD``       ``67108864`` (64 MiB)       largest request a service accepts, bytes
-``MIRRORCOACH_TIMEOUT``           ``120``                     default request timeout of the CLI, seconds
+``MIRRORCOACH_TIMEOUT``           ``120``                     default request timeout of the CLI, seconds;
+                                                              extended to a verb's own time limit when
+                                                              its contract allows longer work (past it,
+                                                              the client looks every 2 s that the
+                                                              service is still there to answer)
 ``MIRRORCOACH_WORKERS``           ``4``                       requests a service handles at once (more
                                                               threads than cores only fight for the GIL)
 ``MIRRORCOACH_QUEUE``             ``256``                     requests a service keeps waiting beyond its
