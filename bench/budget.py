@@ -3,8 +3,9 @@
 Four clients at once each send the largest request the contract allows in practice: a
 recognition of a 100,000-frame clip (62 channels, 47 MB on the wire, near the 64 MiB payload
 limit) to pss, a generation of 100,000 frames, and the simulator's inverse dynamics of its first
-40,000 frames on a human body (the largest whose reply, twice the request, fits the limit). Measured on a private cluster: the peak
-resident memory of pss while they run (``VmHWM``, reset before), the answers (a request the
+40,000 frames on a human body (the largest whose reply, twice the request, fits the limit).
+Measured on a private cluster: the peak resident memory of the service while they run
+(``VmHWM``, reset before), the answers (a request the
 budget cannot take now waits for memory; one it can never take is refused up front), and the
 resident memory after them against the level before (memory returned), with the space's
 recognition caches and the simulator's MuJoCo already loaded by one short request each.
@@ -96,7 +97,8 @@ def main(argv=None) -> int:
             with Client(s) as c:  # one small request after them: what the last large message left held
                 c.request(service, "list", {})
             time.sleep(1.0)
-            row = {"service": service, "verb": verb, "after_small_mb": rss_mb(pid), "answers": dict(Counter(a for a, _ in answers)), "seconds": seconds,
+            row = {"service": service, "verb": verb, "after_small_mb": rss_mb(pid),
+                   "answers": dict(Counter(a for a, _ in answers)), "seconds": seconds,
                    "longest_s": max(t for _, t in answers), "rss_before_mb": before, "peak_mb": peak_mb(pid),
                    "rss_after_mb": after}
             row["returned"] = row["rss_after_mb"] <= 1.10 * before
@@ -107,7 +109,8 @@ def main(argv=None) -> int:
                   f"{row['after_small_mb']:.0f} MB after a small request")
     md = ["# The largest valid requests at once, against the memory budget", "",
           f"`python -m bench.budget`: {args.clients} clients at once, each one request of {args.frames:,} frames "
-          f"(62 channels; the simulator's {PERFORM_FRAMES:,}, the largest whose reply fits the payload limit); each service's budget `MIRRORCOACH_MEMORY_MB` = {res['budget_mb']:g} (the systemd unit's "
+          f"(62 channels; the simulator's {PERFORM_FRAMES:,}, the largest whose reply fits the payload limit); "
+          f"each service's budget `MIRRORCOACH_MEMORY_MB` = {res['budget_mb']:g} (the systemd unit's "
           "`MemoryMax` and the compose limit are 2 GB). After each run, one small request (`list`).", "",
           "| service/verb | answers | seconds (longest) | RSS before | peak | after | after a small request | "
           "under budget | returned (<= +10 %) |", "|---|---|---|---|---|---|---|---|---|"]

@@ -1,9 +1,9 @@
 """``make bench``: malformed requests on every verb of every contract, through a real cluster.
 
-Each request is invalid (the contract refuses it, checked before sending), made from the verb's own contract (``schemas/``): one
-field at a time missing, of the wrong type, out of range, not finite, too long, nested 10,000
-deep or 100,000 deep; and for the whole message: not a map, not msgpack, an unknown field, a
-schema version from the future, an empty payload. Sent raw (no client-side check), a few
+Each request is invalid (the contract refuses it, checked before sending), made from the verb's
+own contract (``schemas/``): one field at a time missing, of the wrong type, out of range, not
+finite, too long, nested 10,000 deep or 100,000 deep; and for the whole message: not a map,
+not msgpack, an unknown field, a schema version from the future, an empty payload. Sent raw (no client-side check), a few
 clients at once, over rounds until ``--requests`` have gone out.
 
 What is counted: the code of every answer (``bad_request`` expected; ``internal`` is a bug; no
@@ -125,7 +125,8 @@ def mutations(endpoint):
     body = endpoint.request.body
     seed = example(body)
     raw = [b"", b"\xc1\xc1\xc1", b"not msgpack at all", pack([1, 2, 3]), pack("a map? no"), pack({"v": 99, **seed}),
-           pack({**seed, "unexpected_field": 1}), pack({1: 2}), with_deep(pack(DEEP), 10_000), with_deep(pack({"v": 1, "x": DEEP}), 100_000)]
+           pack({**seed, "unexpected_field": 1}), pack({1: 2}), with_deep(pack(DEEP), 10_000),
+           with_deep(pack({"v": 1, "x": DEEP}), 100_000)]
     out = list(raw)
     for path, f in paths(body):
         if f.required:
@@ -228,11 +229,14 @@ def main(argv=None) -> int:
           f"version), {args.clients} clients at once.", "",
           "| answer | requests |", "|---|---|"]
     md += [f"| {k} | {v} |" for k, v in codes.most_common()]
-    md += ["", f"State (every service's list) before and after: {'unchanged' if not changed else 'CHANGED: ' + ', '.join(changed)}.",
+    state_words = "unchanged" if not changed else "CHANGED: " + ", ".join(changed)
+    md += ["", f"State (every service's list) before and after: {state_words}.",
            "", "Resident memory after each round of the distinct requests (MB):", "",
            "| requests | " + " | ".join(first) + " |", "|---|" + "---|" * len(first)]
-    md += [f"| {r['requests']} | " + " | ".join(f"{r['rss_mb'].get(n, 0):.0f}" for n in first) + " |" for r in res["rounds"]]
-    md += ["", "Growth from the first round to the last: " + ", ".join(f"{n} {100 * g:+.1f} %" for n, g in growth.items()),
+    md += [f"| {r['requests']} | " + " | ".join(f"{r['rss_mb'].get(n, 0):.0f}" for n in first) + " |"
+           for r in res["rounds"]]
+    md += ["", "Growth from the first round to the last: "
+           + ", ".join(f"{n} {100 * g:+.1f} %" for n, g in growth.items()),
            "", "An `ok` or `not_found` answer is a request that turned out valid (an empty payload is an empty map; "
                "an optional field sent as nil takes its default) about something that does not exist.",
            "", "Goals: 0 `internal` " + ("met" if ok["internal"] else f"missed ({codes['internal']})")

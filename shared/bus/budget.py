@@ -3,10 +3,10 @@
 Each process gets ``MIRRORCOACH_MEMORY_MB`` (default 1536, below the systemd unit's
 ``MemoryMax=2G`` and the compose file's 2 GB). What the process holds once it is ready (its
 code, its caches) is its baseline; requests share the rest. A request's cost is estimated
-before its work starts (:meth:`Endpoint.cost <schemas.base.Endpoint>` or the service's own
-estimate from the request: frames x channels x what the verb does with them, measured by
-``python -m bench.budget``); it runs when its cost fits beside the requests in progress, waits
-for memory (bounded) when it does not fit now, and is refused up front when it can never fit.
+before its work starts (a multiple of its payload, or the verb's own estimate declared with
+``Service.cost``: frames x features for ``pss generate``; measured by ``python -m
+bench.budget``); it runs when its cost fits beside the requests in progress, waits for memory
+(bounded) when it does not fit now, and is refused up front when it can never fit.
 After a large request is answered the C allocator is asked to return freed memory to the system
 (``malloc_trim``), and services allocate from one arena (:func:`one_arena`): freed blocks
 otherwise stay in the worker threads' arenas, and a reply's buffers are freed only once it is
@@ -16,9 +16,9 @@ sent (trimming before that left one reply's size held: 40-370 MB).
 from __future__ import annotations
 
 import ctypes
+import ctypes.util
 import gc
 import logging
-import ctypes.util
 import threading
 import time
 from contextlib import contextmanager
@@ -84,7 +84,6 @@ class MemoryBudget:
         self.wait_s = wait_s
         self.baseline = 0
         self.reserved = 0
-        self.largest = 0  # the largest estimate admitted so far (for the log and tests)
         self._cond = threading.Condition()
         self.measure_baseline()
 
@@ -121,7 +120,6 @@ class MemoryBudget:
                                       f"{cost / MB:.0f} MB; retry later", cause="memory", service=self.service)
                 self._cond.wait(left)
             self.reserved += cost
-            self.largest = max(self.largest, cost)
         try:
             yield
         finally:

@@ -261,8 +261,9 @@ class Client:
                                f"accepts by default; a router whose MIRRORCOACH_MAX_PAYLOAD is lower than this "
                                f"client's drops it unread", cause="oversize", timeout=timeout, size=size, **where)
         if waited >= 0.9 * timeout:
-            return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s{_may_run_longer(service, verb, timeout)}",
-                               cause="timeout", timeout=timeout, **where)
+            more = _may_run_longer(service, verb, timeout)
+            return Unavailable(f"service {service} did not answer {verb} within {timeout:g} s{more}", cause="timeout",
+                               timeout=timeout, **where)
         return Unavailable(f"service {service} gave no answer to {verb} (it may have restarted meanwhile); retry",
                            cause="no_answer", **where)
 

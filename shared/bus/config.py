@@ -200,12 +200,14 @@ class Settings:
             raise BadInput(f"MIRRORCOACH_QUEUE must be 0..100000 and MIRRORCOACH_QUEUE_MB positive, "
                            f"got {self.queue} and {self.queue_mb}")
         if not 128 <= self.memory_mb <= 1e7:
-            raise BadInput(f"MIRRORCOACH_MEMORY_MB must be 128..10000000 (MB per service process), got {self.memory_mb}")
+            raise BadInput(f"MIRRORCOACH_MEMORY_MB must be 128..10000000 (MB per service process), "
+                           f"got {self.memory_mb}")
         if not 0 < self.time_limit <= 1e6:
             raise BadInput(f"MIRRORCOACH_TIME_LIMIT must be positive seconds, got {self.time_limit}")
         if not (2 <= self.recording_mb <= 1e6 and 1 <= self.recordings <= 10_000 and 0 < self.observer_queue_mb <= 1e6):
             raise BadInput(f"MIRRORCOACH_RECORDING_MB must be at least 2 (a dashboard's layout takes up to ~1 MB), "
-                           f"MIRRORCOACH_OBSERVER_QUEUE_MB positive and MIRRORCOACH_RECORDINGS 1..10000, got {self.recording_mb}, {self.observer_queue_mb} and "
+                           f"MIRRORCOACH_OBSERVER_QUEUE_MB positive and MIRRORCOACH_RECORDINGS 1..10000, got "
+                           f"{self.recording_mb}, {self.observer_queue_mb} and "
                            f"{self.recordings}")
         if not re.fullmatch(r"[A-Za-z0-9_-]{1,32}", self.prefix):
             raise BadInput(f"MIRRORCOACH_PREFIX {self.prefix!r} must be 1-32 letters, digits, '_' or '-'")

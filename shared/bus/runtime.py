@@ -378,7 +378,8 @@ class Service:
         limit = None if ep.waits else min(ep.time_limit_s, self.settings.time_limit)
         cost = max(PAYLOAD_FACTOR * len(payload), self.costs[verb](req) if verb in self.costs else 0.0)
         self._answered.cost = cost  # given back by _serve once the reply is sent
-        with self.budget.reserve(cost, f"{self.name}/{verb}", own_held=PAYLOAD_HELD * len(payload)):  # the reply is packed inside: it costs too
+        # the reply is packed inside the reservation: it costs too
+        with self.budget.reserve(cost, f"{self.name}/{verb}", own_held=PAYLOAD_HELD * len(payload)):
             with time_limit(limit, f"{self.name}/{verb}"):
                 out = self.handlers[verb](req)
             try:
