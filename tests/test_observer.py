@@ -97,3 +97,22 @@ def test_request_events_draw_only_the_contracts_verbs(tmp_path, monkeypatch):
     d.close()
     latency = {p for p in read(tmp_path / "r.rrd") if p.startswith("/cluster/latency/")}
     assert latency == {"/cluster/latency/pss/list", "/cluster/latency/pss/unknown_verb"}, latency
+
+
+def test_a_new_recording_carries_a_session_whose_target_has_no_skeleton(tmp_path, bundled):
+    """A target sent without its skeleton is drawn as nothing but still a session: a rotation
+    carries it (and the newest session always) without failing."""
+    from shared.io import find_clips, load_clip
+    from shared.observe.dashboard import Dashboard
+    from shared.observe.recording import read
+
+    clip = load_clip(find_clips([bundled / "amc"])[0])
+    old = Dashboard(tmp_path / "a.rrd")
+    old.session_started("with", clip)
+    old.session_started("without", clip.with_data(clip.data, skeleton=None))
+    new = Dashboard(tmp_path / "b.rrd")
+    old.close()
+    new.continue_from(old, budget_bytes=10 * 2**20)
+    assert list(new.targets) == ["with", "without"]
+    new.close()
+    assert "/sessions/with/body/target" in read(tmp_path / "b.rrd")

@@ -369,7 +369,9 @@ class Dashboard:
 
         def carry(s: str) -> None:
             for name in ("targets", "frames", "poses", "paths", "emphatic", "trials", "curves"):
-                getattr(self, name)[s] = getattr(old, name)[s]
+                table = getattr(old, name)
+                if s in table:  # (a target without a skeleton has no pose)
+                    getattr(self, name)[s] = table[s]
             self._session_series(s)
             self._show_target(s, self.targets[s])
 
