@@ -27,7 +27,7 @@ _DENIED = re.compile(r"CertCommonName\((?P<cn>[^)]*)\).* is unauthorized to (?P<
 _WHO = re.compile(r"(?P<zid>[0-9a-f]{8,32}) on \S*CertCommonName\((?P<cn>[^)]*)\)")
 _CACHED = re.compile(r"Using cached result: (?P<zid>[0-9a-f]{8,32}) is unauthorized to (?P<what>.+?) "
                      r"\((?P<flow>ingress|egress)\) on (?P<key>\S+)")
-_ACCEPTED = re.compile(r"Accepted TLS connection on \S+: (?P<peer>\S+)\. Common Name: (?P<cn>[^.\s][^\s]*?)\.?$")
+_ACCEPTED = re.compile(r"Accepted TLS connection on \S+: \S+\. Common Name: (?P<cn>[^.\s][^\s]*?)\.?$")
 _NO_SUBJECT = re.compile(r"(?P<zid>[0-9a-f]{8,32}) did not match any configured ACL subject")
 _THREAD = re.compile(r"ThreadId\(\d+\)")
 _CACHING = re.compile(r"caching permissions for `(?P<key>[^`]*)`")
@@ -68,6 +68,9 @@ class RefusalLog:
         who = _WHO.search(line)
         if who:  # a session's id and its certificate's name, for the decisions that give the id only
             self._names[who["zid"]] = who["cn"]
+            if len(self._names) > 10_000:  # sessions come and go: the oldest names are forgotten
+                for zid in list(self._names)[:5_000]:
+                    del self._names[zid]
         accepted = _ACCEPTED.search(line)
         if accepted:  # the access control's next line on this thread is about this certificate
             self._accepted[thread] = accepted["cn"]
@@ -109,9 +112,8 @@ class RefusalLog:
         n = self._seen[key] = self._seen.get(key, 0) + 1
         if n <= 20 or n % 1000 == 0:
             self.out.write(f"{line[:27]} router REFUSED {text}" + (f" ({n} times)" if n > 20 else "") + "\n")
-        if len(self._names) > 10_000:  # sessions come and go: the oldest names are forgotten
-            for zid in list(self._names)[:5_000]:
-                del self._names[zid]
+        if len(self._seen) > 10_000:  # refusals on ever new keys: the counts start again
+            self._seen.clear()
 
 
 def main() -> int:
