@@ -400,3 +400,20 @@ def test_offline_recognize_runs_without_numba_and_answers_as_the_compiled_path(t
     assert got["confidence"] == pytest.approx(want.confidence, abs=1e-9)
     assert [n["name"] for n in got["nearest"]] == [n for n, _, _ in want.nearest]
     np.testing.assert_allclose([n["distance"] for n in got["nearest"]], [d for _, _, d in want.nearest], rtol=1e-9)
+
+
+def test_a_long_recording_is_fitted_in_blocks_of_frames_to_the_same_model(monkeypatch):
+    """A long recording's diagonal fit works on blocks of frames instead of ``[x, x*x]`` whole
+    (memory); the model is the stacked form's to rounding."""
+    from shared.pss import hmm
+
+    rng = np.random.default_rng(4)
+    x = np.concatenate([rng.normal(k, 1.0 + 0.2 * k, size=(700, 5)) for k in range(4)])
+    stacked = hmm.fit_hmm([x], 4, covariance_type="diag", var_floor=1e-3, n_iter=15)
+    monkeypatch.setattr(hmm, "CHUNKED_ABOVE", 0)
+    monkeypatch.setattr(hmm, "CHUNK_FRAMES", 256)  # blocks that do not divide the 2,800 frames
+    blocks = hmm.fit_hmm([x], 4, covariance_type="diag", var_floor=1e-3, n_iter=15)
+    np.testing.assert_allclose(blocks.means, stacked.means, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(blocks.covars, stacked.covars, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(blocks.stay, stacked.stay, rtol=1e-9, atol=1e-12)
+    assert blocks.n_iter == stacked.n_iter

@@ -65,8 +65,8 @@ def error_payload(code: str, message: str, details: dict | None = None) -> bytes
 
 
 #: a request's working memory when its service has no estimate of its own: this many times its
-#: payload (measured by bench.budget: a recognition peaks at 6x its clip in the library, plus the
-#: reply and the space's caches on first use)
+#: payload (measured by bench.budget: a recognition peaked at 6x its clip in the library, 3x since
+#: its HMM is fitted on blocks of frames; kept with room for the reply and first-use caches)
 PAYLOAD_FACTOR = 7
 #: every request in flight also holds its payload twice (as received and decoded) outside its
 #: reservation, also while it waits for memory
