@@ -23,17 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from bench.common import parse_args, private_cluster, write_results
-from bench.memory import cluster_pids, rss_mb
+from bench.memory import cluster_pids, rss_mb, status_mb
 
 
 PERFORM_FRAMES = 40_000
 
 
 def peak_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return 0.0
+    return status_mb(pid, "VmHWM")
 
 
 def reset_peak(pid: int) -> None:

@@ -23,11 +23,16 @@ def shm_bytes() -> int:
     return sum(p.stat().st_blocks * 512 for p in Path("/dev/shm").rglob("*") if p.is_file())
 
 
-def rss_mb(pid: int) -> float:
+def status_mb(pid: int, field: str = "VmRSS") -> float:
+    """A process's memory figure from /proc (``VmRSS`` resident now, ``VmHWM`` its peak), MB."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
+        if line.startswith(f"{field}:"):
             return int(line.split()[1]) / 1024
     return 0.0
+
+
+def rss_mb(pid: int) -> float:
+    return status_mb(pid, "VmRSS")
 
 
 def cluster_pids(s) -> dict[str, int]:

@@ -154,7 +154,10 @@ def test_a_reply_that_breaks_its_contract_is_an_error_not_a_traceback(tmp_path):
         session = zenoh.open(client_config(s))
         try:
             impostor = session.declare_queryable(s.key("pss", "list"), lambda q: q.reply(q.key_expr, pack({"spaces": 7})))
-            time.sleep(0.5)
+            deadline = time.monotonic() + 30  # the impostor reachable through the router, however slow the machine
+            while time.monotonic() < deadline and not any(x.ok is not None for x in session.get(s.key("pss", "list"),
+                                                                                                  timeout=1.0)):
+                time.sleep(0.05)
             r = subprocess.run([sys.executable, "-m", "shared.cli", "space", "list"], capture_output=True, text=True,
                                env=env, cwd=REPO, timeout=120)
             impostor.undeclare()
