@@ -30,6 +30,57 @@ def test_the_dtw_kernels_match_their_python_source():
     assert seg.global_dtw(seg._distances(a, a[:5])) == np.inf  # a slope steeper than 2 cannot join the ends
 
 
+def _subsequence_dtw_whole(cost):
+    """The reference: the accumulated cost and start of every cell kept (the form before the
+    kernel kept three rows)."""
+    n, m = cost.shape
+    acc, start = np.full((n, m), np.inf), np.zeros((n, m), np.int64)
+    acc[0], start[0] = 2.0 * cost[0], np.arange(m)
+    for i in range(1, n):
+        for j in range(1, m):
+            c = cost[i, j]
+            steps = [(acc[i - 1, j - 1] + 2.0 * c, start[i - 1, j - 1])]
+            if j >= 2:
+                steps.append((acc[i - 1, j - 2] + 2.0 * cost[i, j - 1] + c, start[i - 1, j - 2]))
+            if i >= 2:
+                steps.append((acc[i - 2, j - 1] + 2.0 * cost[i - 1, j] + c, start[i - 2, j - 1]))
+            acc[i, j], start[i, j] = min(steps, key=lambda x: x[0])
+    return acc[-1], start[-1]
+
+
+def test_a_long_take_is_read_in_bounded_pieces_with_the_same_numbers(bundled, monkeypatch):
+    """The kernel keeps three rows, distances come from scipy's cdist, a take's features and speed
+    are read in blocks: each gives what the whole form gives (memory of a long take: bench.budget)."""
+    r = np.random.default_rng(1)
+    for n, m in ((1, 9), (2, 30), (12, 40), (30, 31)):
+        cost = np.ascontiguousarray(r.random((n, m)))
+        acc, start = seg.subsequence_dtw(cost)
+        ref_acc, ref_start = _subsequence_dtw_whole(cost)
+        finite = np.isfinite(ref_acc)
+        assert np.array_equal(np.isfinite(acc), finite)
+        assert np.allclose(acc[finite], ref_acc[finite]) and np.array_equal(start[finite], ref_start[finite])
+    a, b = r.normal(size=(7, 5)), r.normal(size=(50, 5))
+    assert np.allclose(seg._distances(a, b), np.sqrt(((a[:, None] - b[None]) ** 2).sum(-1)), atol=1e-12)
+    clips = _clips(bundled, "bd", "squat1Reps")
+    take, _ = join(clips * 3, seed=2)
+    reader = seg.Reader(clips[0])
+    whole, whole_speed = reader.read(take), seg.speed(reader.read(take), seg.FPS)
+    monkeypatch.setattr(seg, "READ_BLOCK", 37)  # many blocks, a short last one merged into the one before
+    assert len(whole) > 10 * 37
+    assert np.allclose(reader.read(take), whole, atol=1e-12)
+    assert np.array_equal(seg.speed(whole, seg.FPS), whole_speed)
+
+
+def test_a_segmentation_past_its_time_limit_stops_with_the_limit_named(bundled):
+    from shared.deadline import TimeLimit, time_limit
+
+    clips = _clips(bundled, "bd", "squat1Reps")
+    take, _ = join(clips * 2, seed=3)
+    with time_limit(0.0, "capture/segment"), pytest.raises(TimeLimit, match="capture/segment passed its time limit"):
+        seg.segment(take, clips[0])
+    assert seg.segment(take, clips[0], expected=None).repetitions  # the same take without a limit is cut
+
+
 def test_a_joined_take_holds_its_clips_where_it_says(bundled):
     two = _clips(bundled, "bk", "squat1Reps")[:2]
     clips = [two[0], two[1], two[0]]

@@ -51,9 +51,11 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from shared.clip import Clip
 from shared.compiled import kernel
+from shared.deadline import check_time
 from shared.errors import BadInput
 
 FPS = 30.0  # both clips are compared at this rate
@@ -69,6 +71,7 @@ MAX_JOIN = 4  # a repetition spans this many stretches of movement at most (paus
 SLACK = 0.6  # seconds a repetition's ends may lie from its stretch of movement's ends
 AMPLITUDE_FLOOR = 0.25  # a stretch smaller than this share of the target's spread is not scaled up further
 ROOT_TERMS = 6  # the position group's last columns left out: the root's up vector, velocities and yaw rate
+READ_BLOCK = 4096  # a take's features and speed are read in blocks of this many frames (bounded memory)
 REST_AFTER = 0.2  # seconds of take after the last expected repetition before a live take ends (until_repeated)
 
 
@@ -78,28 +81,31 @@ def subsequence_dtw(cost):
     ``cost`` (n, m): per end column, the accumulated cost of the best alignment of the whole
     target ending there and the column where it starts."""
     n, m = cost.shape
-    inf = np.inf
-    acc = np.full((n, m), inf)
-    start = np.zeros((n, m), np.int64)
+    # three rows kept (a step reaches two rows back): memory of the take's length, not n times it
+    acc = np.full((3, m), np.inf)
+    start = np.zeros((3, m), np.int64)
     for j in range(m):
         acc[0, j] = 2.0 * cost[0, j]
         start[0, j] = j
     for i in range(1, n):
+        r, r1, r2 = i % 3, (i - 1) % 3, (i - 2) % 3
+        acc[r, 0], start[r, 0] = np.inf, 0
         for j in range(1, m):
             c = cost[i, j]
-            best = acc[i - 1, j - 1] + 2.0 * c
-            s = start[i - 1, j - 1]
+            best = acc[r1, j - 1] + 2.0 * c
+            s = start[r1, j - 1]
             if j >= 2:
-                two = acc[i - 1, j - 2] + 2.0 * cost[i, j - 1] + c
+                two = acc[r1, j - 2] + 2.0 * cost[i, j - 1] + c
                 if two < best:
-                    best, s = two, start[i - 1, j - 2]
+                    best, s = two, start[r1, j - 2]
             if i >= 2:
-                down = acc[i - 2, j - 1] + 2.0 * cost[i - 1, j] + c
+                down = acc[r2, j - 1] + 2.0 * cost[i - 1, j] + c
                 if down < best:
-                    best, s = down, start[i - 2, j - 1]
-            acc[i, j] = best
-            start[i, j] = s
-    return acc[n - 1].copy(), start[n - 1].copy()
+                    best, s = down, start[r2, j - 1]
+            acc[r, j] = best
+            start[r, j] = s
+    last = (n - 1) % 3
+    return acc[last].copy(), start[last].copy()
 
 
 @kernel(cache=True, nogil=True)
@@ -126,7 +132,10 @@ def global_dtw(cost):
 
 
 def _distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(np.sqrt(np.maximum(((a[:, None, :] - b[None, :, :]) ** 2).sum(axis=-1), 0.0)))
+    """Euclidean distances of every frame of ``a`` (rows) to every frame of ``b`` (columns):
+    scipy's ``cdist`` (no target x take x features differences held: a movement of 20,000 frames
+    held 1.1 GB of them at once)."""
+    return cdist(a, b)
 
 
 @dataclass
@@ -198,7 +207,11 @@ class Reader:
     def read(self, clip: Clip) -> np.ndarray:
         if clip.skeleton is None:
             raise BadInput("segmentation needs clips with a skeleton (AMC, BVH or NPZ from them)", field="clip")
-        return _positions(self.feats, clip.resample(self.fps)) * self.w
+        clip = clip.resample(self.fps)
+        edges = list(range(0, clip.n_frames, READ_BLOCK)) + [clip.n_frames]
+        if len(edges) > 2 and edges[-1] - edges[-2] < 16:  # no block too short for the features' rates
+            del edges[-2]
+        return np.concatenate([_positions(self.feats, clip.frames(s, e)) for s, e in zip(edges, edges[1:])]) * self.w
 
 
 def features_of(target: Clip, clips: list[Clip], fps: float = FPS) -> list[np.ndarray]:
@@ -237,9 +250,12 @@ def speed(x: np.ndarray, fps: float) -> np.ndarray:
     ``SMOOTH`` seconds centred on the frame, so the jitter of a pose held still cancels while a
     movement does not."""
     h = max(int(round(SMOOTH * fps / 2)), 1)
-    idx = np.arange(len(x))
-    lo, hi = np.clip(idx - h, 0, len(x) - 1), np.clip(idx + h, 0, len(x) - 1)
-    return np.linalg.norm(x[hi] - x[lo], axis=1) / np.maximum(hi - lo, 1) * fps
+    out = np.empty(len(x))
+    for k in range(0, len(x), READ_BLOCK):  # in blocks: a long take's differences are not held whole
+        idx = np.arange(k, min(k + READ_BLOCK, len(x)))
+        lo, hi = np.clip(idx - h, 0, len(x) - 1), np.clip(idx + h, 0, len(x) - 1)
+        out[idx] = np.linalg.norm(x[hi] - x[lo], axis=1) / np.maximum(hi - lo, 1) * fps
+    return out
 
 
 def movements(b: np.ndarray, level: float, fps: float) -> list[tuple[int, int]]:
@@ -297,6 +313,7 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], cohort: float,
     n = len(a)
     stretches = set()
     for i in range(len(moves)):
+        check_time()  # a long take is long work: a request stops here past its time limit
         for k in range(i, min(i + MAX_JOIN, len(moves))):
             s, e = moves[i][0], moves[k][1]
             if k > i and e - s > SPEEDS[1] * n + 2 * slack:
@@ -304,7 +321,9 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], cohort: float,
             if e - s + 2 * slack >= SPEEDS[0] * n:
                 stretches.update(_aligned(A, b, s, e, slack, floor))
     scored = []
-    for s, e in stretches:
+    for k, (s, e) in enumerate(stretches):
+        if k % 1000 == 999:
+            check_time()
         if not SPEEDS[0] * n <= e - s <= SPEEDS[1] * n:
             continue
         scored.append((global_dtw(_distances(A, shape(b[s:e], floor))), s, e))
