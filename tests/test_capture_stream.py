@@ -35,6 +35,11 @@ def test_a_replayed_clip_arrives_whole(squat, tmp_path):
     assert take.clip.channels == ref.channels and take.clip.fps == pytest.approx(30.0)
     assert np.allclose(take.clip.data, ref.data, atol=1e-4)
     assert take.ended.startswith("no frame for") or "stopped" in take.ended
+    # the frame lines waited in a file beside the take, not in memory: the take is the BVH file
+    # the clip writes (the same frame lines) and nothing else is left in the folder
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ref.bvh", "take.bvh"]
+    ref_text, take_text = (tmp_path / "ref.bvh").read_text(), (tmp_path / "take.bvh").read_text()
+    assert take_text.split("MOTION")[1].splitlines()[3:] == ref_text.split("MOTION")[1].splitlines()[3:]
 
 
 def test_skipped_frames_a_stopped_source_and_a_reconnect_are_reported(squat, tmp_path):

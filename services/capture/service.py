@@ -132,7 +132,7 @@ def make_service(settings: Settings | None = None) -> Service:
                 header.write_text(req["skeleton"], encoding="latin-1")
             result = record(source, root / f"{take}.bvh", seconds=req["seconds"], idle=req["idle"],
                             reconnect=req["reconnect"], skeleton=header, fps=req.get("fps"), until=until,
-                            check_every=req["check_every"], on_frame=on_frame, stop_when=rec.stop)
+                            check_every=req["check_every"], on_frame=on_frame, stop_when=rec.stop, read=False)
             flush(rec, frame_rate[0])
             if until is not None and until.last is not None and until.last[0].n_frames == result.frames:
                 with lock:  # the check that ended the take saw all of it: its cut is the take's
@@ -231,6 +231,20 @@ def make_service(settings: Settings | None = None) -> Service:
         if info["state"] != "done":
             raise Conflict(f"take {take!r} failed: {info.get('error', info['ended'])}", take=take)
         return load_clip(root / f"{take}.bvh")
+
+    @svc.cost("clip")
+    def clip_cost(req):
+        """A finished take read whole: its BVH parsed, ~1.5 KB per frame (bench.budget)."""
+        return 1536 * info_of(req["take"])["frames"]
+
+    @svc.cost("segment")
+    def segment_cost(req):
+        """The take read whole and its features at the segmentation's rate, ~3.6 KB per frame
+        (bench.budget: the features and alignments of a 100,000-frame take held 346 MB)."""
+        from shared.capture.segment import FPS
+
+        info = info_of(req["take"])
+        return 1536 * info["frames"] + 3686 * FPS * info["seconds"]
 
     @svc.handler("clip")
     def clip(req):

@@ -60,8 +60,7 @@ class ReplaySource:
         clips = list(clip) if isinstance(clip, (list, tuple)) else [clip]
         if not clips:
             raise BadInput("nothing to play", field="clip")
-        self.clips = clips
-        self.plays = [bvh_lines(c) for c in clips]
+        self.clips = clips  # each clip's BVH text is made when it plays (a replay of 50 long clips held them all)
         self.switch_lines = bvh_lines(switch) if switch is not None else None
         self.header, self.speed, self.loop = header, float(speed), loop
         self.skip, self.stop_after = set(skip or ()), stop_after
@@ -115,8 +114,11 @@ class ReplaySource:
         self._sock.close()
 
     def _play(self, conn: socket.socket) -> None:
+        from shared.io.bvh import bvh_lines
+
         k = (self.served - 1) % len(self.clips)
-        clip, (head, rows) = self.clips[k], self.plays[k]
+        clip = self.clips[k]
+        head, rows = bvh_lines(clip)
         dt = 1.0 / (clip.fps * self.speed)
 
         def send_header(lines):
@@ -171,11 +173,12 @@ class Take:
     ended: str = ""
     last_frame: float | None = None  # time.monotonic() when the last frame arrived
     ended_at: float | None = None  # time.monotonic() when the take ended (the source stopped, the time was up)
+    frame_time: float | None = None  # seconds per frame
 
     def to_dict(self) -> dict:
+        seconds = self.clip.duration if self.clip is not None else max(self.frames - 1, 0) * (self.frame_time or 0.0)
         return {"path": str(self.path), "frames": self.frames, "events": self.events, "dropped": self.dropped,
-                "skipped": self.skipped, "reconnects": self.reconnects, "ended": self.ended,
-                "seconds": self.clip.duration if self.clip is not None else 0.0}
+                "skipped": self.skipped, "reconnects": self.reconnects, "ended": self.ended, "seconds": seconds}
 
 
 def parse_source(source: str) -> tuple[str, int]:
@@ -241,7 +244,7 @@ def _channels(header: list[str]) -> int:
 def record(source: str, out: Path, *, seconds: float | None = None, frames: int | None = None,
            skeleton: Path | None = None, fps: float | None = None, idle: float = 2.0, reconnect: int = 0,
            connect_timeout: float = 5.0, until=None, check_every: float = 0.25, on_frame=None,
-           stop_when: threading.Event | None = None) -> Take:
+           stop_when: threading.Event | None = None, read: bool = True) -> Take:
     """Record a take from a live BVH stream (module docstring) into ``out`` (a .bvh file),
     until ``seconds`` or ``frames`` (whichever first), the source stops, or its skeleton
     changes. ``skeleton``: a BVH file whose header the stream's lines follow (a stream without
@@ -249,7 +252,8 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
     ``until(clip)``: called with the take so far every ``check_every`` seconds of frames; the
     take ends when it returns a reason (a source that never stops: a person done repeating).
     ``on_frame(index, values, frame_time)``: called with every frame kept (values as floats);
-    ``stop_when``: an event that ends the take when set (checked at every line)."""
+    ``stop_when``: an event that ends the take when set (checked at every line); ``read=False``:
+    the take's clip is not read back (``Take.clip`` None; a service that only keeps the file)."""
     host, port = parse_source(source)
     if seconds is None and frames is None:
         raise BadInput("say how long to record: seconds or frames", field="seconds")
@@ -257,152 +261,212 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
     header, file_frame_time = _skeleton_file(skeleton) if skeleton is not None else (None, None)
     frame_time = 1.0 / fps if fps else file_frame_time
     events: list[str] = []
-    rows: list[str] = []
-    values: list[list[float]] = []  # the rows as numbers, for the take so far (:class:`_SoFar`)
-    so_far = _SoFar()
-    dropped = skipped = reconnects = 0
-    ended = ""
-    deadline = None if seconds is None else time.monotonic() + seconds
-    last_arrival = last_frame = None
-    connected = False
-    while True:
-        conn, waited = None, time.monotonic()
-        while conn is None:  # a source coming back gets connect_timeout seconds to listen again
-            try:
-                conn = socket.create_connection((host, port), timeout=connect_timeout)
-            except OSError as e:
-                if not connected:
-                    raise BadInput(f"no live source at {source}: {e.strerror or e}", field="source") from None
-                if time.monotonic() - waited > connect_timeout:
-                    ended = f"the source did not come back within {connect_timeout:g} s"
-                    break
-                time.sleep(0.1)
-        if conn is None:
-            break
-        if connected:
-            reconnects += 1
-            events.append(f"reconnected after frame {len(rows)} ({time.monotonic() - waited:.1f} s)")
-        connected = True
-        lines = _Lines(conn, idle)
-        own_header: list[str] = []
-        in_header = False
-        stop = False
-        with conn:
-            while True:
-                if stop_when is not None and stop_when.is_set():
-                    ended, stop = "stopped on request", True
-                    break
-                if deadline is not None and time.monotonic() >= deadline:
-                    ended, stop = f"{seconds:g} s recorded", True
-                    break
-                if len(rows) >= limit:
-                    ended, stop = f"{len(rows)} frames recorded", True
-                    break
-                try:
-                    line = lines.next()
-                except (TimeoutError, socket.timeout):
-                    line = None
-                    events.append(f"no frame for {idle:g} s after frame {len(rows)}: the source stopped")
-                except OSError as e:
-                    line = None
-                    events.append(f"the connection broke after frame {len(rows)} ({e.strerror or e})")
-                except BadInput as e:  # a line too long: not BVH; the frames so far are kept
-                    if not rows:
-                        raise
-                    events.append(f"after frame {len(rows)}: {e.message}; the take ends there")
-                    ended, stop = "the stream stopped being BVH", True
-                    break
-                if line is None:
-                    break
-                text = line.strip()
-                if not text:
-                    continue
-                word = text.split()[0].upper()
-                if word == "HIERARCHY":
-                    in_header, own_header = True, [text]
-                    continue
-                if in_header:
-                    if len(own_header) > MAX_HEADER_LINES:
-                        if not rows:
-                            raise BadInput(f"a BVH header of more than {MAX_HEADER_LINES} lines: not a skeleton",
-                                           field="source")
-                        events.append(f"a header of more than {MAX_HEADER_LINES} lines after frame {len(rows)}: "
-                                      "the take ends there (the frames so far are kept)")
-                        ended, stop = "the stream sent no skeleton", True
-                        break
-                    own_header.append(line)
-                    if word == "MOTION":
-                        in_header = False
-                        if header is not None and rows:
-                            if _skeleton(own_header) != _skeleton(header):
-                                events.append(f"the skeleton changed after frame {len(rows)} ({_channels(header)} -> "
-                                              f"{_channels(own_header)} channels): the take ends there")
-                                ended, stop = "the skeleton changed", True
-                                break
-                            events.append(f"the same skeleton sent again after frame {len(rows)}: kept recording")
-                        header = own_header
-                    continue
-                if word.startswith("FRAME"):  # "Frames: n" / "Frame Time: t"
-                    if word == "FRAME" and "TIME" in text.upper():
-                        try:
-                            frame_time = float(text.split(":")[1])
-                        except (IndexError, ValueError):
-                            events.append(f"unreadable frame time {text!r}")
-                    continue
-                if header is None:
-                    raise BadInput("the stream sends frames without a skeleton: give the BVH file it follows "
-                                   "(--skeleton)", field="skeleton")
-                values = text.split()
-                try:
-                    numbers = [float(v) for v in values]
-                    ok = len(values) == _channels(header)
-                except ValueError:
-                    ok = False
-                if not ok:
-                    dropped += 1
-                    if dropped <= 5:
-                        events.append(f"dropped a malformed frame line after frame {len(rows)} "
-                                      f"({len(values)} values, {_channels(header)} channels)")
-                    continue
-                now = time.monotonic()
-                if last_arrival is not None and frame_time and now - last_arrival > GAP * frame_time:
-                    missing = int(round((now - last_arrival) / frame_time)) - 1
-                    skipped += missing
-                    events.append(f"about {missing} frame(s) missing after frame {len(rows)} "
-                                  f"({(now - last_arrival) * 1000:.0f} ms without a frame)")
-                last_arrival = last_frame = now
-                rows.append(text)
-                values.append(numbers)
-                if on_frame is not None:
-                    on_frame(len(rows) - 1, numbers, frame_time)
-                step = max(int(round(check_every / (frame_time or 1 / 30))), 1)
-                if until is not None and len(rows) % step == 0:
-                    reason = until(so_far.clip(header, rows, values, frame_time, Path(out)))
-                    last_arrival = time.monotonic()  # the check's own time is no gap in the stream
-                    if reason:
-                        ended, stop = str(reason), True
-                        break
-        if stop:
-            break
-        if reconnects < reconnect:
-            last_arrival = None
-            continue
-        ended = ended or "the source stopped"
-        break
-    ended_at = time.monotonic()
-    if dropped > 5:
-        events.append(f"{dropped} malformed frame lines dropped in all")
     out = Path(out)
-    if header is None or not rows:
-        return Take(out, None, 0, events + ["no frames recorded"], dropped, skipped, reconnects, ended or "no frames",
-                    last_frame, ended_at)
-    from shared.io import load_clip
-    from shared.io.atomic import atomic_write
+    rows = _Rows(out)  # the frame lines, kept in a file beside the take as they come
+    so_far_numbers = _Numbers() if until is not None else None  # the rows as numbers, for :class:`_SoFar`
+    try:
+        so_far = _SoFar()
+        dropped = skipped = reconnects = 0
+        ended = ""
+        deadline = None if seconds is None else time.monotonic() + seconds
+        last_arrival = last_frame = None
+        connected = False
+        while True:
+            conn, waited = None, time.monotonic()
+            while conn is None:  # a source coming back gets connect_timeout seconds to listen again
+                try:
+                    conn = socket.create_connection((host, port), timeout=connect_timeout)
+                except OSError as e:
+                    if not connected:
+                        raise BadInput(f"no live source at {source}: {e.strerror or e}", field="source") from None
+                    if time.monotonic() - waited > connect_timeout:
+                        ended = f"the source did not come back within {connect_timeout:g} s"
+                        break
+                    time.sleep(0.1)
+            if conn is None:
+                break
+            if connected:
+                reconnects += 1
+                events.append(f"reconnected after frame {len(rows)} ({time.monotonic() - waited:.1f} s)")
+            connected = True
+            lines = _Lines(conn, idle)
+            own_header: list[str] = []
+            in_header = False
+            stop = False
+            with conn:
+                while True:
+                    if stop_when is not None and stop_when.is_set():
+                        ended, stop = "stopped on request", True
+                        break
+                    if deadline is not None and time.monotonic() >= deadline:
+                        ended, stop = f"{seconds:g} s recorded", True
+                        break
+                    if len(rows) >= limit:
+                        ended, stop = f"{len(rows)} frames recorded", True
+                        break
+                    try:
+                        line = lines.next()
+                    except (TimeoutError, socket.timeout):
+                        line = None
+                        events.append(f"no frame for {idle:g} s after frame {len(rows)}: the source stopped")
+                    except OSError as e:
+                        line = None
+                        events.append(f"the connection broke after frame {len(rows)} ({e.strerror or e})")
+                    except BadInput as e:  # a line too long: not BVH; the frames so far are kept
+                        if not rows:
+                            raise
+                        events.append(f"after frame {len(rows)}: {e.message}; the take ends there")
+                        ended, stop = "the stream stopped being BVH", True
+                        break
+                    if line is None:
+                        break
+                    text = line.strip()
+                    if not text:
+                        continue
+                    word = text.split()[0].upper()
+                    if word == "HIERARCHY":
+                        in_header, own_header = True, [text]
+                        continue
+                    if in_header:
+                        if len(own_header) > MAX_HEADER_LINES:
+                            if not rows:
+                                raise BadInput(f"a BVH header of more than {MAX_HEADER_LINES} lines: not a skeleton",
+                                               field="source")
+                            events.append(f"a header of more than {MAX_HEADER_LINES} lines after frame {len(rows)}: "
+                                          "the take ends there (the frames so far are kept)")
+                            ended, stop = "the stream sent no skeleton", True
+                            break
+                        own_header.append(line)
+                        if word == "MOTION":
+                            in_header = False
+                            if header is not None and rows:
+                                if _skeleton(own_header) != _skeleton(header):
+                                    events.append(f"the skeleton changed after frame {len(rows)} ({_channels(header)} -> "
+                                                  f"{_channels(own_header)} channels): the take ends there")
+                                    ended, stop = "the skeleton changed", True
+                                    break
+                                events.append(f"the same skeleton sent again after frame {len(rows)}: kept recording")
+                            header = own_header
+                        continue
+                    if word.startswith("FRAME"):  # "Frames: n" / "Frame Time: t"
+                        if word == "FRAME" and "TIME" in text.upper():
+                            try:
+                                frame_time = float(text.split(":")[1])
+                            except (IndexError, ValueError):
+                                events.append(f"unreadable frame time {text!r}")
+                        continue
+                    if header is None:
+                        raise BadInput("the stream sends frames without a skeleton: give the BVH file it follows "
+                                       "(--skeleton)", field="skeleton")
+                    values = text.split()
+                    try:
+                        numbers = [float(v) for v in values]
+                        ok = len(values) == _channels(header)
+                    except ValueError:
+                        ok = False
+                    if not ok:
+                        dropped += 1
+                        if dropped <= 5:
+                            events.append(f"dropped a malformed frame line after frame {len(rows)} "
+                                          f"({len(values)} values, {_channels(header)} channels)")
+                        continue
+                    now = time.monotonic()
+                    if last_arrival is not None and frame_time and now - last_arrival > GAP * frame_time:
+                        missing = int(round((now - last_arrival) / frame_time)) - 1
+                        skipped += missing
+                        events.append(f"about {missing} frame(s) missing after frame {len(rows)} "
+                                      f"({(now - last_arrival) * 1000:.0f} ms without a frame)")
+                    last_arrival = last_frame = now
+                    rows.append(text)
+                    if so_far_numbers is not None:
+                        so_far_numbers.append(numbers)
+                    if on_frame is not None:
+                        on_frame(len(rows) - 1, numbers, frame_time)
+                    step = max(int(round(check_every / (frame_time or 1 / 30))), 1)
+                    if until is not None and len(rows) % step == 0:
+                        reason = until(so_far.clip(header, rows, so_far_numbers, frame_time, out))
+                        last_arrival = time.monotonic()  # the check's own time is no gap in the stream
+                        if reason:
+                            ended, stop = str(reason), True
+                            break
+            if stop:
+                break
+            if reconnects < reconnect:
+                last_arrival = None
+                continue
+            ended = ended or "the source stopped"
+            break
+        ended_at = time.monotonic()
+        if dropped > 5:
+            events.append(f"{dropped} malformed frame lines dropped in all")
+        if header is None or not rows:
+            return Take(out, None, 0, events + ["no frames recorded"], dropped, skipped, reconnects, ended or "no frames",
+                        last_frame, ended_at)
+        from shared.io import load_clip
+        from shared.io.atomic import atomic_write
 
-    text = "\n".join(header + [f"Frames: {len(rows)}", f"Frame Time: {frame_time or 1 / 30:.12g}"] + rows) + "\n"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(out, lambda f: f.write(text.encode("latin-1")))
-    return Take(out, load_clip(out), len(rows), events, dropped, skipped, reconnects, ended, last_frame, ended_at)
+        atomic_write(out, lambda f: rows.write_bvh(f, header, frame_time))
+        return Take(out, load_clip(out) if read else None, len(rows), events, dropped, skipped, reconnects, ended,
+                    last_frame, ended_at, frame_time or 1 / 30)
+
+    finally:
+        rows.close()  # the take's file has the lines now, or there is none
+
+
+class _Rows:
+    """A take's frame lines as they arrive, kept in a temporary file beside the take instead of in
+    memory (a 30-minute take at 120 fps is 216,000 lines: as Python strings and numbers they held
+    ~2.5 KB a frame); ``len`` is the frames so far."""
+
+    def __init__(self, out: Path):
+        import os
+        import tempfile
+
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=".rows-", suffix=".part", dir=out.parent)
+        self.path, self._f, self._n = Path(name), os.fdopen(fd, "w+b"), 0
+
+    def __len__(self) -> int:
+        return self._n
+
+    def append(self, text: str) -> None:
+        self._f.write(text.encode("latin-1") + b"\n")
+        self._n += 1
+
+    def write_bvh(self, f, header: list[str], frame_time: float | None) -> None:
+        """The take so far as a BVH file into the open binary file ``f``."""
+        import shutil
+
+        f.write(("\n".join(header + [f"Frames: {self._n}", f"Frame Time: {frame_time or 1 / 30:.12g}"]) + "\n")
+                .encode("latin-1"))
+        self._f.flush()
+        self._f.seek(0)
+        shutil.copyfileobj(self._f, f)
+        self._f.seek(0, 2)
+
+    def close(self) -> None:
+        self._f.close()
+        self.path.unlink(missing_ok=True)
+
+
+class _Numbers:
+    """The frames' numbers so far as one growing array (doubled when full)."""
+
+    def __init__(self):
+        import numpy as np
+
+        self._np, self._data, self._n = np, None, 0
+
+    def append(self, numbers: list[float]) -> None:
+        if self._data is None:
+            self._data = self._np.empty((1024, len(numbers)))
+        elif self._n == len(self._data):
+            self._data = self._np.concatenate([self._data, self._np.empty_like(self._data)])
+        self._data[self._n] = numbers
+        self._n += 1
+
+    def array(self):
+        return self._data[:self._n]
 
 
 class _SoFar:
@@ -414,30 +478,30 @@ class _SoFar:
         self.template: Clip | None = None
         self.header: list[str] | None = None
 
-    def clip(self, header: list[str], rows: list[str], values: list[list[float]], frame_time, out: Path) -> Clip:
+    def clip(self, header: list[str], rows: "_Rows", values: "_Numbers", frame_time, out: Path) -> Clip:
         import numpy as np
 
+        numbers = values.array()
         if self.template is not None and self.header is header:
-            return self.template.with_data(np.asarray(values, dtype=float))
+            return self.template.with_data(numbers.copy())
         c = _clip_of(header, rows, frame_time, out)
-        same = c.data.shape == (len(values), len(values[0])) and np.allclose(c.data, np.asarray(values), atol=1e-9)
+        same = c.data.shape == numbers.shape and np.allclose(c.data, numbers, atol=1e-9)
         self.template, self.header = (c, header) if same else (None, None)
         return c
 
 
-def _clip_of(header: list[str], rows: list[str], frame_time: float | None, out: Path) -> Clip:
+def _clip_of(header: list[str], rows: "_Rows", frame_time: float | None, out: Path) -> Clip:
     """The take so far as a clip (read by the project's BVH reader, conventions and all)."""
     import os
     import tempfile
 
     from shared.io import load_clip
 
-    text = "\n".join(header + [f"Frames: {len(rows)}", f"Frame Time: {frame_time or 1 / 30:.12g}"] + rows) + "\n"
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".partial-", suffix=".bvh", dir=out.parent)
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(text.encode("latin-1"))
+            rows.write_bvh(f, header, frame_time)
         return load_clip(tmp)
     finally:
         Path(tmp).unlink(missing_ok=True)

@@ -82,6 +82,7 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
     except OSError as e:
         raise ClipFormatError(path, f"cannot read file: {e.strerror or e}") from None
     lines = text.splitlines()
+    del text  # a long take's text is held once, as its lines
     motion_line = next((i for i, ln in enumerate(lines) if ln.strip().upper() == "MOTION"), None)
     if motion_line is None:
         raise ClipFormatError(path, "no MOTION section (is this a BVH file?)")
@@ -164,7 +165,9 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
         k += 1
     if n_frames is None or frame_time is None or frame_time <= 0:
         raise ClipFormatError(path, "missing or invalid 'Frames:' / 'Frame Time:'")
-    rows = []
+    # the frames straight into one array (a row array per line held a long take twice)
+    data = np.empty((max(min(n_frames, len(body) - k), 0), len(channels)))
+    n_rows = 0
     for i, s in enumerate(body[k:], start=motion_line + 2 + k):
         if not s.strip():
             continue
@@ -176,15 +179,18 @@ def read_bvh(path, label: str | None = None, *, units: str | None = None, up: st
             raise ClipFormatError(path, f"frame has {vals.size} values, the hierarchy declares {len(channels)} channels", i)
         if not np.all(np.isfinite(vals)):
             raise ClipFormatError(path, "frame line with a non-finite value", i)
-        rows.append(vals)
-    if len(rows) != n_frames:
-        raise ClipFormatError(path, f"'Frames: {n_frames}' but {len(rows)} frame lines")
-    if not rows:
+        if n_rows < len(data):
+            data[n_rows] = vals
+        n_rows += 1
+    if n_rows != n_frames:
+        raise ClipFormatError(path, f"'Frames: {n_frames}' but {n_rows} frame lines")
+    if not n_rows:
         raise ClipFormatError(path, "no frames")
+    del lines, body
     if len(set(j.name for j in joints)) != len(joints):
         raise ClipFormatError(path, "two joints share a name")
     sk, data, channels, read_as = _conventions(path, Skeleton(name=path.stem, joints=joints, unit_m=1.0, up_axis=1,
-                                                              source_format="bvh"), np.vstack(rows), channels,
+                                                              source_format="bvh"), data, channels,
                                                units, up, translations)
     fps = 1.0 / frame_time
     if abs(fps - round(fps)) < 1e-3 * fps:  # "0.008333" means 120 fps, not 120.0048
