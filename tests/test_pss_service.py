@@ -8,6 +8,7 @@ the same contract the service imports (``schemas/pss.py``).
 from __future__ import annotations
 
 import hashlib
+import re
 import threading
 import time
 
@@ -413,6 +414,16 @@ def test_a_request_that_never_fits_the_memory_budget_is_refused_up_front(tmp_pat
             assert "MIRRORCOACH_MEMORY_MB=700" in e.value.message and time.monotonic() - t0 < 5
             small = c.request("pss", "generate", {"space": "b", "mix": mix, "frames": 500})
             assert small["clip"]["data"].shape[0] == 500
+            # a recognition is estimated by its frames at the space's rate x its features (a long
+            # clip at 30 fps: 7x its 30 MB payload would fit, its features would not)
+            long = clips[0][0].resample(30.0)
+            long = long.with_data(np.tile(long.data, (60_000 // long.n_frames + 1, 1))[:60_000])
+            with pytest.raises(RemoteError) as e:
+                c.request("pss", "recognize", {"space": "b", "clips": [clip_to_wire(long, False)]})
+            assert e.value.details["cause"] == "too_large" and "pss/recognize needs about" in e.value.message
+            needed = int(re.search(r"needs about (\d+) MB", e.value.message).group(1))
+            assert needed > 7 * long.data.nbytes / 2**20, e.value.message  # the features' estimate, not the payload's
+            assert c.request("pss", "recognize", {"space": "b", "clips": [clip_to_wire(long.frames(0, 3000), False)]})
         assert "memory: " in procs.log("pss") and "Traceback" not in procs.log("pss")
     finally:
         serve.close()

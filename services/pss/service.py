@@ -46,6 +46,18 @@ def _warm() -> None:
 
 #: a generation without ``frames`` takes the expected durations: a few seconds of motion
 DEFAULT_FRAMES_ESTIMATE = 2000
+#: bytes per feature and frame (at the space's rate) of reading clips as features and fitting
+#: their HMMs (bench.budget: an attempt of 20 x 5,000 frames added to a space peaked at 27)
+FEATURE_BYTES = 32
+#: features per channel when the space is not built yet (HDM05's skeleton: 237 from 62)
+FEATURES_PER_CHANNEL = 4
+
+
+def feature_cost(clips: list[dict], fps: float, n_features: int | None = None) -> float:
+    """Working memory (bytes) of reading the wire ``clips`` as a space's features at ``fps`` and
+    fitting HMMs on them: frames at the space's rate x features x ``FEATURE_BYTES``."""
+    return sum(FEATURE_BYTES * (n_features or FEATURES_PER_CHANNEL * c["data"].shape[1])
+               * len(c["data"]) * fps / c["fps"] for c in clips)
 
 
 def make_service(settings: Settings | None = None) -> Service:
@@ -69,6 +81,20 @@ def make_service(settings: Settings | None = None) -> Service:
             space = make()
             store.commit(name, space)
         return space
+
+    @svc.cost("build")
+    def build_cost(req):
+        return feature_cost(req["clips"], req["fps"])
+
+    @svc.cost("add")
+    def add_cost(req):
+        space = store.get(req["space"])
+        return feature_cost(req["clips"], space.params.fps, space.features.n_features)
+
+    @svc.cost("recognize")
+    def recognize_cost(req):
+        space = store.get(req["space"])
+        return feature_cost(req["clips"] or [], space.params.fps, space.features.n_features)
 
     @svc.handler("build")
     def build(req):

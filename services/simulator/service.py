@@ -82,6 +82,12 @@ def make_service(settings: Settings | None = None) -> Service:
         100,000-frame clip at once peaked at 1.86 GB, three running)."""
         return 14 * req["clip"]["data"].nbytes
 
+    @svc.cost("other_ask")
+    def ask_cost(req):
+        """An other performs the motions one after another: the largest one's inverse dynamics
+        (as ``perform``: bench.budget, two arm motions of 900,000 frames at once held 490 MB)."""
+        return 14 * max(c["data"].nbytes for c in req["clips"])
+
     @svc.handler("perform")
     def do_perform(req):
         b = bodies.get(req["body"], req["skeleton"], req["mass"])

@@ -94,7 +94,7 @@ class Service:
         self.settings = settings or Settings()
         self.handlers: dict[str, Callable[[dict], dict]] = {}
         self.costs: dict[str, Callable[[dict], float]] = {}
-        self.budget = MemoryBudget(name, self.settings.memory_mb, held=lambda: PAYLOAD_HELD * self._inflight_bytes)
+        self.budget = MemoryBudget(name, self.settings.memory_mb, held=lambda: PAYLOAD_HELD * self._held_bytes)
         self.on_stop: list[Callable[[], None]] = []
         self.on_promote: list[Callable[[], None]] = []  # deployed: before this instance starts to lead
         self.leading = False
@@ -114,6 +114,7 @@ class Service:
         self._publishers: dict[str, object] = {}
         self._inflight = 0  # on the workers, running or waiting for one
         self._inflight_bytes = 0
+        self._held_bytes = 0  # payloads of every request in progress, the waiting verbs' too (the budget)
         self._waiting = 0  # verbs that wait for a person, on their own pool
         self._inflight_lock = threading.Lock()
         self._client = None
@@ -301,6 +302,7 @@ class Service:
                 busy, limit = self._inflight, self.workers + self.settings.queue
                 full = busy >= limit or (busy > 0 and self._inflight_bytes + size > self.settings.queue_mb * 2**20)
             if not full:
+                self._held_bytes += size
                 if waits:
                     self._waiting += 1
                 else:
@@ -323,6 +325,7 @@ class Service:
 
     def _done(self, size: int, waits: bool) -> None:
         with self._inflight_lock:
+            self._held_bytes -= size
             if waits:
                 self._waiting -= 1
             else:
