@@ -67,6 +67,7 @@ bench: bytecode
 	$(BIN)/python -m bench.segmentation --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.live --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.fuzz --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.budget --hdm05 $(HDM05) --out bench/results
 
 reproduce: $(STAMP)
 	$(BIN)/mirrorcoach reproduce ch3 ch4 ch5 ch6 --out reports

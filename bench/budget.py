@@ -1,14 +1,25 @@
 """``make bench``: the largest valid requests at once, against each service's memory budget.
 
-Four clients at once each send the largest request the contract allows in practice: a
-recognition of a 100,000-frame clip (62 channels, 47 MB on the wire, near the 64 MiB payload
-limit) to pss, a generation of 100,000 frames, and the simulator's inverse dynamics of its first
-40,000 frames on a human body (the largest whose reply, twice the request, fits the limit).
-Measured on a private cluster: the peak resident memory of the service while they run
-(``VmHWM``, reset before), the answers (a request the
-budget cannot take now waits for memory; one it can never take is refused up front), and the
-resident memory after them against the level before (memory returned), with the space's
-recognition caches and the simulator's MuJoCo already loaded by one short request each.
+Several clients at once each send the largest request a verb's contract allows in practice, to
+every service that does work on clips:
+
+* pss: a recognition of a 100,000-frame clip (62 channels, 47 MB on the wire, near the 64 MiB
+  payload limit), and a generation of 100,000 frames;
+* simulator: the inverse dynamics of 40,000 frames on a human body (the largest whose reply,
+  twice the request, fits the limit);
+* coach: a trial whose attempt is 20 repetitions of 5,000 frames (100,000 frames, the contract's
+  20 clips), on a session of its own per client (it recognises them in pss and checks the
+  emphatic motion on the simulator);
+* dialogue: a comparative question on two arm motions of 900,000 frames each (4 channels: 58 MB,
+  the other performs both on its body in the simulator);
+* capture: a replay of 50 clips (100,000 frames) into a take, then the take's repetitions found;
+* estimator: a conversation of two sets (its requests are small; its work is its own).
+
+Measured on a private cluster, for every run and every service: the peak resident memory while
+the run's requests work (``VmHWM``, reset before), the answers (a request the budget cannot take
+now waits for memory; one it can never take is refused up front), and the resident memory after
+them against the level before (memory returned), with each service's caches already loaded by
+one short request of the same kind first.
 
 Writes ``bench/results/budget.json`` and ``bench/results/budget.md``.
 """
@@ -18,15 +29,20 @@ from __future__ import annotations
 import time
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from bench.common import parse_args, private_cluster, write_results
 from bench.memory import cluster_pids, rss_mb, status_mb
 
-
 PERFORM_FRAMES = 40_000
+ATTEMPT_CLIPS = 20
+ARM_PER_FRAME = 9  # arm frames per clip frame: 4 channels against 62, the same bytes
+REPLAY_CLIPS = 50
+SERVICES = ("pss", "simulator", "coach", "dialogue", "capture", "estimator")
 
 
 def peak_mb(pid: int) -> float:
@@ -37,84 +53,175 @@ def reset_peak(pid: int) -> None:
     Path(f"/proc/{pid}/clear_refs").write_text("5")  # the kernel's peak RSS starts again from now
 
 
+@dataclass
+class Run:
+    """One verb sent by every client at once; ``call(client, i)`` sends client i's request."""
+
+    service: str
+    verb: str
+    what: str
+    call: Callable
+    warm: Callable  # one short request of the same kind: the service's caches, before the level
+
+
+def long_clip(base, frames: int, name: str):
+    return base.with_data(np.tile(base.data, (frames // base.n_frames + 1, 1))[:frames], name=name)
+
+
+def arm_motion(frames: int, seed: int):
+    """An arm motion of ``frames`` frames on the small humanoid's joints (chapter 3's kind)."""
+    from shared.estimation.motions import ALL, unknown_motions
+
+    m = unknown_motions(1, seed=seed, joints=ALL)[0]
+    reps = frames // m.n_frames + 1
+    return m.with_data(np.concatenate([m.data] * reps)[:frames], name=f"arm{seed}")
+
+
+def runs_for(args, c, train, base) -> list[Run]:
+    from schemas.common import clip_to_wire
+
+    big = long_clip(base, args.frames, "long")
+    wire = clip_to_wire(big, with_skeleton=False)
+    human = {"skeleton": base.skeleton.to_json(),
+             "clip": clip_to_wire(big.with_data(big.data[:PERFORM_FRAMES]), with_skeleton=False)}
+    short = {"skeleton": base.skeleton.to_json(), "clip": clip_to_wire(base, with_skeleton=False)}
+    c.request("pss", "build", {"space": "budget", "clips": [clip_to_wire(x) for x in train]}, timeout=600)
+    out = [
+        Run("pss", "recognize", f"a clip of {args.frames:,} frames",
+            lambda k, i: k.request("pss", "recognize", {"space": "budget", "clips": [wire]}, timeout=900),
+            lambda k: k.request("pss", "recognize", {"space": "budget", "clips": [clip_to_wire(train[0])]})),
+        Run("pss", "generate", f"{args.frames:,} frames",
+            lambda k, i: k.request("pss", "generate", {"space": "budget", "mix": {train[0].name: 1.0},
+                                                       "frames": args.frames}, timeout=900),
+            lambda k: k.request("pss", "generate", {"space": "budget", "mix": {train[0].name: 1.0}, "frames": 100})),
+        Run("simulator", "perform", f"{PERFORM_FRAMES:,} frames on a human body",
+            lambda k, i: k.request("simulator", "perform", human, timeout=900),
+            lambda k: k.request("simulator", "perform", short)),
+    ]
+    per = args.frames // ATTEMPT_CLIPS
+    reps = [clip_to_wire(long_clip(x, per, f"rep{j}"), with_skeleton=False)
+            for j, x in enumerate((train * ATTEMPT_CLIPS)[:ATTEMPT_CLIPS])]
+    for i in range(args.clients):
+        c.request("coach", "start", {"session": f"budget{i}", "target": clip_to_wire(base), "replace": True})
+    c.request("coach", "start", {"session": "budget-warm", "target": clip_to_wire(base), "replace": True})
+    out.append(Run("coach", "attempt", f"{ATTEMPT_CLIPS} repetitions of {per:,} frames",
+                   lambda k, i: k.request("coach", "attempt", {"session": f"budget{i}", "clips": reps}, timeout=1800),
+                   lambda k: k.request("coach", "attempt", {"session": "budget-warm",
+                                                            "clips": [clip_to_wire(train[0], False)]}, timeout=600)))
+    arm_frames = ARM_PER_FRAME * args.frames
+    arms = [clip_to_wire(arm_motion(arm_frames, s)) for s in (1, 2)]
+    small_arms = [clip_to_wire(arm_motion(100, s)) for s in (1, 2)]
+    for i in range(args.clients):
+        c.request("simulator", "other_create", {"other": f"budget{i}", "replace": True})
+    out.append(Run("dialogue", "ask_compare", f"two arm motions of {arm_frames:,} frames",
+                   lambda k, i: k.request("dialogue", "ask_compare", {"dialogue": f"budget{i}", "other": f"budget{i}",
+                                                                      "clips": arms, "timeout": 1800}, timeout=1900),
+                   lambda k: k.request("dialogue", "ask_compare", {"dialogue": "budget-warm", "other": "budget0",
+                                                                   "clips": small_arms})))
+    per = args.frames // REPLAY_CLIPS
+    replay = [clip_to_wire(long_clip(x, per, f"rep{j}")) for j, x in enumerate((train * REPLAY_CLIPS)[:REPLAY_CLIPS])]
+    target = clip_to_wire(train[0])
+
+    def take(k, i, clips, speed):
+        name = f"budget{i}"
+        k.request("capture", "record", {"take": name, "replay": clips, "speed": speed, "replace": True,
+                                        "idle": 30.0})
+        for _ in range(3600):  # bounded: an hour of half-seconds
+            if k.request("capture", "status", {"take": name})["state"] != "recording":
+                break
+            time.sleep(0.5)
+        return k.request("capture", "segment", {"take": name, "target": target, "expected": 5}, timeout=900)
+
+    out.append(Run("capture", "record+segment", f"a replay of {REPLAY_CLIPS} clips ({args.frames:,} frames) "
+                   "and its repetitions", lambda k, i: take(k, i, replay, 100.0),
+                   lambda k: take(k, "-warm", [target], 100.0)))
+    for i in range(args.clients):
+        c.request("estimator", "start", {"estimate": f"budget{i}", "other": f"budget{i}", "replace": True})
+
+    def first_sets(k):  # every estimate's first set: the service keeps its last loaded estimates (a cache)
+        for i in range(args.clients):
+            k.request("estimator", "converse", {"estimate": f"budget{i}", "sets": 1}, timeout=900)
+
+    out.append(Run("estimator", "converse", "two more conversation sets",
+                   lambda k, i: k.request("estimator", "converse", {"estimate": f"budget{i}", "sets": 2}, timeout=1800),
+                   first_sets))
+    return out
+
+
 def main(argv=None) -> int:
     def extra(ap):
         ap.add_argument("--frames", type=int, default=100_000)
         ap.add_argument("--clients", type=int, default=4)
+        ap.add_argument("--only", nargs="*", default=None, help="service/verb labels to run (default: all)")
 
     args = parse_args(__doc__, argv, extra=extra)
-    from schemas.common import clip_to_wire
     from shared.bus.client import Client, RemoteError, Unavailable
     from shared.io import find_clips, load_clip
 
     files = find_clips([args.hdm05 / "amc"])
     train = [load_clip(f).resample(30) for f in files if "_bd_" in f.name][:20]
     base = load_clip(next(f for f in files if "_dg_" in f.name))
-    big = base.with_data(np.tile(base.data, (args.frames // base.n_frames + 1, 1))[: args.frames], name="long")
-    wire = clip_to_wire(big, with_skeleton=False)
     res: dict = {"frames": args.frames, "clients": args.clients, "runs": []}
     with private_cluster("budget") as s:
-        with Client(s) as c:
-            c.request("pss", "build", {"space": "budget", "clips": [clip_to_wire(x) for x in train]}, timeout=300)
-            # one short recognition first: the space's recognition caches (kept while the space is
-            # loaded) are part of the level memory returns to, not of what a request holds
-            c.request("pss", "recognize", {"space": "budget", "clips": [clip_to_wire(train[0])]})
-            # and one short inverse dynamics: MuJoCo and the human body are loaded on first use
-            c.request("simulator", "perform", {"skeleton": base.skeleton.to_json(),
-                                               "clip": clip_to_wire(base, with_skeleton=False)})
         res["budget_mb"] = s.memory_mb
-        # inverse dynamics adds every joint's torques: its reply is about twice its request, so the
-        # largest valid perform is about 40,000 frames (100,000 would be refused as too large a reply)
-        human = {"skeleton": base.skeleton.to_json(),
-                 "clip": clip_to_wire(big.with_data(big.data[:PERFORM_FRAMES]), with_skeleton=False)}
-        runs = 2 * (("pss", "recognize", {"space": "budget", "clips": [wire]}),
-                    ("pss", "generate", {"space": "budget", "mix": {train[0].name: 1.0}, "frames": args.frames}))
-        runs += (("simulator", "perform", human),)
-        for service, verb, message in runs:
-            pid = cluster_pids(s)[service]
+        with Client(s) as c:
+            runs = runs_for(args, c, train, base)
+        for run in runs:
+            label = f"{run.service}/{run.verb}"
+            if args.only and label not in args.only:
+                continue
+            with Client(s) as c:
+                run.warm(c)
+            pids = {k: v for k, v in cluster_pids(s).items() if k in SERVICES}
             time.sleep(2.0)
-            before = rss_mb(pid)
-            reset_peak(pid)
+            before = {k: rss_mb(p) for k, p in pids.items()}
+            for p in pids.values():
+                reset_peak(p)
 
-            def one(_):
+            def one(i, run=run):
                 t0 = time.perf_counter()
                 try:
                     with Client(s, connect_timeout_s=30.0) as c:
-                        c.request(service, verb, message, timeout=600)
+                        run.call(c, i)
                     return "ok", time.perf_counter() - t0
                 except (RemoteError, Unavailable) as e:
                     return f"{getattr(e, 'code', 'unavailable')}: {str(e)[:120]}", time.perf_counter() - t0
 
             t0 = time.perf_counter()
-            with ThreadPoolExecutor(args.clients) as pool:
+            pool = ThreadPoolExecutor(args.clients)
+            try:
                 answers = list(pool.map(one, range(args.clients)))
+            finally:  # stopped (SIGTERM): the cluster goes down at once, its requests end with it
+                pool.shutdown(wait=False, cancel_futures=True)
             seconds = time.perf_counter() - t0
+            peaks = {k: peak_mb(p) for k, p in pids.items()}
             time.sleep(3.0)
-            after = rss_mb(pid)
-            with Client(s) as c:  # one small request after them: what the last large message left held
-                c.request(service, "list", {})
-            time.sleep(1.0)
-            row = {"service": service, "verb": verb, "after_small_mb": rss_mb(pid),
+            after = {k: rss_mb(p) for k, p in pids.items()}
+            row = {"service": run.service, "verb": run.verb, "what": run.what,
                    "answers": dict(Counter(a for a, _ in answers)), "seconds": seconds,
-                   "longest_s": max(t for _, t in answers), "rss_before_mb": before, "peak_mb": peak_mb(pid),
+                   "longest_s": max(t for _, t in answers), "rss_before_mb": before, "peak_mb": peaks,
                    "rss_after_mb": after}
-            row["returned"] = row["rss_after_mb"] <= 1.10 * before
-            row["under_budget"] = row["peak_mb"] <= res["budget_mb"]
+            row["under_budget"] = all(v <= res["budget_mb"] for v in peaks.values())
+            row["returned"] = all(after[k] <= 1.10 * before[k] for k in pids)
             res["runs"].append(row)
-            print(f"{service}/{verb}: {row['answers']} in {seconds:.1f} s; {before:.0f} MB before, peak "
-                  f"{row['peak_mb']:.0f} MB (budget {res['budget_mb']:g} MB), {after:.0f} MB after, "
-                  f"{row['after_small_mb']:.0f} MB after a small request")
+            top = sorted(pids, key=lambda k: -(peaks[k] - before[k]))[:3]
+            print(f"{label} ({run.what}): {row['answers']} in {seconds:.1f} s; "
+                  + "; ".join(f"{k} {before[k]:.0f} -> peak {peaks[k]:.0f} -> {after[k]:.0f} MB" for k in top),
+                  flush=True)
     md = ["# The largest valid requests at once, against the memory budget", "",
-          f"`python -m bench.budget`: {args.clients} clients at once, each one request of {args.frames:,} frames "
-          f"(62 channels; the simulator's {PERFORM_FRAMES:,}, the largest whose reply fits the payload limit); "
-          f"each service's budget `MIRRORCOACH_MEMORY_MB` = {res['budget_mb']:g} (the systemd unit's "
-          "`MemoryMax` and the compose limit are 2 GB). After each run, one small request (`list`).", "",
-          "| service/verb | answers | seconds (longest) | RSS before | peak | after | after a small request | "
-          "under budget | returned (<= +10 %) |", "|---|---|---|---|---|---|---|---|---|"]
+          f"`python -m bench.budget`: {args.clients} clients at once, each one maximal request; each service's "
+          f"budget `MIRRORCOACH_MEMORY_MB` = {res['budget_mb']:g} (the systemd unit's `MemoryMax` and the compose "
+          "limit are 2 GB). Every service is measured in every run (a request also works in the services it "
+          "calls): its resident memory before, its peak while the requests work, and after them.", "",
+          "| service/verb | request | answers | seconds (longest) | service: before -> peak -> after (MB) | "
+          "under budget | returned (<= +10 %) |", "|---|---|---|---|---|---|---|"]
     for r in res["runs"]:
-        md.append(f"| {r['service']}/{r['verb']} | {', '.join(f'{k}: {v}' for k, v in r['answers'].items())} | "
-                  f"{r['seconds']:.0f} ({r['longest_s']:.0f}) | {r['rss_before_mb']:.0f} MB | {r['peak_mb']:.0f} MB | "
-                  f"{r['rss_after_mb']:.0f} MB | {r['after_small_mb']:.0f} MB | {'yes' if r['under_budget'] else 'NO'} | "
+        moved = [k for k in r["peak_mb"] if r["peak_mb"][k] - r["rss_before_mb"][k] > 20] or [r["service"]]
+        mem = "; ".join(f"{k}: {r['rss_before_mb'][k]:.0f} -> {r['peak_mb'][k]:.0f} -> {r['rss_after_mb'][k]:.0f}"
+                        for k in moved)
+        md.append(f"| {r['service']}/{r['verb']} | {r['what']} | "
+                  f"{', '.join(f'{k}: {v}' for k, v in r['answers'].items())} | "
+                  f"{r['seconds']:.0f} ({r['longest_s']:.0f}) | {mem} | {'yes' if r['under_budget'] else 'NO'} | "
                   f"{'yes' if r['returned'] else 'NO'} |")
     write_results(args.out, "budget", res, md)
     return 0
