@@ -28,6 +28,28 @@ def test_clip_info_and_convert(bundled, tmp_path):
     assert b.fps == 30 and b.n_frames == 36
 
 
+def test_a_group_command_runs_alone_as_it_runs_in_the_whole_application(bundled):
+    """``mirrorcoach GROUP ...`` builds that group's commands only (start-up time); it answers
+    as the whole application does, root options still go through the whole application, and a
+    group shows no shell-completion options (the root has none)."""
+    from typer.testing import CliRunner
+
+    from shared.cli.app import _group_of, app
+
+    alone = run("clip", "info", bundled / SQUAT, "--json")
+    whole = CliRunner().invoke(app, ["clip", "info", str(bundled / SQUAT), "--json"])
+    assert alone.returncode == whole.exit_code == 0 and json.loads(alone.stdout) == json.loads(whole.stdout)
+    assert _group_of(["clip", "info"]) is not None and _group_of(["--units", "cm", "clip"]) is None
+    assert _group_of(["up"]) is None and _group_of([]) is None  # a root command, the root's help
+    helped = run("offline", "--help")
+    assert helped.returncode == 0 and "mirrorcoach offline" in helped.stdout and "recognize" in helped.stdout
+    assert "--install-completion" not in helped.stdout
+    rooted = run("--units", "m", "clip", "info", bundled / SQUAT, "--json")
+    assert rooted.returncode == 0 and json.loads(rooted.stdout)["frames"] == 140
+    wrong = run("offline", "nosuch")
+    assert wrong.returncode == 2 and "No such command" in wrong.stderr and "Traceback" not in wrong.stderr
+
+
 def test_space_build_recognize_generate(bundled, tmp_path):
     space = tmp_path / "s.npz"
     r = run("offline", "build", space, bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps")
