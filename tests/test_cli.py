@@ -46,6 +46,8 @@ def test_a_group_command_runs_alone_as_it_runs_in_the_whole_application(bundled)
     assert "--install-completion" not in helped.stdout
     rooted = run("--units", "m", "clip", "info", bundled / SQUAT, "--json")
     assert rooted.returncode == 0 and json.loads(rooted.stdout)["frames"] == 140
+    lone = run("sim", "--help")  # a group of one command stays a group (typer would run the command)
+    assert lone.returncode == 0 and "perform" in lone.stdout and "Usage: mirrorcoach sim [OPTIONS] COMMAND" in lone.stdout
     wrong = run("offline", "nosuch")
     assert wrong.returncode == 2 and "No such command" in wrong.stderr and "Traceback" not in wrong.stderr
 

@@ -11,12 +11,12 @@ from typing import Optional
 
 import typer
 
-from shared.cli.app import GROUP, READING, SKELETON_HELP, _fail, app, read_clip
+from shared.cli.app import READING, SKELETON_HELP, _fail, app, read_clip
 from shared.cli.cluster import _client, _jsonable, _wire
 
-sim_app = typer.Typer(**GROUP, help="MuJoCo bodies on the simulator service (needs `make up`).", no_args_is_help=True)
-other_app = typer.Typer(**GROUP, help="Others of chapter 3: simulated agents, or a person answering here.", no_args_is_help=True)
-learner_app = typer.Typer(**GROUP, help="Simulated learners of chapters 4-6 (a simulation, not people).", no_args_is_help=True)
+sim_app = typer.Typer(help="MuJoCo bodies on the simulator service (needs `make up`).", no_args_is_help=True)
+other_app = typer.Typer(help="Others of chapter 3: simulated agents, or a person answering here.", no_args_is_help=True)
+learner_app = typer.Typer(help="Simulated learners of chapters 4-6 (a simulation, not people).", no_args_is_help=True)
 app.add_typer(sim_app, name="sim")
 app.add_typer(other_app, name="other")
 app.add_typer(learner_app, name="learner")
@@ -237,8 +237,8 @@ def learner_delete(name: str = typer.Argument(...)):
 
 
 # ---------------------------------------------------------------------------- dialogue and estimator
-dialogue_app = typer.Typer(**GROUP, help="Questions to others and their transcripts (dialogue service).", no_args_is_help=True)
-estimator_app = typer.Typer(**GROUP, help="Estimating what an other feels (estimator service, thesis ch. 3).", no_args_is_help=True)
+dialogue_app = typer.Typer(help="Questions to others and their transcripts (dialogue service).", no_args_is_help=True)
+estimator_app = typer.Typer(help="Estimating what an other feels (estimator service, thesis ch. 3).", no_args_is_help=True)
 app.add_typer(dialogue_app, name="dialogue")
 app.add_typer(estimator_app, name="estimator")
 

@@ -17,12 +17,10 @@ import typer
 
 from shared.errors import MirrorcoachError
 
-#: every command group's Typer settings: no shell-completion options and plain tracebacks, like the
-#: root's (a group's command runs by the group's own app: :func:`main`)
-GROUP = {"pretty_exceptions_enable": False, "add_completion": False}
-app = typer.Typer(help="mirrorcoach: motion coaching with the Proto-symbol Space method.", no_args_is_help=True, **GROUP)
-clip_app = typer.Typer(**GROUP, help="Read, inspect and convert motion clips (ASF/AMC, BVH, NPZ).", no_args_is_help=True)
-offline_app = typer.Typer(**GROUP, help="Proto-symbol spaces as local .npz files, without a cluster (library level).",
+app = typer.Typer(help="mirrorcoach: motion coaching with the Proto-symbol Space method.", no_args_is_help=True,
+                  pretty_exceptions_enable=False, add_completion=False)
+clip_app = typer.Typer(help="Read, inspect and convert motion clips (ASF/AMC, BVH, NPZ).", no_args_is_help=True)
+offline_app = typer.Typer(help="Proto-symbol spaces as local .npz files, without a cluster (library level).",
                           no_args_is_help=True)
 app.add_typer(clip_app, name="clip")
 app.add_typer(offline_app, name="offline")
@@ -197,7 +195,7 @@ def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
     typer.echo(json.dumps(out) if as_json else recognition_text(out))
 
 
-evaluate_app = typer.Typer(**GROUP, help="Measured reports: how well mirrorcoach does next to its peers.", no_args_is_help=True)
+evaluate_app = typer.Typer(help="Measured reports: how well mirrorcoach does next to its peers.", no_args_is_help=True)
 app.add_typer(evaluate_app, name="evaluate")
 
 
@@ -279,8 +277,9 @@ from shared.cli import capture as _capture  # noqa: E402,F401  (registers the ca
 
 def _group_of(argv: list[str]):
     """The command group ``argv`` starts with (``offline``, ``space``, ...), or None: a group's
-    command is run by its own Typer app, so the command tree of every other group is not built
-    (typer builds all 64 commands' click objects on every call: ~58 ms of `offline recognize`)."""
+    command is run by that group's click group alone, so the command tree of every other group is
+    not built (typer builds all 64 commands' click objects on every call: ~58 ms of `offline
+    recognize`)."""
     if not argv or argv[0].startswith("-"):
         return None  # root options (--units ...) or the root's help: the whole application
     return next((g.typer_instance for g in app.registered_groups if g.name == argv[0]), None)
@@ -292,7 +291,8 @@ def main() -> None:
         if group is None:
             app()
         else:
-            group(args=sys.argv[2:], prog_name=f"mirrorcoach {sys.argv[1]}")
+            # as a group even with one command (typer runs a lone command's app as that command)
+            typer.main.get_group(group).main(args=sys.argv[2:], prog_name=f"mirrorcoach {sys.argv[1]}")
     except MirrorcoachError as e:
         typer.echo(f"error: {e.message}", err=True)
         sys.exit(2)

@@ -14,9 +14,9 @@ from typing import Optional
 
 import typer
 
-from shared.cli.app import GROUP, SKELETON_HELP, _fail, app, read_clip
+from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
 
-capture_app = typer.Typer(**GROUP, help="Live motion capture: a clip served as a live BVH stream, a take recorded from one, a "
+capture_app = typer.Typer(help="Live motion capture: a clip served as a live BVH stream, a take recorded from one, a "
                                "take cut into the repetitions of a target.", no_args_is_help=True)
 app.add_typer(capture_app, name="capture")
 

@@ -10,10 +10,10 @@ from typing import Optional
 
 import typer
 
-from shared.cli.app import GROUP, READING, SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app, read_clip, recognition_text
+from shared.cli.app import READING, SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app, read_clip, recognition_text
 from shared.clipfiles import wire_file, wire_name
 
-space_app = typer.Typer(**GROUP, help="Proto-symbol spaces on the pss service (needs `make up`).", no_args_is_help=True)
+space_app = typer.Typer(help="Proto-symbol spaces on the pss service (needs `make up`).", no_args_is_help=True)
 app.add_typer(space_app, name="space")
 
 TIMEOUT_HELP = "Seconds to wait for the service (default: $MIRRORCOACH_TIMEOUT or 120)."

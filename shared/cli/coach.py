@@ -9,10 +9,10 @@ from typing import Optional
 
 import typer
 
-from shared.cli.app import GROUP, SKELETON_HELP, _fail, app, read_clip
+from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
 from shared.cli.cluster import _client, _jsonable, _wire
 
-coach_app = typer.Typer(**GROUP, help="Coaching sessions with emphatic motions and adverbs (coach service, thesis ch. 4-6).",
+coach_app = typer.Typer(help="Coaching sessions with emphatic motions and adverbs (coach service, thesis ch. 4-6).",
                         no_args_is_help=True)
 app.add_typer(coach_app, name="coach")
 

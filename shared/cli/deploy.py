@@ -11,9 +11,9 @@ from typing import List, Optional
 
 import typer
 
-from shared.cli.app import GROUP, app
+from shared.cli.app import app
 
-deploy_app = typer.Typer(**GROUP, help="A cluster across several hosts, secured: a small CA, each process its own certificate, "
+deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small CA, each process its own certificate, "
                               "Zenoh configs with TLS (mutual authentication) and access control per role.",
                          no_args_is_help=True)
 app.add_typer(deploy_app, name="deploy")

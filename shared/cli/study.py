@@ -10,10 +10,10 @@ from typing import Optional
 
 import typer
 
-from shared.cli.app import GROUP, SKELETON_HELP, _fail, app, read_clip
+from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
 from shared.cli.cluster import _client, _wire
 
-study_app = typer.Typer(**GROUP, help="Run the thesis's studies with people: participants send their own attempts (fig. 4.3, "
+study_app = typer.Typer(help="Run the thesis's studies with people: participants send their own attempts (fig. 4.3, "
                              "Table 4.2) and human coaches name adverbs from a coach seat (chapter 5).",
                         no_args_is_help=True)
 app.add_typer(study_app, name="study")
