@@ -722,7 +722,7 @@ def test_a_study_with_scripted_participants_and_a_coach_seat(cluster, bundled, t
 def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
     """A world that does not agree with the method: learners that copy what they see. The
     report's words are computed, so emphasis must not come out as helping there, and every
-    trial is in tidy.csv (issue 14). No sensitivity sweep (`--sensitivity-learners 0`): nothing
+    trial is in tidy.csv. No sensitivity sweep (`--sensitivity-learners 0`): nothing
     here reads it, and it was a fifth of the test's time."""
     from shared.reproduce.tidy import read
 

@@ -87,14 +87,10 @@ def make_service(settings: Settings | None = None) -> Service:
         return feature_cost(req["clips"], req["fps"])
 
     @svc.cost("add")
-    def add_cost(req):
-        space = store.get(req["space"])
-        return feature_cost(req["clips"], space.params.fps, space.features.n_features)
-
     @svc.cost("recognize")
-    def recognize_cost(req):
+    def clips_cost(req):  # (a recognition of files is estimated by its payload)
         space = store.get(req["space"])
-        return feature_cost(req["clips"] or [], space.params.fps, space.features.n_features)
+        return feature_cost(req.get("clips") or [], space.params.fps, space.features.n_features)
 
     @svc.handler("build")
     def build(req):

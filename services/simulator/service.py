@@ -58,6 +58,12 @@ class _Bodies:
         return b
 
 
+#: inverse dynamics keeps about this many times its clip's bytes (bench.budget: four performs of a
+#: 100,000-frame human clip at once peaked at 1.86 GB, three running; two arm motions of 900,000
+#: frames asked about at once held 490 MB)
+INVERSE_DYNAMICS_BYTES = 14
+
+
 def make_service(settings: Settings | None = None) -> Service:
     settings = settings or Settings()
     store = AgentStore(settings.data_dir("simulator"))
@@ -78,15 +84,12 @@ def make_service(settings: Settings | None = None) -> Service:
 
     @svc.cost("perform")
     def perform_cost(req):
-        """Inverse dynamics keeps about 14 times the clip's numbers (bench.budget: four performs of a
-        100,000-frame clip at once peaked at 1.86 GB, three running)."""
-        return 14 * req["clip"]["data"].nbytes
+        return INVERSE_DYNAMICS_BYTES * req["clip"]["data"].nbytes
 
     @svc.cost("other_ask")
     def ask_cost(req):
-        """An other performs the motions one after another: the largest one's inverse dynamics
-        (as ``perform``: bench.budget, two arm motions of 900,000 frames at once held 490 MB)."""
-        return 14 * max(c["data"].nbytes for c in req["clips"])
+        """An other performs the motions one after another: the largest one's inverse dynamics."""
+        return INVERSE_DYNAMICS_BYTES * max(c["data"].nbytes for c in req["clips"])
 
     @svc.handler("perform")
     def do_perform(req):
