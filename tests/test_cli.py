@@ -68,6 +68,14 @@ def test_space_build_recognize_generate(bundled, tmp_path):
     r = run("offline", "generate", space, "--mix", f"{names[0]}=3", "--mix", f"{names[1]}=-2", "--out", tmp_path / "e.bvh")
     assert r.returncode == 0, r.stderr
     assert np.all(np.isfinite(load_clip(tmp_path / "e.bvh").data))
+    # files not held (each read when needed): the same space
+    r = run("offline", "build", tmp_path / "lazy.npz", bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps",
+            "--hold-mb", "0")
+    assert r.returncode == 0, r.stderr
+    from shared.pss.space import ProtoSymbolSpace
+
+    a, b = ProtoSymbolSpace.load(space), ProtoSymbolSpace.load(tmp_path / "lazy.npz")
+    assert b.names == a.names and np.allclose(b.distances, a.distances, rtol=1e-10) and np.allclose(b.points, a.points)
 
 
 def test_errors_are_one_line_without_traceback(bundled, tmp_path):

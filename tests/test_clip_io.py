@@ -256,3 +256,18 @@ def test_skeletons_are_cached_by_content_not_path(hdm05, tmp_path):
         (tmp_path / f"c{i}.asf").write_text(src + f"# {i}\n", encoding="latin-1")
         load_skeleton(tmp_path / f"c{i}.asf")
     assert load_skeleton(tmp_path / "b.asf") is not a
+
+
+def test_an_npz_written_part_by_part_reads_back_as_the_stacked_array(tmp_path):
+    """savez_stacked writes a Stacked value part by part: np.load reads what np.savez of the
+    stacked array would give; a part of another shape is refused."""
+    from shared.io.npz import Stacked, savez_stacked
+
+    rng = np.random.default_rng(3)
+    parts = [rng.normal(size=(4, 5)) for _ in range(7)]
+    with open(tmp_path / "a.npz", "wb") as f:
+        savez_stacked(f, {"m": Stacked(parts), "x": np.arange(3), "h": np.array("text")})
+    with np.load(tmp_path / "a.npz", allow_pickle=False) as z:
+        assert np.array_equal(z["m"], np.stack(parts)) and np.array_equal(z["x"], np.arange(3)) and str(z["h"]) == "text"
+    with pytest.raises(ValueError, match="a part of shape"), open(tmp_path / "b.npz", "wb") as f:
+        savez_stacked(f, {"m": Stacked(parts + [np.zeros((4, 6))])})

@@ -150,6 +150,32 @@ def test_space_saves_and_loads_identically(dev_space, dev_split, tmp_path):
     assert not list(tmp_path.glob(".*"))  # no temporary file left behind
 
 
+def test_a_space_built_from_files_read_when_taken_is_the_same_space(hdm05, torque_space):
+    """A lazy sequence of files (each read when taken, none kept) builds the space a list of the
+    same clips builds: each file read twice, in order; the features' statistics clip by clip are
+    the statistics of all the frames stacked (sensor channels too)."""
+    from shared.io import LazyClips, load_clip
+    from shared.pss.features import MotionFeatures
+
+    files = sorted((hdm05 / "amc").rglob("*.amc"))[::12]
+    held = [load_clip(f) for f in files]
+    reads = []
+    a = ProtoSymbolSpace.build(held, dim=2)
+    b = ProtoSymbolSpace.build(LazyClips(files, on_read=reads.append), dim=2)
+    assert reads == list(range(len(files))) * 2
+    assert b.names == a.names and b.labels == a.labels and [s.performers for s in b.symbols] == [s.performers for s in a.symbols]
+    assert np.allclose(b.distances, a.distances, rtol=1e-10, atol=0)
+    assert np.allclose(b.points, a.points, rtol=1e-8, atol=1e-10)
+    train = torque_space[1][:15]
+    f = MotionFeatures.for_clips(train)
+    sensors = np.vstack([c.select(f.sensor_channels) for c in train])
+    assert f.sensor_channels and np.allclose(f.sensor_mean, sensors.mean(axis=0), rtol=1e-10, atol=1e-12)
+    assert np.allclose(f.sensor_scale, np.maximum(sensors.std(axis=0), 1e-6 * max(1.0, np.abs(sensors).max())), rtol=1e-9)
+    positions = np.vstack([f._raw_positions(c, *f._root_terms(c)) for c in train])
+    assert np.allclose(f.position_mean, positions.mean(axis=0), atol=1e-10)
+    assert np.allclose(f.position_scale, np.maximum(positions.std(axis=0), 1e-3), rtol=1e-8)
+
+
 def test_rebuild_from_a_modified_database(dev_space, dev_split):
     small = ProtoSymbolSpace.build(dev_split[0][:6], dim=2, n_states=dev_space.params.n_states)
     grown = small.rebuilt(add=[dev_split[1][0]], remove=[small.names[0]])

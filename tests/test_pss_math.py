@@ -76,6 +76,40 @@ def test_weighted_distance_bank_matches_reference_and_ones_are_eq_2_4():
         distance_matrix(models, np.ones(4))
 
 
+def test_distance_matrix_on_some_features_is_the_marginals_matrix():
+    """The stacked form (no marginal HMM per model) gives the marginal HMMs' own eq. 2.4 matrix,
+    with and without channel weights."""
+    rng = np.random.default_rng(7)
+    models = [_random_hmm(rng, d=6) for _ in range(7)]
+    idx = np.array([0, 2, 3, 5])
+    marg = [m.marginal(idx) for m in models]
+    assert np.allclose(distance_matrix(models, features=idx), distance_matrix(marg), rtol=1e-12, atol=0)
+    w = rng.uniform(0.0, 3.0, 4)
+    assert np.allclose(distance_matrix(models, w, features=idx), distance_matrix(marg, w), rtol=1e-12, atol=0)
+    with pytest.raises(ModelError, match="channel weights"):
+        distance_matrix(models, np.ones(6), features=idx)
+
+
+def test_an_extended_bank_is_the_bank_of_all_its_models_even_when_two_extend_one():
+    """Extending writes into spare rows shared with the bank it extends; a second extension of
+    the same bank (two spaces added to one) must not overwrite the first's rows."""
+    from shared.pss.distance import ModelBank
+
+    rng = np.random.default_rng(8)
+    models = [_random_hmm(rng, d=6) for _ in range(5)]
+    a, b, c = (_random_hmm(rng, d=6) for _ in range(3))
+    base = ModelBank(models, np.linspace(0.5, 2, 6))
+    first = base.extended([a])
+    again = first.extended([b])  # into first's spare rows
+    other = first.extended([c])  # first extended twice: c must not take b's row
+    probe = _random_hmm(rng, d=6)
+    for bank, ms in ((first, models + [a]), (again, models + [a, b]), (other, models + [a, c])):
+        ref = ModelBank(ms, np.linspace(0.5, 2, 6))
+        assert np.array_equal(bank.distances(probe), ref.distances(probe))
+        assert np.array_equal(bank.distances(probe, start=3), ref.distances(probe, start=3))
+    assert np.array_equal(base.distances(probe), ModelBank(models, np.linspace(0.5, 2, 6)).distances(probe))
+
+
 def test_channel_weights_favour_channels_that_separate_classes_not_performers():
     """Channel 0 tells the classes apart, channel 1 the performers, channel 2 never varies."""
     from shared.pss.recognition import channel_weights
@@ -203,6 +237,15 @@ def test_mds_recovers_a_euclidean_configuration_and_matches_sklearn():
     sk_x, _ = sk_smacof(g, n_components=2, init=classical_mds(g, 2), n_init=1, metric=True, max_iter=3000, eps=1e-9,
                         normalized_stress=False)
     assert ours.stress <= raw_stress(g, sk_x) * 1.001
+    # Torgerson's textbook form (J = I - 1/n, -1/2 J F^2 J, every eigenpair): the same points up to
+    # each axis's sign, and every sign fixed so that the axis's largest component is positive
+    n = len(g)
+    j = np.eye(n) - 1.0 / n
+    w, v = np.linalg.eigh(-0.5 * j @ (g * g) @ j)
+    ref = v[:, ::-1][:, :2] * np.sqrt(w[::-1][:2])
+    x2 = classical_mds(g, 2)
+    assert np.allclose(np.abs(x2), np.abs(ref), atol=1e-9)
+    assert np.all(x2[np.argmax(np.abs(x2), axis=0), [0, 1]] > 0)
 
 
 def test_out_of_sample_point_is_placed_without_moving_the_others():

@@ -481,7 +481,9 @@ def test_recognition_caps_state_variances_and_older_files_do_not(dev_space, dev_
     np.savez(tmp_path / "old.npz", **arrays)
     old = ProtoSymbolSpace.load(tmp_path / "old.npz")
     assert old.params.recognition_var_ceiling is None
-    assert all(a is b for a, b in zip(old.recognition_models(), old.models_on(("position",))))
+    assert all(np.array_equal(a.covars, b.covars) and np.array_equal(a.means, b.means)
+               for a, b in zip(old.recognition_models(), old.models_on(("position",))))  # not capped
+    assert max(float(m.covars.max()) for m in old.recognition_models()) > RECOGNITION_VAR_CEILING
 
 
 def test_a_clip_is_added_without_rebuilding_the_rest(dev_space, dev_split):
@@ -491,6 +493,13 @@ def test_a_clip_is_added_without_rebuilding_the_rest(dev_space, dev_split):
     placed = dev_space.added(new)
     n = len(dev_space.symbols)
     assert len(placed.symbols) == n + 2 and np.array_equal(placed.points[:n], dev_space.points)
+    from shared.pss.mds import raw_stress
+
+    # the stress and stress-1 grown by the new points' pairs are those of the whole configuration
+    assert placed.embedding.stress == pytest.approx(raw_stress(placed.distances, placed.points), rel=1e-9)
+    iu = np.triu_indices(n + 2, 1)
+    assert placed.embedding.stress1 == pytest.approx(np.sqrt(placed.embedding.stress / np.sum(placed.distances[iu] ** 2)),
+                                                     rel=1e-9)
     full = dev_space.rebuilt(add=new)  # the same proto-symbols, every point embedded again
     assert np.allclose(placed.distances, full.distances)
     ref = distance_matrix(placed.recognition_models(), dev_space.recognition_weights)  # the space's weights kept
@@ -567,20 +576,31 @@ def test_a_clip_added_to_a_stored_space_is_a_journal_entry_read_back_the_same(de
 def test_the_calibration_s_vectorised_steps_equal_their_plain_loops(dev_space):
     """calibrate's class distances per proto-symbol (blocks of rows, every class at once) and its
     leave-one-out class spreads (order statistics) against the plain loops they replaced."""
-    from shared.pss.recognition import _class_spread, _class_spreads_without_each, calibrate, class_distances
+    from shared.pss.recognition import (
+        KNOWN_QUANTILE,
+        _class_spread,
+        _class_spreads_without_each,
+        calibrate,
+        class_distances,
+        conformal_threshold,
+    )
 
     d = dev_space.recognition_matrix
     labels, perf = np.asarray(dev_space.labels), np.asarray(dev_space.performers)
     classes = sorted(set(labels))
-    near, truth = [], []
+    near, truth, ratios = [], [], []
     for i in range(len(labels)):
         cand = (np.arange(len(labels)) != i) & (perf != perf[i])
         if (cand & (labels == labels[i])).any():
             dc = class_distances(d[i, cand], labels[cand], classes)
             truth.append(classes.index(labels[i]))
             near.append(dc[truth[-1]])
+            other = np.delete(dc, truth[-1])
+            if np.isfinite(other).any():
+                ratios.append(near[-1] / max(float(np.min(other)), 1e-12))
     cal = calibrate(d, list(labels), list(perf))
     assert cal.n_calibration == len(near)
+    assert cal.ratio_threshold == pytest.approx(conformal_threshold(ratios, KNOWN_QUANTILE), rel=1e-12)
     near, truth = np.array(near), np.array(truth)
     np.testing.assert_allclose(cal.class_scales, [_class_spread(near, truth, k) for k in range(len(classes))])
     np.testing.assert_allclose(_class_spreads_without_each(near, truth),

@@ -105,6 +105,10 @@ def clip_convert(src: Path = typer.Argument(..., help="Input clip: .amc, .bvh or
     typer.echo(f"wrote {dst} ({c.n_frames} frames at {c.fps:g} fps)")
 
 
+#: MB of clip files that ``offline build`` holds in memory at once (together); more are read when needed
+HOLD_CLIP_MB = 256.0
+
+
 def _load_clips(paths: list[Path], skeleton, label: str | None = None):
     from rich.progress import track
 
@@ -152,14 +156,26 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
                 dim: int = typer.Option(3, help="Dimension of the space."),
                 states: Optional[int] = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
                 group_by: str = typer.Option("clip", help="'clip': a proto-symbol per clip; 'label': one per label."),
-                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
-    """Build a Proto-symbol Space from clips (eq. 2.5) and save it."""
+                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                hold_mb: float = typer.Option(HOLD_CLIP_MB, "--hold-mb", min=0,
+                                              help="Clip files held in memory at once, MB together; above it each "
+                                                   "file is read twice (statistics, then its HMM) instead of held.")):
+    """Build a Proto-symbol Space from clips (eq. 2.5) and save it. Clips whose files add up to
+    more than --hold-mb are not held in memory, so thousands of clips build in the memory of
+    their HMMs."""
     from rich.progress import Progress
 
+    from shared.io import LazyClips, find_clips
     from shared.pss.space import ProtoSymbolSpace
 
-    clips = _load_clips(paths, skeleton)
+    files = find_clips(paths)
+    lazy = sum(f.stat().st_size for f in files) > hold_mb * 2**20
+    clips = None if lazy else _load_clips(files, skeleton)
     with Progress(transient=True, disable=not sys.stderr.isatty()) as prog:
+        if lazy:
+            reading = prog.add_task("reading clips (statistics, then one HMM at a time)", total=2 * len(files))
+            clips = LazyClips(files, read=lambda f: read_clip(f, skeleton=skeleton),
+                              on_read=lambda _: prog.advance(reading))
         task = prog.add_task("training proto-symbols", total=len(clips))
         space = ProtoSymbolSpace.build(clips, dim=dim, n_states=states, group_by=group_by, name=out.stem,
                                        progress=lambda done, total: prog.update(task, completed=done, total=total))

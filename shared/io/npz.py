@@ -15,6 +15,34 @@ from shared.skeleton import Skeleton
 FORMAT = "mirrorcoach.clip/1"
 
 
+class Stacked:
+    """An array of ``np.stack(parts)`` that :func:`savez_stacked` writes part by part, never
+    stacked in memory (a space of 3,000 proto-symbols: 0.18 GB of HMM means and variances)."""
+
+    def __init__(self, parts):
+        self.parts = list(parts)
+        first = np.asarray(self.parts[0])
+        self.shape, self.dtype = (len(self.parts),) + first.shape, first.dtype
+
+
+def savez_stacked(f, arrays: dict) -> None:
+    """``np.savez(f, **arrays)`` where a value may be :class:`Stacked`: the same file
+    (``np.load`` reads it back as the stacked array)."""
+    with zipfile.ZipFile(f, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as z:
+        for key, value in arrays.items():
+            with z.open(f"{key}.npy", "w", force_zip64=True) as out:
+                if isinstance(value, Stacked):
+                    np.lib.format.write_array_header_2_0(out, {"descr": np.lib.format.dtype_to_descr(value.dtype),
+                                                               "fortran_order": False, "shape": value.shape})
+                    for part in value.parts:
+                        part = np.asarray(part, dtype=value.dtype)
+                        if part.shape != value.shape[1:]:
+                            raise ValueError(f"{key}: a part of shape {part.shape}, not {value.shape[1:]}")
+                        out.write(np.ascontiguousarray(part).tobytes())
+                else:
+                    np.lib.format.write_array(out, np.asanyarray(value), allow_pickle=False)
+
+
 def write_npz(clip: Clip, path) -> None:
     meta = {
         "format": FORMAT,

@@ -240,47 +240,66 @@ class MotionFeatures:
 
     # ---------------------------------------------------------------- fitting
     @classmethod
-    def for_clips(cls, clips: list[Clip], sensor: bool = True) -> "MotionFeatures":
+    def for_clips(cls, clips, sensor: bool = True, on_clip=None) -> "MotionFeatures":
         """The feature map for a set of clips: their common motion channels and, if every clip
-        has them and ``sensor`` is true, their common sensor channels (standardised)."""
-        if not clips:
+        has them and ``sensor`` is true, their common sensor channels (standardised).
+
+        ``clips`` is any sequence (``len`` and indexing); each clip is taken once, in order, and
+        not kept: a lazy sequence that reads a clip when indexed (:class:`shared.io.LazyClips`)
+        has one clip in memory at a time. ``on_clip(clip)`` is called with each as it is read."""
+        if not len(clips):
             raise BadInput("no clips")
         first = clips[0]
         motion = first.group("motion")
         layout = None if first.skeleton is None else _layout(first.skeleton)
-        for c in clips[1:]:
+        sensors = first.group("sensor") if sensor else []
+        frame = None if first.skeleton is None else body_frame(first.skeleton, first.data, first.channels)
+        base = cls(first.skeleton, motion, [], None, None, frame=frame)
+        positions = bool(base._position_names())
+        # the mean and deviation over every frame of every clip, clip by clip (a stack of all the
+        # frames held 0.5 GB for 1,000 game-studio clips); shifted by the first clip's mean
+        sums = {"sensor": None, "position": None}
+        count, largest = 0, 0.0
+
+        def add(key: str, values: np.ndarray) -> None:
+            if sums[key] is None:
+                shift = values.mean(axis=0)
+                sums[key] = [shift, np.zeros_like(shift), np.zeros_like(shift)]
+            shift, total, squares = sums[key]
+            d = values - shift
+            total += d.sum(axis=0)
+            squares += (d * d).sum(axis=0)
+
+        for i in range(len(clips)):
+            c = first if i == 0 else clips[i]
             same = (c.skeleton is not None and _layout(c.skeleton) == layout) if layout else c.group("motion") == motion
             if not same:
                 raise BadInput(f"clip {c.name!r} has another body layout than {first.name!r} (joints or motion channels); "
                                "a space needs one")
-        sensors = first.group("sensor") if sensor else []
-        if sensors and any(c.group("sensor") != sensors for c in clips):
-            raise BadInput("clips differ in their sensor channels")
-        mean = scale = None
+            if sensors:
+                if c.group("sensor") != sensors:
+                    raise BadInput("clips differ in their sensor channels")
+                v = c.select(sensors)
+                add("sensor", v)
+                largest = max(largest, float(np.abs(v).max()))
+            if positions:
+                add("position", base._raw_positions(c, *base._root_terms(c)))
+            count += c.n_frames
+            if on_clip is not None:
+                on_clip(c)
+
+        def moments(key: str) -> tuple[np.ndarray, np.ndarray]:
+            shift, total, squares = sums[key]
+            mean_d = total / count
+            return shift + mean_d, np.sqrt(np.maximum(squares / count - mean_d * mean_d, 0.0))
+
+        mean = scale = p_mean = p_scale = None
         if sensors:
-            allv = np.vstack([c.select(sensors) for c in clips])
-            mean = allv.mean(axis=0)
-            scale = np.maximum(allv.std(axis=0), 1e-6 * max(1.0, float(np.abs(allv).max())))
-        frame = None if first.skeleton is None else body_frame(first.skeleton, first.data, first.channels)
-        base = cls(first.skeleton, motion, sensors, mean, scale, frame=frame)
-        if not base._position_names():
-            return base
-        # the mean and deviation over every frame of every clip, clip by clip (a stack of all the
-        # frames held 0.5 GB for 1,000 game-studio clips); shifted by the first clip's mean
-        shift = total = squares = None
-        count = 0
-        for c in clips:
-            raw = base._raw_positions(c, *base._root_terms(c))
-            if shift is None:
-                shift = raw.mean(axis=0)
-                total, squares = np.zeros_like(shift), np.zeros_like(shift)
-            d = raw - shift
-            total += d.sum(axis=0)
-            squares += (d * d).sum(axis=0)
-            count += len(raw)
-        mean_d = total / count
-        p_mean = shift + mean_d
-        p_scale = np.maximum(np.sqrt(np.maximum(squares / count - mean_d * mean_d, 0.0)), 1e-3)
+            mean, std = moments("sensor")
+            scale = np.maximum(std, 1e-6 * max(1.0, largest))
+        if positions:
+            p_mean, std = moments("position")
+            p_scale = np.maximum(std, 1e-3)
         return cls(first.skeleton, motion, sensors, mean, scale, p_mean, p_scale, frame=frame)
 
     # ---------------------------------------------------------------- other conventions

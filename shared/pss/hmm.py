@@ -570,7 +570,7 @@ def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, t
                 stats = np.hstack([gamma.T @ x_all, squares]) / occ_safe[:, None]
             else:
                 stats = (gamma.T @ z) / occ_safe[:, None]
-            means = stats[:, :d]
+            means = np.ascontiguousarray(stats[:, :d])  # its own (N, D): a view kept the whole (N, 2D) alive
             covars = stats[:, d:] - means * means
         else:
             means = (gamma.T @ x_all) / occ_safe[:, None]

@@ -187,21 +187,19 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
             cols = label_id == k
             all_dc[lo:lo + 512, k] = block[:, cols].min(axis=1) if cols.any() else np.inf
     keep = np.isfinite(all_dc[np.arange(len(labels_a)), label_id])
-    rows = list(all_dc[keep])
-    truth = list(label_id[keep])
-    nearest_same = [dc[t] for dc, t in zip(rows, truth)]
-    ratios = []
-    for dc, t in zip(rows, truth):
-        other = np.delete(dc, t)
-        if np.isfinite(other).any():
-            ratios.append(dc[t] / max(float(np.min(other)), 1e-12))
+    dc_all = all_dc[keep]
+    y = label_id[keep]
+    near = dc_all[np.arange(len(y)), y]
+    # each row's own class against the nearest other class (rows with another class in reach)
+    other = dc_all.copy()
+    other[np.arange(len(y)), y] = np.inf
+    nearest_other = other.min(axis=1) if len(classes) > 1 else np.full(len(y), np.inf)
+    reach = np.isfinite(nearest_other)
+    ratios = list(near[reach] / np.maximum(nearest_other[reach], 1e-12))
     scheme = "across performers" if across else "leave one out"
-    if not rows:  # one proto-symbol per class: nothing to calibrate against
+    if not len(y):  # one proto-symbol per class: nothing to calibrate against
         scale = float(np.median(d[np.triu_indices(len(d), 1)])) if len(d) > 1 else 1.0
         return Calibration(classes, max(scale, 1e-6), np.inf, np.inf, 0, scheme)
-    dc_all = np.array(rows)
-    y = np.array(truth)
-    near = np.array(nearest_same)
 
     def nll(log_t):
         t = np.exp(log_t)
@@ -217,7 +215,7 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     own = _class_spreads_without_each(near, y)
     threshold = conformal_threshold(near / own, known_quantile)
     ratio_threshold = conformal_threshold(ratios, known_quantile) if ratios else np.inf
-    return Calibration(classes, float(np.exp(res.x)), threshold, ratio_threshold, len(rows), scheme,
+    return Calibration(classes, float(np.exp(res.x)), threshold, ratio_threshold, len(y), scheme,
                        [_class_spread(near, y, k) for k in range(len(classes))])
 
 

@@ -23,6 +23,7 @@ import dataclasses
 import json
 import time
 import uuid
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,10 +32,12 @@ import numpy as np
 from shared.clip import Clip
 from shared.errors import BadInput, NotFound
 from shared.io.atomic import atomic_write
+from shared.io.npz import Stacked, savez_stacked
 from shared.pss.distance import ModelBank, distance_matrix, distances_to
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
-from shared.pss.mds import Embedding, place_point, smacof
+from shared.pss.mds import Embedding, pair_squares, place_point, smacof
+from shared.pss.rows import appended
 from shared.pss.synthesis import combine, generate, point_weights
 
 FORMAT = "mirrorcoach.space/2"
@@ -55,6 +58,31 @@ class ProtoSymbol:
     clips: list[str] = field(default_factory=list)
     n_frames: list[int] = field(default_factory=list)
     performers: list[str] = field(default_factory=list)  # skeleton names of its clips ("" if none)
+
+
+def _padded(matrix: np.ndarray, size: int) -> np.ndarray:
+    """A symmetric ``matrix`` in the top left of a ``size`` x ``size`` one, the rest zero
+    (written once: zeros then a copy wrote 72 MB twice at 3,000 proto-symbols)."""
+    n = len(matrix)
+    out = np.empty((size, size))
+    out[:n, :n] = matrix
+    out[n:] = 0.0
+    out[:n, n:] = 0.0
+    return out
+
+
+class _AtRate:
+    """A sequence of clips seen at ``fps`` (each resampled when taken, none kept)."""
+
+    def __init__(self, clips: Sequence[Clip], fps: float):
+        self.clips, self.fps = clips, fps
+
+    def __len__(self) -> int:
+        return len(self.clips)
+
+    def __getitem__(self, i: int) -> Clip:
+        c = self.clips[i]
+        return c if c.fps == self.fps else c.resample(self.fps)
 
 
 def performer(clip: Clip) -> str:
@@ -162,51 +190,60 @@ class ProtoSymbolSpace:
 
     # ------------------------------------------------------------------ build
     @classmethod
-    def build(cls, clips: list[Clip], *, n_states: int | None = None, dim: int = 3, fps: float = 30.0,
+    def build(cls, clips: Sequence[Clip], *, n_states: int | None = None, dim: int = 3, fps: float = 30.0,
               covariance_type: str = "diag", var_floor: float = 0.01, backend: str = "banded",
               group_by: str = "clip", sensor: bool = True, name: str = "space", progress=None) -> "ProtoSymbolSpace":
         """``P = F_build(D)`` (eq. 2.5).
 
         Parameters
         ----------
-        clips : list of Clip
-            The database ``D``; every clip needs a ``label`` (its motion class).
+        clips : sequence of Clip
+            The database ``D``; every clip needs a ``label`` (its motion class). A list, or a
+            lazy sequence that reads a clip when it is indexed (:class:`shared.io.LazyClips`):
+            each clip is then taken twice (the features' statistics, then its HMM) and never
+            held, so a space of thousands of clips builds in the memory of its HMMs.
         group_by : {"clip", "label"}
             One proto-symbol per clip, or one per label trained on all its repetitions.
         progress : callable(done, total), optional
             Called after every HMM is trained.
         """
-        if not clips:
+        if not len(clips):
             raise BadInput("a space needs at least one clip")
         if group_by not in ("clip", "label"):
             raise BadInput(f"group_by must be 'clip' or 'label', got {group_by!r}")
         if dim < 1:
             raise BadInput("dimension must be at least 1")
-        clips = [c if c.fps == fps else c.resample(fps) for c in clips]  # read only here: no copy at the rate
-        features = MotionFeatures.for_clips(clips, sensor=sensor)
-        groups: dict[str, list[Clip]] = {}
-        for c in clips:
-            key = (c.label or c.name) if group_by == "label" else c.name
+        if isinstance(clips, list):  # held by the caller anyway: each at the space's rate once
+            clips = [c if c.fps == fps else c.resample(fps) for c in clips]
+        else:
+            clips = _AtRate(clips, fps)
+        seen: list[tuple[str, str | None, int, str]] = []  # name, label, frames, performer of every clip
+        features = MotionFeatures.for_clips(clips, sensor=sensor, on_clip=lambda c: seen.append(
+            (c.name, c.label, c.n_frames, performer(c))))
+        groups: dict[str, list[int]] = {}
+        for i, (clip_name, label, _, _) in enumerate(seen):
+            key = (label or clip_name) if group_by == "label" else clip_name
             if key in groups and group_by == "clip":
                 raise BadInput(f"two clips are named {key!r}; clip names must be unique in a space")
-            groups.setdefault(key, []).append(c)
-        shortest = min(c.n_frames for c in clips)
+            groups.setdefault(key, []).append(i)
+        short = min(range(len(seen)), key=lambda i: seen[i][2])
+        shortest = seen[short][2]
         if n_states is None:
             n_states = default_n_states(shortest)
         if shortest < n_states:
-            short = min(clips, key=lambda c: c.n_frames)
-            raise BadInput(f"clip {short.name!r} has {short.n_frames} frames at {fps:g} fps, fewer than {n_states} HMM states",
-                           frames=short.n_frames, states=n_states)
+            raise BadInput(f"clip {seen[short][0]!r} has {shortest} frames at {fps:g} fps, fewer than {n_states} HMM states",
+                           frames=shortest, states=n_states)
         params = SpaceParams(recognition_var_ceiling=RECOGNITION_VAR_CEILING if covariance_type == "diag" else None,
                              n_states=n_states, fps=fps, dim=dim, covariance_type=covariance_type,
                              var_floor=var_floor, backend=backend, group_by=group_by)
         symbols = []
         for i, (key, members) in enumerate(groups.items()):
-            seqs = [features.encode(c) for c in members]
+            seqs = [features.encode(clips[k]) for k in members]
             hmm = fit_hmm(seqs, n_states, covariance_type=covariance_type, var_floor=var_floor, backend=backend,
                           n_iter=params.n_iter)
-            symbols.append(ProtoSymbol(key, members[0].label or key, hmm, [c.name for c in members],
-                                       [c.n_frames for c in members], [performer(c) for c in members]))
+            del seqs
+            symbols.append(ProtoSymbol(key, seen[members[0]][1] or key, hmm, [seen[k][0] for k in members],
+                                       [seen[k][2] for k in members], [seen[k][3] for k in members]))
             if progress:
                 progress(i + 1, len(groups))
         return cls.from_symbols(params, features, symbols, name=name)
@@ -215,7 +252,7 @@ class ProtoSymbolSpace:
     def from_symbols(cls, params: SpaceParams, features: MotionFeatures, symbols: list[ProtoSymbol],
                      name: str = "space") -> "ProtoSymbolSpace":
         geo = features.group_indices(GEOMETRY_GROUPS)
-        f = distance_matrix([s.hmm.marginal(geo) for s in symbols])
+        f = distance_matrix([s.hmm for s in symbols], features=geo)
         emb = smacof(f, params.dim)
         return cls(params, features, symbols, f, emb, name=name)
 
@@ -240,22 +277,24 @@ class ProtoSymbolSpace:
             names.add(c.name)
         n, new = len(self.symbols), symbols[len(self.symbols):]
         geo = self.features.group_indices(GEOMETRY_GROUPS)
-        f = np.zeros((len(symbols), len(symbols)))
-        f[:n, :n] = self.distances
+        f = _padded(self.distances, len(symbols))
         bank = self.bank_on(GEOMETRY_GROUPS)
         for k, sym in enumerate(new):
             row = np.r_[bank.distances(sym.hmm.marginal(geo)),
                         [distances_to(sym.hmm.marginal(geo), [o.hmm.marginal(geo)])[0] for o in new[:k]]]
             f[n + k, :n + k] = f[:n + k, n + k] = row
-        points = np.array(self.points, float)
+        points = np.empty((len(symbols), self.points.shape[1]))
+        points[:n] = self.points
+        # the stress and sum f_ij^2 of the pairs (i < j) grow by the new points' pairs alone: the
+        # other points do not move (the old sum f_ij^2 is the old stress over its stress-1 squared)
+        stress = float(self.embedding.stress)
+        total = stress / self.embedding.stress1 ** 2 if self.embedding.stress1 > 0 else pair_squares(self.distances)
         for k in range(len(new)):
-            x, _ = place_point(points, f[n + k, :n + k])
-            points = np.vstack([points, x])
-        from shared.pss.mds import raw_stress
-
-        stress = raw_stress(f, points)
-        iu = np.triu_indices(len(f), 1)
-        emb = Embedding(points, stress, float(np.sqrt(stress / max(float(np.sum(f[iu] ** 2)), 1e-300))),
+            row = f[n + k, :n + k]
+            points[n + k], _ = place_point(points[:n + k], row)
+            stress += float(np.sum((row - np.linalg.norm(points[:n + k] - points[n + k], axis=1)) ** 2))
+            total += float(np.sum(row * row))
+        emb = Embedding(points, stress, float(np.sqrt(stress / max(total, 1e-300))),
                         self.embedding.n_iter, self.embedding.converged)
         space = ProtoSymbolSpace(self.params, self.features, symbols, f, emb, name=self.name)
         space.format, space.generation = self.format, self.generation  # a journal entry names its saved base
@@ -267,9 +306,7 @@ class ProtoSymbolSpace:
         if self.recognition_groups != GEOMETRY_GROUPS:
             w = self.recognition_weights
             rec = space.recognition_models()
-            old = self.recognition_matrix
-            m = np.zeros_like(f)
-            m[:n, :n] = old
+            m = _padded(self.recognition_matrix, len(symbols))
             known = self.recognition_bank()
             for k in range(len(new)):
                 row = np.r_[known.distances(rec[n + k]),
@@ -284,27 +321,23 @@ class ProtoSymbolSpace:
         only: recomputing them for every proto-symbol cost an add to a 3,000-clip space 0.7 s."""
         new = space.symbols[n:]
         for key, value in self._group_models.items():
-            if isinstance(value, list) and key and key[0] == "recognition":
-                groups = key[1:]
-                space._group_models[key] = value + [space.as_recognised(m.hmm.marginal(
-                    self.features.group_indices(groups))) for m in new]
-            elif isinstance(value, list):
-                idx = self.features.group_indices(key)
-                full = len(idx) == self.features.n_features
-                space._group_models[key] = value + [m.hmm if full else m.hmm.marginal(idx) for m in new]
-        for key, value in self._group_models.items():
-            if isinstance(value, ModelBank):
-                models = (space._group_models.get(("recognition",) + key[1:]) if key[0] == "weighted bank"
-                          else space._group_models.get(key[1:]))
-                if models is not None and len(models) == len(space.symbols):
-                    space._group_models[key] = value.extended(models[n:])
+            if not isinstance(value, ModelBank) or key[0] == "weighted bank":
+                continue
+            idx = self.features.group_indices(key[1:])
+            more = [m.hmm if len(idx) == self.features.n_features else m.hmm.marginal(idx) for m in new]
+            if key[0] == "recognition":
+                more = [space.as_recognised(m) for m in more]
+            space._group_models[key] = value.extended(more)
+        rg = tuple(self.recognition_groups)
+        stack = space._group_models.get(("recognition",) + rg)
+        weighted = self._group_models.get(("weighted bank",) + rg)
+        if stack is not None and weighted is not None:  # the same arrays as the stack, as in this space
+            space._group_models[("weighted bank",) + rg] = stack.weighted(weighted.weights)
         feats = self._group_models.get(("symbol features",))
-        rec = space._group_models.get(("recognition",) + tuple(self.recognition_groups))
-        if feats is not None and rec is not None:
+        if feats is not None and stack is not None:
             from shared.pss.recognition import hmm_features
 
-            space._group_models[("symbol features",)] = np.vstack([feats, hmm_features(
-                np.stack([m.means for m in rec[n:]]), np.stack([m.covars for m in rec[n:]]))])
+            space._group_models[("symbol features",)] = appended(feats, hmm_features(stack.means[n:], stack.vars[n:]))
 
     def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None,
                 as_one: str | None = None) -> "ProtoSymbolSpace":
@@ -399,21 +432,25 @@ class ProtoSymbolSpace:
                        backend=p.backend, n_iter=p.n_iter)
 
     def models_on(self, groups) -> list[LeftToRightHMM]:
-        """The proto-symbols seen on some channel groups (cached; a space is never changed in place)."""
-        key = tuple(groups)
-        if key not in self._group_models:
-            idx = self.features.group_indices(key)
-            full = len(idx) == self.features.n_features
-            self._group_models[key] = self.models if full else [m.marginal(idx) for m in self.models]
-        return self._group_models[key]
+        """The proto-symbols seen on some channel groups (views of :meth:`bank_on`'s arrays)."""
+        idx = self.features.group_indices(tuple(groups))
+        return self.models if len(idx) == self.features.n_features else self.bank_on(groups).models
 
     def recognition_models(self) -> list[LeftToRightHMM]:
         """The proto-symbols on the recognition groups as recognition compares them (their
-        variances capped, :data:`RECOGNITION_VAR_CEILING`; cached)."""
+        variances capped, :data:`RECOGNITION_VAR_CEILING`; views of one cached stack)."""
+        return self._recognition_stack().models
+
+    def _recognition_stack(self) -> ModelBank:
         key = ("recognition",) + tuple(self.recognition_groups)
         if key not in self._group_models:
-            self._group_models[key] = [self.as_recognised(m) for m in self.models_on(self.recognition_groups)]
+            idx = self.features.group_indices(self.recognition_groups)
+            self._group_models[key] = ModelBank.of(self.models, None if len(idx) == self.features.n_features else idx,
+                                                   self._ceiling())
         return self._group_models[key]
+
+    def _ceiling(self) -> float | None:
+        return self.params.recognition_var_ceiling if self.params.covariance_type == "diag" else None
 
     def as_recognised(self, hmm: LeftToRightHMM) -> LeftToRightHMM:
         """``hmm`` (on the recognition groups) as recognition compares it: its variances capped."""
@@ -423,10 +460,11 @@ class ProtoSymbolSpace:
         return LeftToRightHMM(hmm.means, np.minimum(hmm.covars, ceiling), hmm.stay, hmm.covariance_type)
 
     def bank_on(self, groups) -> ModelBank:
-        """:meth:`models_on` stacked for fast eq. 2.4 (cached)."""
+        """The proto-symbols on some channel groups stacked for fast eq. 2.4 (cached)."""
         key = ("bank",) + tuple(groups)
         if key not in self._group_models:
-            self._group_models[key] = ModelBank(self.models_on(groups))
+            idx = self.features.group_indices(tuple(groups))
+            self._group_models[key] = ModelBank.of(self.models, None if len(idx) == self.features.n_features else idx)
         return self._group_models[key]
 
     @property
@@ -450,9 +488,8 @@ class ProtoSymbolSpace:
         if self._recognition_weights is None:
             from shared.pss.recognition import channel_weights
 
-            ms = self.recognition_models()
-            self._recognition_weights = channel_weights(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms]),
-                                                        self.labels, self.performers)
+            stack = self._recognition_stack()
+            self._recognition_weights = channel_weights(stack.means, stack.vars, self.labels, self.performers)
         return self._recognition_weights
 
     def recognition_bank(self) -> ModelBank:
@@ -460,7 +497,7 @@ class ProtoSymbolSpace:
         rg = self.recognition_groups
         key = ("weighted bank",) + rg
         if key not in self._group_models:
-            self._group_models[key] = ModelBank(self.recognition_models(), self.recognition_weights)
+            self._group_models[key] = self._recognition_stack().weighted(self.recognition_weights)
         return self._group_models[key]
 
     @property
@@ -468,7 +505,7 @@ class ProtoSymbolSpace:
         """Weighted eq. 2.4 between the proto-symbols on the recognition groups."""
         if self._recognition_matrix is None:
             self._recognition_matrix = (self.distances if self.recognition_groups == GEOMETRY_GROUPS
-                                        else distance_matrix(self.recognition_models(), self.recognition_weights))
+                                        else distance_matrix(self.recognition_bank()))
         return self._recognition_matrix
 
     @property
@@ -514,8 +551,8 @@ class ProtoSymbolSpace:
         if key not in self._group_models:
             from shared.pss.recognition import hmm_features
 
-            ms = self.recognition_models()
-            self._group_models[key] = hmm_features(np.stack([m.means for m in ms]), np.stack([m.covars for m in ms]))
+            stack = self._recognition_stack()
+            self._group_models[key] = hmm_features(stack.means, stack.vars)
         return self._group_models[key]
 
     def recognize(self, clip_or_clips, top: int = 5) -> Recognition:
@@ -733,8 +770,8 @@ class ProtoSymbolSpace:
             "first": first,
         }
         arrays = {
-            "means": np.stack([s.hmm.means for s in syms]),
-            "covars": np.stack([s.hmm.covars for s in syms]),
+            "means": Stacked([s.hmm.means for s in syms]),  # written symbol by symbol, never stacked
+            "covars": Stacked([s.hmm.covars for s in syms]),
             "stay": np.stack([s.hmm.stay for s in syms]),
             "distances": self.distances[first:],  # the rows of these proto-symbols, every column
             "points": self.points[first:],
@@ -759,7 +796,7 @@ class ProtoSymbolSpace:
         self.generation, self.base_count = uuid.uuid4().hex, len(self.symbols)
         header["generation"] = self.generation
         arrays["header"] = np.array(json.dumps(header))
-        atomic_write(path, lambda f: np.savez(f, **arrays))
+        atomic_write(path, lambda f: savez_stacked(f, arrays))
         return path
 
     def save_added(self, path, first: int) -> Path:
@@ -776,7 +813,7 @@ class ProtoSymbolSpace:
             header.pop(k)
         header["generation"] = self.generation
         arrays["header"] = np.array(json.dumps(header))
-        atomic_write(Path(path), lambda f: np.savez(f, **arrays))
+        atomic_write(Path(path), lambda f: savez_stacked(f, arrays))
         return Path(path)
 
     @staticmethod
