@@ -463,6 +463,39 @@ def test_where_a_person_stands_and_faces_changes_no_label(dev_space, dev_split):
     assert res["as is"]["as_shown"] >= 0.9
 
 
+def test_travel_velocities_are_averaged_over_a_window_and_older_files_keep_them_raw(dev_space, dev_split, tmp_path):
+    """The position group's forward and lateral velocity are centred means over
+    TRAVEL_WINDOW seconds (scipy's uniform filter is the reference); every other channel is
+    as before; the window is saved with the space, and a file written before it reads its
+    velocities raw."""
+    import json
+
+    from scipy.ndimage import uniform_filter1d
+
+    from shared.pss.features import TRAVEL_WINDOW, MotionFeatures, moving_mean
+
+    f = dev_space.features
+    assert f.travel_window == TRAVEL_WINDOW > 0
+    d = json.loads(f.to_json())
+    del d["travel_window"]
+    raw = MotionFeatures.from_json(json.dumps(d))
+    assert raw.travel_window == 0
+    c = dev_split[1][0].resample(30)
+    a, b = f._raw_positions(c, *f._root_terms(c)), raw._raw_positions(c, *raw._root_terms(c))
+    names = f._position_names()
+    cols = [names.index("pos(root).v_forward"), names.index("pos(root).v_lateral")]
+    width = int(round(TRAVEL_WINDOW * 30)) | 1
+    np.testing.assert_allclose(a[:, cols], uniform_filter1d(b[:, cols], width, axis=0, mode="nearest"), atol=1e-12)
+    rest = [k for k in range(a.shape[1]) if k not in cols]
+    np.testing.assert_array_equal(a[:, rest], b[:, rest])
+    assert np.std(a[:, cols[0]]) < np.std(b[:, cols[0]])  # the sway of the steps averaged out
+    rng = np.random.default_rng(2)
+    for n, w in ((1, 31), (5, 31), (40, 3), (40, 1)):
+        x = rng.normal(size=(n, 2))
+        np.testing.assert_allclose(moving_mean(x, w), uniform_filter1d(x, w, axis=0, mode="nearest"), atol=1e-12)
+    assert ProtoSymbolSpace.load(dev_space.save(tmp_path / "w.npz")).features.travel_window == TRAVEL_WINDOW
+
+
 def test_recognition_caps_state_variances_and_older_files_do_not(dev_space, dev_split, tmp_path):
     import json
 
