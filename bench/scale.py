@@ -101,8 +101,10 @@ def main(argv=None) -> int:
     slope = float(np.polyfit(np.log(ns), np.log([r["total_s"] for r in rows]), 1)[0]) if len(rows) > 1 else float("nan")
     res = {"rows": rows, "exponent": slope}
     md = ["# A space's build against its number of clips (`python -m bench.scale`)", "",
-          "The game studio's 174 files and their time warps (0.80-1.20x); each size in a fresh process; peak memory "
-          "includes the clips (the process's peak up to the saved space; the adds after it hold two spaces at once). "
+          "The game studio's 174 files and their time warps (0.80-1.20x), each clip made when the build takes it "
+          "(as `offline build` reads its files above `--hold-mb`: twice, never all held); each size in a fresh "
+          "process; peak memory is the process's up to the saved space, the 174 files included (the adds after it "
+          "hold two spaces at once). "
           "The adds go through the store as `space add` does (a journal entry beside the space's file); the first "
           "pays the recognition bank that later adds extend.", "",
           "| clips | frames | build (HMMs, distances, MDS) | decision and save | total | peak memory | add one clip "

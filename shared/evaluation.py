@@ -469,8 +469,9 @@ def report_markdown(res: dict) -> str:
              "leave one performer out (the dev split is the one that tests dg). All methods see the same 30 fps clips; "
              "the peers read the space's z-scored joint positions in the heading frame. Written by "
              "`mirrorcoach evaluate recognition` (also `make bench`). Recognition's variance ceiling "
-             "(`RECOGNITION_VAR_CEILING`) was chosen on the game studio's styles under the constraint that the dg "
-             "split stay at 100 % closed set: the dg column is not held out from that choice, bd and bk are.", "",
+             "(`RECOGNITION_VAR_CEILING`) and the window its travel velocities are averaged over (`TRAVEL_WINDOW`) "
+             "were chosen on the game studio's styles under the constraint that the dg split stay at 100 % closed "
+             "set: the dg column is not held out from those choices, bd and bk are.", "",
              "| method | " + " | ".join(f"test {w} ({splits[w]['test']} clips)" for w in who) + " | ms per clip (median) |",
              "|---|" + "---|" * (len(who) + 1)]
     for m in methods:

@@ -176,6 +176,18 @@ def test_a_space_built_from_files_read_when_taken_is_the_same_space(hdm05, torqu
     assert np.allclose(f.position_scale, np.maximum(positions.std(axis=0), 1e-3), rtol=1e-8)
 
 
+def test_a_space_of_full_covariances_builds_recognises_and_adds(dev_split):
+    """Full covariances take the plain banks (no stacked diagonal arrays): the decision's HMM
+    features, a recognition and an add still work."""
+    train = [c for c in dev_split[0] if "squat" in c.name][:3] + [c for c in dev_split[0] if "kick" in c.name][:3]
+    space = ProtoSymbolSpace.build(train, covariance_type="full", n_states=3)
+    assert space.recognition_weights is None and space._symbol_features().shape[0] == len(train)
+    probe = next(c for c in dev_split[1] if "squat" in c.name)
+    assert space.recognize(probe).nearest_label == probe.label
+    grown = space.added([probe])
+    assert len(grown.symbols) == len(train) + 1 and grown._symbol_features().shape[0] == len(train) + 1
+
+
 def test_rebuild_from_a_modified_database(dev_space, dev_split):
     small = ProtoSymbolSpace.build(dev_split[0][:6], dim=2, n_states=dev_space.params.n_states)
     grown = small.rebuilt(add=[dev_split[1][0]], remove=[small.names[0]])

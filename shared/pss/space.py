@@ -60,6 +60,15 @@ class ProtoSymbol:
     performers: list[str] = field(default_factory=list)  # skeleton names of its clips ("" if none)
 
 
+def _stacked(bank: ModelBank, start: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The means and covariances of a bank's HMMs from ``start`` on, stacked (a diagonal bank's
+    own arrays; full covariances stacked here)."""
+    if bank.diag:
+        return bank.means[start:], bank.vars[start:]
+    ms = bank.models[start:]
+    return np.stack([m.means for m in ms]), np.stack([m.covars for m in ms])
+
+
 def _padded(matrix: np.ndarray, size: int) -> np.ndarray:
     """A symmetric ``matrix`` in the top left of a ``size`` x ``size`` one, the rest zero
     (written once: zeros then a copy wrote 72 MB twice at 3,000 proto-symbols)."""
@@ -337,7 +346,7 @@ class ProtoSymbolSpace:
         if feats is not None and stack is not None:
             from shared.pss.recognition import hmm_features
 
-            space._group_models[("symbol features",)] = appended(feats, hmm_features(stack.means[n:], stack.vars[n:]))
+            space._group_models[("symbol features",)] = appended(feats, hmm_features(*_stacked(stack, n)))
 
     def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None,
                 as_one: str | None = None) -> "ProtoSymbolSpace":
@@ -551,8 +560,7 @@ class ProtoSymbolSpace:
         if key not in self._group_models:
             from shared.pss.recognition import hmm_features
 
-            stack = self._recognition_stack()
-            self._group_models[key] = hmm_features(stack.means, stack.vars)
+            self._group_models[key] = hmm_features(*_stacked(self._recognition_stack()))
         return self._group_models[key]
 
     def recognize(self, clip_or_clips, top: int = 5) -> Recognition:
