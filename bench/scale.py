@@ -105,8 +105,8 @@ def main(argv=None) -> int:
           "(as `offline build` reads its files above `--hold-mb`: twice, never all held); each size in a fresh "
           "process; peak memory is the process's up to the saved space, the 174 files included (the adds after it "
           "hold two spaces at once). "
-          "The adds go through the store as `space add` does (a journal entry beside the space's file); the first "
-          "pays the recognition bank that later adds extend.", "",
+          "The adds go through the store as `space add` does (a journal entry beside the space's file); each "
+          "extends the stacks the build kept (into their spare rows: the first add as the next).", "",
           "| clips | frames | build (HMMs, distances, MDS) | decision and save | total | peak memory | add one clip "
           "(placed, decision refitted, journal entry): first / next | add one clip by a rebuild |",
           "|---|---|---|---|---|---|---|---|"]

@@ -471,7 +471,8 @@ def report_markdown(res: dict) -> str:
              "`mirrorcoach evaluate recognition` (also `make bench`). Recognition's variance ceiling "
              "(`RECOGNITION_VAR_CEILING`) and the window its travel velocities are averaged over (`TRAVEL_WINDOW`) "
              "were chosen on the game studio's styles under the constraint that the dg split stay at 100 % closed "
-             "set: the dg column is not held out from those choices, bd and bk are.", "",
+             "set: the dg column is not held out from those choices, bd and bk are (though both were scored at "
+             "three travel windows before its choice).", "",
              "| method | " + " | ".join(f"test {w} ({splits[w]['test']} clips)" for w in who) + " | ms per clip (median) |",
              "|---|" + "---|" * (len(who) + 1)]
     for m in methods:

@@ -108,6 +108,13 @@ def test_an_extended_bank_is_the_bank_of_all_its_models_even_when_two_extend_one
         assert np.array_equal(bank.distances(probe), ref.distances(probe))
         assert np.array_equal(bank.distances(probe, start=3), ref.distances(probe, start=3))
     assert np.array_equal(base.distances(probe), ModelBank(models, np.linspace(0.5, 2, 6)).distances(probe))
+    # a bank stacked by ModelBank.of keeps spare rows: its first extension writes in place
+    stacked = ModelBank.of(models, np.array([1, 2, 3]))
+    grown = stacked.extended([a.marginal(np.array([1, 2, 3]))])
+    assert grown.means.base is stacked.means.base and grown.vars.base is stacked.vars.base
+    ref = ModelBank([m.marginal(np.array([1, 2, 3])) for m in models + [a]])
+    assert np.array_equal(grown.distances(probe.marginal(np.array([1, 2, 3]))),
+                          ref.distances(probe.marginal(np.array([1, 2, 3]))))
 
 
 def test_channel_weights_favour_channels_that_separate_classes_not_performers():

@@ -19,7 +19,7 @@ import numpy as np
 from shared.compiled import kernel
 from shared.errors import ModelError
 from shared.pss.hmm import LeftToRightHMM
-from shared.pss.rows import appended
+from shared.pss.rows import appended, spare
 
 
 def bhattacharyya_terms(mu_p, var_p, mu_q, var_q) -> tuple[np.ndarray, np.ndarray]:
@@ -142,16 +142,20 @@ class ModelBank:
                       if m.covariance_type == "diag" else m for m in ms]
             return cls(ms)
         f = slice(None) if features is None else np.asarray(features)
+        if isinstance(f, np.ndarray) and len(f) and np.array_equal(f, np.arange(f[0], f[0] + len(f))):
+            f = slice(int(f[0]), int(f[0]) + len(f))  # a run of features: sliced, not gathered (10x faster)
         shape = (len(models),) + models[0].means[:, f].shape
-        means, var = np.empty(shape), np.empty(shape)
+        # with spare rows: the bank's first extension (a clip added to the space) writes in place
+        means, var, logdet = spare(shape), spare(shape), spare(shape[:2])
         for i, m in enumerate(models):
             _check(m, models[0])
             means[i], var[i] = m.means[:, f], m.covars[:, f]
         if ceiling is not None:
             np.minimum(var, ceiling, out=var)
+        np.sum(np.log(var), axis=2, out=logdet)
         bank = cls.__new__(cls)
         bank.diag, bank.weights = True, None
-        bank.means, bank.vars, bank.logdet = means, var, np.log(var).sum(axis=2)
+        bank.means, bank.vars, bank.logdet = means, var, logdet
         bank._kernel_weights = np.ones(shape[2])
         bank.models = [LeftToRightHMM(means[i], var[i], m.stay, "diag") for i, m in enumerate(models)]
         return bank

@@ -16,6 +16,20 @@ _USED: dict[int, int] = {}  # id of a live buffer -> rows taken (the entry goes 
 _LOCK = threading.Lock()
 
 
+def _spare(n: int) -> int:
+    return n + max(64, n // 16)
+
+
+def spare(shape: tuple, dtype=float) -> np.ndarray:
+    """An empty array of ``shape`` whose buffer keeps spare rows after it, so that its first
+    :func:`appended` writes in place instead of copying it."""
+    buf = np.empty((_spare(shape[0]),) + tuple(shape[1:]), dtype=dtype)
+    with _LOCK:
+        _USED[id(buf)] = shape[0]
+    weakref.finalize(buf, _USED.pop, id(buf), None)
+    return buf[:shape[0]]
+
+
 def appended(array: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """``np.concatenate([array, rows])``, writing into ``array``'s spare rows when they are
     its own to write (a sixteenth of its length kept spare, at least 64 rows)."""
@@ -28,10 +42,9 @@ def appended(array: np.ndarray, rows: np.ndarray) -> np.ndarray:
         if mine:
             _USED[id(buf)] = n + k
     if not mine:
-        buf = np.empty((n + k + max(64, (n + k) // 16),) + array.shape[1:], dtype=array.dtype)
-        buf[:n] = array
-        with _LOCK:
-            _USED[id(buf)] = n + k
-        weakref.finalize(buf, _USED.pop, id(buf), None)
+        out = spare((n + k,) + array.shape[1:], array.dtype)
+        out[:n] = array
+        out[n:] = rows
+        return out
     buf[n:n + k] = rows
     return buf[:n + k]
