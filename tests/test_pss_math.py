@@ -77,17 +77,20 @@ def test_weighted_distance_bank_matches_reference_and_ones_are_eq_2_4():
 
 
 def test_distance_matrix_on_some_features_is_the_marginals_matrix():
-    """The stacked form (no marginal HMM per model) gives the marginal HMMs' own eq. 2.4 matrix,
-    with and without channel weights."""
+    """A bank stacked on some features (no marginal HMM per model, ModelBank.of) gives the
+    marginal HMMs' own eq. 2.4 matrix, with and without channel weights."""
+    from shared.pss.distance import ModelBank
+
     rng = np.random.default_rng(7)
     models = [_random_hmm(rng, d=6) for _ in range(7)]
-    idx = np.array([0, 2, 3, 5])
-    marg = [m.marginal(idx) for m in models]
-    assert np.allclose(distance_matrix(models, features=idx), distance_matrix(marg), rtol=1e-12, atol=0)
-    w = rng.uniform(0.0, 3.0, 4)
-    assert np.allclose(distance_matrix(models, w, features=idx), distance_matrix(marg, w), rtol=1e-12, atol=0)
-    with pytest.raises(ModelError, match="channel weights"):
-        distance_matrix(models, np.ones(6), features=idx)
+    for idx in (np.array([0, 2, 3, 5]), np.array([1, 2, 3])):  # gathered, and a run (sliced)
+        marg = [m.marginal(idx) for m in models]
+        bank = ModelBank.of(models, idx)
+        assert np.allclose(distance_matrix(bank), distance_matrix(marg), rtol=1e-12, atol=0)
+        w = rng.uniform(0.0, 3.0, len(idx))
+        assert np.allclose(distance_matrix(bank, w), distance_matrix(marg, w), rtol=1e-12, atol=0)
+        with pytest.raises(ModelError, match="channel weights"):
+            distance_matrix(bank, np.ones(6))
 
 
 def test_an_extended_bank_is_the_bank_of_all_its_models_even_when_two_extend_one():

@@ -110,19 +110,37 @@ def _diag_hmm_distances_numpy(mu1, var1, logdet1, mu, var, logdet, w):
     return np.sqrt(np.maximum(bd, 0.0)).sum(axis=1)
 
 
+def _stack(models: list[LeftToRightHMM], f=slice(None), ceiling: float | None = None):
+    """Means, variances (capped at ``ceiling``) and per-state log-determinants of diagonal HMMs
+    seen on features ``f``, stacked with spare rows (:func:`shared.pss.rows.spare`): a bank's
+    first extension (a clip added to its space) writes in place."""
+    shape = (len(models),) + models[0].means[:, f].shape
+    means, var, logdet = spare(shape), spare(shape), spare(shape[:2])
+    for i, m in enumerate(models):
+        _check(m, models[0])
+        means[i], var[i] = m.means[:, f], m.covars[:, f]
+    if ceiling is not None:
+        np.minimum(var, ceiling, out=var)
+    np.sum(np.log(var), axis=2, out=logdet)
+    return means, var, logdet
+
+
 class ModelBank:
     """Many HMMs of one space stacked for eq. 2.4 against a new one (built once, reused)."""
 
     def __init__(self, models: list[LeftToRightHMM], weights=None):
         self.models = models
-        self.weights = None if weights is None else np.ascontiguousarray(weights, dtype=float)
         self.diag = bool(models) and all(m.covariance_type == "diag" for m in models)
-        if self.weights is not None and models and not self.diag:
+        if self.diag:
+            self.means, self.vars, self.logdet = _stack(models)
+        self._weigh(weights)
+
+    def _weigh(self, weights) -> None:
+        """Channel ``weights`` on eq. 2.3's mean term (``None``: eq. 2.4 itself)."""
+        self.weights = None if weights is None else np.ascontiguousarray(weights, dtype=float)
+        if self.weights is not None and self.models and not self.diag:
             raise ModelError("channel weights need diagonal covariances")
         if self.diag:
-            self.means = np.ascontiguousarray(np.stack([m.means for m in models]), dtype=float)
-            self.vars = np.ascontiguousarray(np.stack([m.covars for m in models]), dtype=float)
-            self.logdet = np.log(self.vars).sum(axis=2)
             n_features = self.means.shape[2]
             if self.weights is not None and self.weights.shape != (n_features,):
                 raise ModelError(f"{self.weights.size} channel weights for HMMs of {n_features} channels")
@@ -136,57 +154,34 @@ class ModelBank:
         on those features exist once (a list of marginal HMMs and their stack held them twice,
         0.3 GB at 3,000 game-studio proto-symbols)."""
         if not models or not all(m.covariance_type == "diag" for m in models):
-            ms = models if features is None else [m.marginal(features) for m in models]
-            if ceiling is not None:
-                ms = [LeftToRightHMM(m.means, np.minimum(m.covars, ceiling), m.stay, m.covariance_type)
-                      if m.covariance_type == "diag" else m for m in ms]
-            return cls(ms)
+            return cls(models if features is None else [m.marginal(features) for m in models])
         f = slice(None) if features is None else np.asarray(features)
         if isinstance(f, np.ndarray) and len(f) and np.array_equal(f, np.arange(f[0], f[0] + len(f))):
             f = slice(int(f[0]), int(f[0]) + len(f))  # a run of features: sliced, not gathered (10x faster)
-        shape = (len(models),) + models[0].means[:, f].shape
-        # with spare rows: the bank's first extension (a clip added to the space) writes in place
-        means, var, logdet = spare(shape), spare(shape), spare(shape[:2])
-        for i, m in enumerate(models):
-            _check(m, models[0])
-            means[i], var[i] = m.means[:, f], m.covars[:, f]
-        if ceiling is not None:
-            np.minimum(var, ceiling, out=var)
-        np.sum(np.log(var), axis=2, out=logdet)
         bank = cls.__new__(cls)
-        bank.diag, bank.weights = True, None
-        bank.means, bank.vars, bank.logdet = means, var, logdet
-        bank._kernel_weights = np.ones(shape[2])
-        bank.models = [LeftToRightHMM(means[i], var[i], m.stay, "diag") for i, m in enumerate(models)]
+        bank.diag = True
+        bank.means, bank.vars, bank.logdet = _stack(models, f, ceiling)
+        bank.models = [LeftToRightHMM(bank.means[i], bank.vars[i], m.stay, "diag") for i, m in enumerate(models)]
+        bank._weigh(None)
         return bank
 
     def weighted(self, weights) -> "ModelBank":
-        """The same HMMs (the same arrays, not copied) with channel ``weights`` on eq. 2.3's
-        mean term."""
-        if not self.diag:
-            return ModelBank(self.models, weights)
+        """The same HMMs (the same arrays, not copied) with channel ``weights``."""
         out = copy.copy(self)
-        out.weights = np.ascontiguousarray(weights, dtype=float)
-        if out.weights.shape != (self.means.shape[2],):
-            raise ModelError(f"{out.weights.size} channel weights for HMMs of {self.means.shape[2]} channels")
-        out._kernel_weights = out.weights
+        out._weigh(weights)
         return out
 
     def extended(self, models: list[LeftToRightHMM]) -> "ModelBank":
         """This bank with ``models`` after its own: the stacked arrays grow into spare rows
         (:func:`shared.pss.rows.appended`), so adding one HMM to a bank of 3,000 does not copy
         the 3,000 (0.2 s each)."""
-        if not self.diag or not models:
-            return ModelBank(self.models + list(models), self.weights)
         more = ModelBank(list(models))
-        if not more.diag or more.means.shape[1:] != self.means.shape[1:]:
+        if not self.diag or not models or not more.diag or more.means.shape[1:] != self.means.shape[1:]:
             return ModelBank(self.models + list(models), self.weights)
-        out = ModelBank.__new__(ModelBank)
-        out.models, out.weights, out.diag = self.models + list(models), self.weights, True
-        out.means = appended(self.means, more.means)
-        out.vars = appended(self.vars, more.vars)
-        out.logdet = appended(self.logdet, more.logdet)
-        out._kernel_weights = self._kernel_weights
+        out = copy.copy(self)
+        out.models = self.models + list(models)
+        out.means, out.vars, out.logdet = (appended(a, b) for a, b in ((self.means, more.means), (self.vars, more.vars),
+                                                                       (self.logdet, more.logdet)))
         return out
 
     def distances(self, model: LeftToRightHMM, start: int = 0) -> np.ndarray:
@@ -218,16 +213,11 @@ def distances_to(model: LeftToRightHMM, models: list[LeftToRightHMM] | ModelBank
     return bank.distances(model)
 
 
-def distance_matrix(models: list[LeftToRightHMM] | ModelBank, weights=None, features=None) -> np.ndarray:
+def distance_matrix(models: list[LeftToRightHMM] | ModelBank, weights=None) -> np.ndarray:
     """Symmetric matrix of eq. 2.4 distances (with channel ``weights``) with a zero diagonal,
-    between ``models`` (or a bank's, with its weights); with ``features``, between the HMMs seen
-    on those output features only (as :meth:`LeftToRightHMM.marginal` sees them), stacked once
-    (:meth:`ModelBank.of`)."""
+    between ``models`` or a bank's (with its own weights unless ``weights`` are given)."""
     if isinstance(models, ModelBank):
         bank = models if weights is None else models.weighted(weights)
-    elif features is not None:
-        bank = ModelBank.of(models, features)
-        bank = bank if weights is None else bank.weighted(weights)
     else:
         bank = ModelBank(models, weights)
     n = len(bank.models)

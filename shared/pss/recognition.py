@@ -193,7 +193,7 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     # each row's own class against the nearest other class (rows with another class in reach)
     other = dc_all.copy()
     other[np.arange(len(y)), y] = np.inf
-    nearest_other = other.min(axis=1) if len(classes) > 1 else np.full(len(y), np.inf)
+    nearest_other = other.min(axis=1)
     reach = np.isfinite(nearest_other)
     ratios = list(near[reach] / np.maximum(nearest_other[reach], 1e-12))
     scheme = "across performers" if across else "leave one out"

@@ -464,11 +464,12 @@ class ProtoSymbolSpace:
         return self._group_models[key]
 
     def _ceiling(self) -> float | None:
+        """Recognition's variance ceiling (None: none, older files and full covariances)."""
         return self.params.recognition_var_ceiling if self.params.covariance_type == "diag" else None
 
     def as_recognised(self, hmm: LeftToRightHMM) -> LeftToRightHMM:
         """``hmm`` (on the recognition groups) as recognition compares it: its variances capped."""
-        ceiling = self.params.recognition_var_ceiling
+        ceiling = self._ceiling()
         if ceiling is None or hmm.covariance_type != "diag":
             return hmm
         return LeftToRightHMM(hmm.means, np.minimum(hmm.covars, ceiling), hmm.stay, hmm.covariance_type)
