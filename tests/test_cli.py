@@ -52,6 +52,38 @@ def test_a_group_command_runs_alone_as_it_runs_in_the_whole_application(bundled)
     assert wrong.returncode == 2 and "No such command" in wrong.stderr and "Traceback" not in wrong.stderr
 
 
+def test_the_command_runs_with_the_collector_on_and_its_imports_frozen(bundled):
+    """The entry point imports without the cyclic garbage collector (start-up time) but a
+    command runs with it on, and what the imports made is frozen out of its passes; imported
+    as a library, the command line leaves the collector as it found it."""
+    import gc
+
+    from shared.cli import lasting_imports
+
+    probe = ("import atexit, gc, sys\n"
+             "atexit.register(lambda: print('collector', gc.isenabled(), gc.get_freeze_count() > 1000))\n"
+             "from shared.cli.entry import main\n"
+             "sys.argv = ['mirrorcoach'] + sys.argv[1:]\n"
+             "main()\n")
+    r = subprocess.run([sys.executable, "-c", probe, "clip", "info", str(bundled / SQUAT), "--json"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout.splitlines()[0])["frames"] == 140
+    assert r.stdout.splitlines()[-1] == "collector True True"
+    before = gc.isenabled()
+    try:
+        with lasting_imports():
+            assert not gc.isenabled()
+        assert gc.isenabled() == before and gc.get_freeze_count() > 0
+        gc.disable()
+        with lasting_imports():
+            pass
+        assert not gc.isenabled()
+    finally:
+        gc.unfreeze()
+        (gc.enable if before else gc.disable)()
+
+
 def test_space_build_recognize_generate(bundled, tmp_path):
     space = tmp_path / "s.npz"
     r = run("offline", "build", space, bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps")

@@ -1,3 +1,3 @@
-from shared.cli.app import main
+from shared.cli.entry import main
 
 main()

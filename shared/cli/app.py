@@ -193,15 +193,19 @@ def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
     """Recognise a motion: its class with a calibrated confidence (or "none of these"), its
     nearest proto-symbols and its point in the space (eq. 2.6). How the label is decided:
     README, "How a motion is recognised"."""
-    from shared.compiled import use_numba
+    from shared.cli import lasting_imports
 
-    use_numba(False)  # one clip's work is milliseconds: numba's start-up (~0.6 s) would be most of the command
-    from shared.pss.space import ProtoSymbolSpace
+    with lasting_imports():
+        from shared.compiled import use_numba
+
+        use_numba(False)  # one clip's work is milliseconds: numba's start-up (~0.6 s) would be most of the command
+        import shared.io  # noqa: F401  (read_clip's)
+        from shared.pss.recognition import rejected_by
+        from shared.pss.space import ProtoSymbolSpace
 
     space = ProtoSymbolSpace.load(space_file)
     reps = [read_clip(c, skeleton=skeleton) for c in clips]
     r = space.recognize(reps)
-    from shared.pss.recognition import rejected_by
 
     out = {**({"label": r.label} if r.label is not None else {}), "known": r.label is not None,
            **({"rejected_by": rejected_by(r.decision)} if r.label is None and r.decision is not None else {}),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -18,7 +17,7 @@ CLIP_SUFFIXES = (".amc", ".bvh", ".npz")
 #: a clip file is read whole: a larger one is refused before reading (a 2 GB file took 4 GB of memory)
 MAX_CLIP_FILE_BYTES = 512 * 1024 * 1024
 ASF_CACHE_SIZE = 64
-_ASF_CACHE: OrderedDict = OrderedDict()  # (sha256 of the file, units) -> Skeleton, least recently used first
+_ASF_CACHE: OrderedDict = OrderedDict()  # (the file's bytes, units) -> Skeleton, least recently used first
 _ASF_LOCK = threading.Lock()
 
 
@@ -26,9 +25,10 @@ def load_skeleton(path, units: str | None = None):
     """:func:`read_asf`, once per file content and unit: a performer's clips share one skeleton
     (and its compiled kinematics). Keyed by content, not path, so an edited file is read again
     and a service that receives skeletons as bytes (:mod:`shared.clipfiles`) reuses them;
-    bounded, so a long-running service does not grow."""
+    bounded, so a long-running service does not grow. The key is the bytes themselves (a few KB
+    each; hashlib's OpenSSL would cost every command's start 4 ms)."""
     try:
-        key = (hashlib.sha256(Path(path).read_bytes()).digest(), units)
+        key = (Path(path).read_bytes(), units)
     except OSError as e:
         raise ClipFormatError(path, f"cannot read file: {e.strerror or e}") from None
     with _ASF_LOCK:

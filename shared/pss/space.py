@@ -836,13 +836,13 @@ class ProtoSymbolSpace:
     def _read(path) -> tuple[dict, dict, dict]:
         """A space file's header, arrays and the open set's fitted tests' arrays."""
         try:
-            with np.load(path, allow_pickle=False) as z:
+            with np.load(path, allow_pickle=False) as z:  # each z[k] is a new array of its own (not copied again)
                 header = json.loads(str(z["header"]))
-                arrays = {k: np.array(z[k]) for k in ("means", "covars", "stay", "distances", "points")}
+                arrays = {k: z[k] for k in ("means", "covars", "stay", "distances", "points")}
                 for k in ("recognition_weights", "recognition_matrix"):
-                    arrays[k] = np.array(z[k]) if k in z.files else None
+                    arrays[k] = z[k] if k in z.files else None
                 # the open set's fitted tests, each its header entry and arrays named after it
-                tests = {key: {k: np.array(z[k]) for k in z.files if k.startswith(f"{key}_")}
+                tests = {key: {k: z[k] for k in z.files if k.startswith(f"{key}_")}
                          for key in ("novelty", "discriminant")}
         except FileNotFoundError:
             raise NotFound(f"no space file {path}") from None
