@@ -10,7 +10,9 @@ end, never by the collector."""
 
 import gc
 
-gc.disable()  # before the first import; main() turns it on (imported from elsewhere, use app.main)
+# before the first import; main() turns it back on. A program that uses the command line as a
+# library imports shared.cli.app, which leaves the collector alone.
+gc.disable()
 
 from shared.cli.app import main as _app_main  # noqa: E402
 
