@@ -52,6 +52,44 @@ def test_a_group_command_runs_alone_as_it_runs_in_the_whole_application(bundled)
     assert wrong.returncode == 2 and "No such command" in wrong.stderr and "Traceback" not in wrong.stderr
 
 
+def test_a_group_imports_only_the_module_that_adds_it(bundled):
+    """``mirrorcoach GROUP ...`` imports the module that adds GROUP and no other command module
+    (start-up time); the table it goes by names, for every module, the groups that module adds,
+    and the whole application still has every group."""
+    from shared.cli.app import COMMAND_MODULES, OWN_GROUPS
+
+    def groups_after(code: str) -> list[str]:
+        r = subprocess.run([sys.executable, "-c", "from shared.cli.app import app\n" + code +
+                            "\nprint(' '.join(sorted(g.name for g in app.registered_groups)))"],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+        return r.stdout.split()
+
+    assert groups_after("") == sorted(OWN_GROUPS)
+    for name, groups in COMMAND_MODULES.items():
+        added = set(groups_after(f"import shared.cli.{name}")) - set(OWN_GROUPS)
+        # a module may import another for its helpers (agents uses cluster's client): what it adds is its own
+        others = {g for m, gs in COMMAND_MODULES.items() if m != name for g in gs}
+        assert set(groups) <= added and not (added - set(groups)) - others, (name, added)
+    every = set(groups_after("from shared.cli.app import register\nregister()"))
+    assert every == set(OWN_GROUPS) | {g for gs in COMMAND_MODULES.values() for g in gs}
+
+    probe = ("import atexit, sys\n"
+             "atexit.register(lambda: print('loaded', *sorted(m for m in sys.modules if m.startswith('shared.cli.'))))\n"
+             "from shared.cli.entry import main\n"
+             "sys.argv = ['mirrorcoach'] + sys.argv[1:]\n"
+             "main()\n")
+
+    def loaded(*args) -> set[str]:
+        r = subprocess.run([sys.executable, "-c", probe, *map(str, args)], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+        return set(r.stdout.splitlines()[-1].split()[1:])
+
+    assert loaded("clip", "info", bundled / SQUAT, "--json") == {"shared.cli.app", "shared.cli.entry"}
+    assert loaded("space", "--help") == {"shared.cli.app", "shared.cli.entry", "shared.cli.cluster"}
+    assert {f"shared.cli.{m}" for m in COMMAND_MODULES} <= loaded("--help")
+
+
 def test_the_command_runs_with_the_collector_on_and_its_imports_frozen(bundled):
     """The entry point imports without the cyclic garbage collector (start-up time) but a
     command runs with it on, and what the imports made is frozen out of its passes; imported

@@ -287,22 +287,40 @@ def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
     typer.echo(f"wrote {out} ({clip.n_frames} frames at {clip.fps:g} fps)")
 
 
-from shared.cli import agents as _agents  # noqa: E402,F401  (registers the simulator commands on app)
-from shared.cli import cluster as _cluster  # noqa: E402,F401  (registers the cluster commands on app)
-from shared.cli import coach as _coach  # noqa: E402,F401  (registers the coach commands on app)
-from shared.cli import study as _study  # noqa: E402,F401  (registers the study commands on app)
-from shared.cli import deploy as _deploy  # noqa: E402,F401  (registers the deploy commands on app)
-from shared.cli import capture as _capture  # noqa: E402,F401  (registers the capture commands on app)
+#: the command groups this module adds to ``app``
+OWN_GROUPS = ("clip", "offline", "evaluate")
+#: the modules that add the other command groups (and the root commands), with the groups each adds
+COMMAND_MODULES = {"agents": ("sim", "other", "learner", "dialogue", "estimator"), "cluster": ("space",),
+                   "coach": ("coach",), "study": ("study",), "deploy": ("deploy",), "capture": ("capture",)}
+
+
+def register(group: str | None = None) -> None:
+    """Import the modules that add commands to ``app``: the one that adds ``group`` (none for
+    this module's own groups), or all of them (``None``, or a name no module adds: a root
+    command). A program that uses ``app`` as a library calls ``register()`` first."""
+    import importlib
+
+    if group in OWN_GROUPS:
+        return
+    names = [m for m, groups in COMMAND_MODULES.items() if group in groups] or list(COMMAND_MODULES)
+    for name in names:
+        importlib.import_module(f"shared.cli.{name}")
 
 
 def _group_of(argv: list[str]):
     """The command group ``argv`` starts with (``offline``, ``space``, ...), or None: a group's
-    command is run by that group's click group alone, so the command tree of every other group is
-    not built (typer builds all 64 commands' click objects on every call: ~58 ms of `offline
-    recognize`)."""
+    command is run by that group's click group alone, and only the module that adds it is
+    imported (:func:`register`), so the command tree of every other group is not built (typer
+    builds all 64 commands' click objects on every call: ~58 ms of `offline recognize`) nor
+    imported (~5 ms)."""
     if not argv or argv[0].startswith("-"):
+        register()
         return None  # root options (--units ...) or the root's help: the whole application
-    return next((g.typer_instance for g in app.registered_groups if g.name == argv[0]), None)
+    register(argv[0])
+    group = next((g.typer_instance for g in app.registered_groups if g.name == argv[0]), None)
+    if group is None:
+        register()  # a root command (up, status, ...) or a misspelt one: the whole application answers
+    return group
 
 
 def main() -> None:

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import errno
 import os
-import tempfile
 from pathlib import Path
 from typing import Callable
 
 
 def atomic_write(path, write: Callable[[object], None]) -> Path:
     """Call ``write(binary_file)`` on a temporary file and move it to ``path``."""
+    import tempfile  # here: a command that only reads does not pay its import (1 ms)
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
