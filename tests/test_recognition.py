@@ -122,6 +122,8 @@ def test_a_motion_of_no_known_class_comes_back_as_none_of_these(dev_space, dev_s
     data[:, angles] += walk
     r = dev_space.recognize(c.with_data(data, name="flail"))
     assert r.label is None and r.novelty > 1.0 and r.nearest_label
+    # the confidence falls with it: at most how often the space's known motions look this unusual
+    assert r.confidence <= r.decision.credibility <= 0.05
     from shared.cli.app import recognition_text
     from shared.pss.recognition import rejected_by
 
@@ -159,6 +161,37 @@ def test_open_set_rule_as_documented():
     assert far.label is None and far.nearest_label == "a" and far.novelty == pytest.approx(1.5)
     between = decide(np.array([1.0, 1.2]), ["a", "b"], c)  # not clearly nearer one class than the other
     assert between.label is None and between.novelty == pytest.approx(1.0 / 1.2 / 0.5)
+
+
+def test_a_rejected_motion_keeps_at_most_its_credibility_as_confidence(dev_space, tmp_path):
+    """A motion the open set rejects has as confidence at most its credibility, the conformal
+    p-value of the test that rejects it (at most 1 - the level there); an accepted motion keeps
+    the softmax; a calibration written before the scores decides its confidence as before."""
+    import dataclasses
+
+    from shared.pss.recognition import conformal_p_value, softmax_confidence
+
+    scores = np.random.default_rng(0).uniform(0.0, 1.0, 99)
+    for s in (-1.0, 0.3, 0.99, 2.0):
+        assert conformal_p_value(scores, s) == (1 + np.sum(scores >= s)) / 100
+        assert conformal_p_value(scores, s, larger_is_unusual=False) == (1 + np.sum(scores <= s)) / 100
+    q = 0.98
+    t = conformal_threshold(scores, q)
+    assert conformal_p_value(scores, t + 1e-9) <= 1 - q + 1e-12 and conformal_p_value([], 5.0) == 1.0
+    c = Calibration(["a", "b"], 1.0, threshold=t, ratio_threshold=np.inf, n_calibration=99, scheme="across performers",
+                    scores=[float(v) for v in scores])
+    near = np.array([0.5 * t, 5.0])
+    ok = decide(near, ["a", "b"], c)
+    assert ok.label == "a" and ok.confidence == pytest.approx(softmax_confidence(near, 1.0)[0])
+    farther = np.array([1.5 * t, 50.0])  # past a's threshold, and far from b: the softmax alone says a
+    assert softmax_confidence(farther, 1.0)[0] > 0.99
+    far = decide(farther, ["a", "b"], c)
+    assert far.label is None and far.confidence == far.credibility == pytest.approx(1 / 100)
+    assert decide(farther, ["a", "b"], dataclasses.replace(c, scores=None)).confidence > 0.99
+    # the space keeps the distance rule's scores in its file
+    assert dev_space.calibration.scores and len(dev_space.calibration.scores) == dev_space.calibration.n_calibration
+    back = ProtoSymbolSpace.load(dev_space.save(tmp_path / "s.npz"))
+    assert back.calibration.scores == pytest.approx(dev_space.calibration.scores)
 
 
 def test_the_distance_test_scales_each_class_by_its_own_spread_across_performers():

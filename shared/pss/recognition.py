@@ -21,7 +21,12 @@ On top of the nearest proto-symbol:
   the nearest proto-symbol of class ``c``; the temperature ``T`` maximises the likelihood of
   the space's own proto-symbols recognised *across performers* (each proto-symbol against the
   proto-symbols of other performers, a performer being the skeleton its clips came with; plain
-  leave-one-out when the space has only one performer);
+  leave-one-out when the space has only one performer). A motion the open set rejects keeps
+  at most its *credibility* as confidence: the smallest of the tests' split-conformal p-values
+  (:func:`conformal_p_value`), how often the space's own known motions (the calibration) look
+  at least as unusual, so the confidence falls on motions the space does not hold (about
+  ``1 - known_quantile`` and below where a test rejects) instead of staying the softmax's
+  share among the classes it does;
 * **open set** ("none of these"): a motion is unknown when any of three tests says so.
 
   1. *Too far*, measured in its nearest class's own spread: the distance over the class's
@@ -73,6 +78,18 @@ def conformal_threshold(scores, q: float) -> float:
     s = np.sort(np.asarray(scores, float))
     k = int(np.ceil((len(s) + 1) * q))
     return float(s[k - 1]) if 1 <= k <= len(s) else np.inf
+
+
+def conformal_p_value(scores, score: float, larger_is_unusual: bool = True) -> float:
+    """The split-conformal p-value of a new ``score``: ``(1 + #{calibration scores at least as
+    unusual}) / (n + 1)``, the chance that a motion of the kind calibrated on looks at least this
+    unusual (Vovk et al. 2005; :func:`conformal_threshold` rejects where it is at most about
+    ``1 - q``). 1 without calibration scores."""
+    s = np.asarray(scores, float)
+    if not len(s):
+        return 1.0
+    beyond = int(np.sum(s >= score)) if larger_is_unusual else int(np.sum(s <= score))
+    return (1 + beyond) / (len(s) + 1)
 
 
 def channel_weights(means: np.ndarray, covars: np.ndarray, labels, performers) -> np.ndarray:
@@ -144,6 +161,9 @@ class Calibration:
     # per class (in ``classes`` order), the scale its distances are divided by before the
     # threshold; None in files written before it (their threshold is on raw distances)
     class_scales: list[float] | None = None
+    # the distance rule's calibration scores (distance over class scale), for the credibility of a
+    # rejected motion; None in files written before it
+    scores: list[float] | None = None
 
 
 def class_distances(distances: np.ndarray, labels: np.ndarray, classes: list[str]) -> np.ndarray:
@@ -216,7 +236,7 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     threshold = conformal_threshold(near / own, known_quantile)
     ratio_threshold = conformal_threshold(ratios, known_quantile) if ratios else np.inf
     return Calibration(classes, float(np.exp(res.x)), threshold, ratio_threshold, len(y), scheme,
-                       [_class_spread(near, y, k) for k in range(len(classes))])
+                       [_class_spread(near, y, k) for k in range(len(classes))], [float(v) for v in near / own])
 
 
 def _class_spreads_without_each(nearest_same: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -266,12 +286,16 @@ def _class_spread(nearest_same: np.ndarray, truth: np.ndarray, k: int, skip: int
 class Decision:
     label: str | None  # None: "none of these" (open-set rejection)
     nearest_label: str
-    confidence: float  # calibrated probability of nearest_label among the space's classes
+    confidence: float  # calibrated probability of nearest_label among the space's classes; for a motion the
+    # tests reject, at most its credibility (the chance a known motion looks this unusual)
     novelty: float  # the largest of the tests' (> 1: unknown)
     distance_novelty: float = 0.0  # the eq. 2.4 rule's: distance / threshold (and, without a
     # discriminant ratio, the eq. 2.4 ratio / its threshold)
     model_novelty: float = 0.0  # the novelty model's: threshold / margin (0 without a model)
     ratio_novelty: float = 0.0  # the discriminant ratio's: ratio / threshold (0 without one)
+    # the smallest conformal p-value of the tests (:func:`conformal_p_value`): how often the
+    # space's own known motions look at least this unusual (1 where no test has scores)
+    credibility: float = 1.0
 
 
 #: the open-set tests by the names a rejection gives them (:func:`rejected_by`)
@@ -301,15 +325,25 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
     model = novelty_model.novelty(features) if novelty_model is not None and have else 0.0
     ratio = discriminant.novelty(features) if discriminant is not None and have else 0.0
     distance = 0.0
+    credibility = [1.0]
     if np.isfinite(cal.threshold) and cal.threshold > 0:
         scale = cal.class_scales[k] if cal.class_scales else 1.0
         distance = float(dc[k] / scale / cal.threshold)
+        credibility.append(conformal_p_value(cal.scores or [], float(dc[k] / scale)))
     if (discriminant is None or not have) and len(dc) > 1 and np.isfinite(cal.ratio_threshold) \
             and np.isfinite(dc[order[1]]) and cal.ratio_threshold > 0:
         distance = max(distance, float(dc[k] / max(dc[order[1]], 1e-12) / cal.ratio_threshold))
+    if model > 0:
+        credibility.append(conformal_p_value(novelty_model.scores, float(novelty_model.margins(features)[0]),
+                                             larger_is_unusual=False))
+    if ratio > 0:
+        credibility.append(conformal_p_value(discriminant.scores, float(discriminant.ratios(features)[0])))
     novelty = max(distance, model, ratio)
-    return Decision(cal.classes[k] if novelty <= 1.0 else None, cal.classes[k], float(p[k]), novelty, distance, model,
-                    ratio)
+    known = novelty <= 1.0
+    # a motion the tests call "none of these" is the nearest class with at most its credibility
+    confidence = float(p[k]) if known else min(float(p[k]), min(credibility))
+    return Decision(cal.classes[k] if known else None, cal.classes[k], confidence, novelty, distance, model, ratio,
+                    min(credibility))
 
 
 # ---------------------------------------------------------------------------- the discriminant ratio

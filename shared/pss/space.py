@@ -112,7 +112,7 @@ class Recognition:
     hmm: LeftToRightHMM
     seconds: float = 0.0
     nearest_label: str = ""  # class of the nearest proto-symbol, known or not
-    confidence: float = 1.0  # calibrated probability of nearest_label
+    confidence: float = 1.0  # calibrated probability of nearest_label (of a rejected motion: at most its credibility)
     novelty: float = 0.0  # > 1: farther than the space's known motions (rejected)
     recognition_distances: np.ndarray | None = None  # eq. 2.4 on the recognition group
     decision: object | None = None  # shared.pss.recognition.Decision: each open-set test's novelty
