@@ -78,7 +78,8 @@ def one(folder: Path, n: int) -> dict:
         t2 = time.perf_counter()
         space.rebuilt(add=[extra]).save(Path(tmp) / "r.npz")
         rebuilt = time.perf_counter() - t2
-    return {"clips": n, "frames": int(sum(sum(s.n_frames) for s in space.symbols)),  # at the space's rate "build_s": built - t0,
+    return {"clips": n, "frames": int(sum(sum(s.n_frames) for s in space.symbols)),  # at the space's rate
+            "build_s": built - t0,
             "decision_and_save_s": saved - built, "total_s": saved - t0, "add_one_s": adds[0], "add_next_s": adds[1],
             "add_one_by_rebuild_s": rebuilt, "peak_mb": peak_build,
             "peak_with_adds_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}

@@ -44,6 +44,9 @@ def test_open_set_counts_every_clip_for_every_method(bundled_clips):
             assert sum(s > 1.0 for s, n in zip(scores, row["novel"]) if not n) == row[method]["in"][0]
         assert row["scores"]["pss"] == [max(d, r, m) for d, r, m in zip(
             row["scores"]["pss_distance"], row["scores"]["pss_ratio"], row["scores"]["pss_model"])]
+        # the confidence the user is given for every clip; a rejected one at most its credibility (<= 0.05)
+        assert len(row["confidence"]) == len(test) and all(0.0 <= c <= 1.0 for c in row["confidence"])
+        assert all(c <= 0.05 for c, s in zip(row["confidence"], row["scores"]["pss"]) if s > 1.0)
         # "none of these" when any test says so: the union rejects at least what each rejects
         tests = ("pss_distance", "pss_ratio", "pss_model")
         for key in ("out", "in"):
@@ -75,6 +78,18 @@ def test_the_open_set_verdict_is_computed(out_rejected, in_rejected, word):
     text = report_markdown(res)
     assert f"| p | {10 * out_rejected:.1f} % | {float(in_rejected):.1f} % |" in text.splitlines()
     assert "| q | " + f"{10 * out_rejected:.1f} % | 100.0 % |" in text.splitlines()
+
+
+def test_the_report_gives_the_confidence_on_motions_the_space_does_not_hold():
+    res = _result(9, 5)
+    res["verdicts"] = verdicts(res)
+    assert "mean confidence | confidence >= 0.5" not in report_markdown(res)  # rows written before it: left out
+    for w, conf in (("p", [0.9, 0.02, 0.6, 0.1]), ("q", [0.01, 0.03])):
+        row = res["open_set"][w]["rows"][0]
+        row["novel"] = [True] * len(conf) + [False]
+        row["confidence"] = conf + [1.0]  # a known clip's confidence does not count
+    lines = report_markdown(res).splitlines()
+    assert "| p | 4 | 0.405 | 2 |" in lines and "| q | 2 | 0.020 | 0 |" in lines
 
 
 def _with_scores(res: dict, inside: list[float], outside: list[float]) -> dict:

@@ -209,3 +209,22 @@ def test_space_refuses_bad_clips(dev_space, dev_split):
         dev_space.recognize(wrong)
     with pytest.raises(BadInput):
         ProtoSymbolSpace.build([])
+
+
+def test_the_scale_benchmark_runs_and_reports_every_column(hdm05, tmp_path):
+    """``python -m bench.scale`` at two small sizes (a fresh process each, the game studio's
+    clips): every row has its build, decision, add and peak, and the report is written."""
+    import json
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "bench.scale", "--hdm05", str(hdm05), "--sizes", "10,14",
+                        "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads((tmp_path / "scale.json").read_text())["rows"]
+    assert [row["clips"] for row in rows] == [10, 14]
+    for row in rows:
+        assert row["frames"] > 0 and row["build_s"] > 0 and row["total_s"] >= row["build_s"] and row["peak_mb"] > 0
+        assert row["add_one_s"] > 0 and row["add_next_s"] > 0
+    md = (tmp_path / "scale.md").read_text()
+    assert "| 10 |" in md and "| 14 |" in md

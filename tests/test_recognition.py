@@ -1,4 +1,4 @@
-"""Recognition as a user means it (issue 11): position channels, the decided label, its
+"""Recognition as a user means it: position channels, the decided label, its
 confidence, "none of these", old space files, and the compiled forward kinematics."""
 
 from __future__ import annotations

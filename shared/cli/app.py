@@ -287,8 +287,8 @@ def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
     typer.echo(f"wrote {out} ({clip.n_frames} frames at {clip.fps:g} fps)")
 
 
-#: the command groups this module adds to ``app``
-OWN_GROUPS = ("clip", "offline", "evaluate")
+#: the command groups this module adds to ``app`` (the only ones registered so far)
+OWN_GROUPS = tuple(g.name for g in app.registered_groups)
 #: the modules that add the other command groups (and the root commands), with the groups each adds
 COMMAND_MODULES = {"agents": ("sim", "other", "learner", "dialogue", "estimator"), "cluster": ("space",),
                    "coach": ("coach",), "study": ("study",), "deploy": ("deploy",), "capture": ("capture",)}
@@ -316,11 +316,8 @@ def _group_of(argv: list[str]):
     if not argv or argv[0].startswith("-"):
         register()
         return None  # root options (--units ...) or the root's help: the whole application
-    register(argv[0])
-    group = next((g.typer_instance for g in app.registered_groups if g.name == argv[0]), None)
-    if group is None:
-        register()  # a root command (up, status, ...) or a misspelt one: the whole application answers
-    return group
+    register(argv[0])  # a root command (up, status, ...) or a misspelt one: every module, the whole application
+    return next((g.typer_instance for g in app.registered_groups if g.name == argv[0]), None)
 
 
 def main() -> None:

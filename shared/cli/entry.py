@@ -6,20 +6,18 @@ A command's objects are collected as usual while it runs. At exit, what is still
 frozen, so the interpreter's final collection does not walk every object the imports made
 (~20 ms of a one-clip command, measured by ``python -m bench.bus``): the process ends and the
 system takes its memory back. Files are written through ``with`` blocks and closed when they
-end, never by the collector."""
+end, never by the collector. A program that uses the command line as a library imports
+:mod:`shared.cli.app`, which leaves the collector alone."""
 
 import gc
 
-# before the first import; main() turns it back on. A program that uses the command line as a
-# library imports shared.cli.app, which leaves the collector alone.
-gc.disable()
+from shared.cli import lasting_imports
 
-from shared.cli.app import main as _app_main  # noqa: E402
+with lasting_imports():
+    from shared.cli.app import main as _app_main
 
 
 def main() -> None:
-    gc.freeze()
-    gc.enable()
     try:
         _app_main()
     finally:

@@ -1,7 +1,7 @@
 """How a recognised motion gets its label: the decision on top of ``F_recog`` (eq. 2.6).
 
-The thesis recognises a motion by its point in the space. Measured on HDM05 (issue 11,
-``reports/recognition/report.md``), the label is best decided before the point: by the eq.
+The thesis recognises a motion by its point in the space. Measured on HDM05 (the
+recognition report, ``reports/recognition/report.md``), the label is best decided before the point: by the eq.
 2.4 distance between the motion's HMM and every proto-symbol *on the position channel group*
 (:mod:`shared.pss.features`), nearest proto-symbol first. The same report measures the
 alternatives this module does not use on the same distances (k-NN with k = 3 and 5, a
@@ -11,7 +11,7 @@ the nearest point of the 3-D space; none did better.
 The distance is eq. 2.4 with **channel weights** on the mean term (:func:`channel_weights`,
 a Fisher ratio per channel from the space's own proto-symbols): a joint coordinate that
 differs between classes more than between performers of one class counts more. Measured on
-HDM05 leave-one-actor-out (issue 11): the same 100 % closed-set accuracy, and the held-out
+HDM05 leave-one-actor-out (the recognition report): the same 100 % closed-set accuracy, and the held-out
 class's clips stand out more (nearest / second class ratio: AUC 0.93 -> 0.95; out-of-class
 rejection at 5 % in-class rejection 62 -> 74 %).
 
@@ -322,10 +322,10 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
     order = np.argsort(dc)
     k = int(order[0])
     have = features is not None
-    model = novelty_model.novelty(features) if novelty_model is not None and have else 0.0
-    ratio = discriminant.novelty(features) if discriminant is not None and have else 0.0
+    model, p_model = novelty_model.judged(features) if novelty_model is not None and have else (0.0, 1.0)
+    ratio, p_ratio = discriminant.judged(features) if discriminant is not None and have else (0.0, 1.0)
     distance = 0.0
-    credibility = [1.0]
+    credibility = [p_model, p_ratio]
     if np.isfinite(cal.threshold) and cal.threshold > 0:
         scale = cal.class_scales[k] if cal.class_scales else 1.0
         distance = float(dc[k] / scale / cal.threshold)
@@ -333,11 +333,6 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
     if (discriminant is None or not have) and len(dc) > 1 and np.isfinite(cal.ratio_threshold) \
             and np.isfinite(dc[order[1]]) and cal.ratio_threshold > 0:
         distance = max(distance, float(dc[k] / max(dc[order[1]], 1e-12) / cal.ratio_threshold))
-    if model > 0:
-        credibility.append(conformal_p_value(novelty_model.scores, float(novelty_model.margins(features)[0]),
-                                             larger_is_unusual=False))
-    if ratio > 0:
-        credibility.append(conformal_p_value(discriminant.scores, float(discriminant.ratios(features)[0])))
     novelty = max(distance, model, ratio)
     known = novelty <= 1.0
     # a motion the tests call "none of these" is the nearest class with at most its credibility
@@ -392,7 +387,7 @@ def _shrunk_lda(x: np.ndarray, y: np.ndarray) -> "DiscriminantRatio | None":
 @dataclass
 class DiscriminantRatio:
     """The open set's "not clearly nearer to one class than to the next" test, in a discriminant
-    space (issue 11): a shrinkage LDA (:func:`_shrunk_lda`) learns the space's classes from every
+    space: a shrinkage LDA (:func:`_shrunk_lda`) learns the space's classes from every
     proto-symbol's :func:`hmm_features`; a motion's score is its distance to the nearest class
     mean over its distance to the second nearest, both in the LDA's projection. It is "none of
     these" when the score is above ``threshold``, split-conformal (:func:`conformal_threshold`,
@@ -426,9 +421,15 @@ class DiscriminantRatio:
 
     def novelty(self, features: np.ndarray) -> float:
         """Ratio over threshold (> 1: "none of these"; 0 when the test never rejects)."""
+        return self.judged(features)[0]
+
+    def judged(self, features: np.ndarray) -> tuple[float, float]:
+        """One motion's :meth:`novelty` and its conformal p-value among the calibration ratios
+        (0 and 1 when the test never rejects)."""
         if not np.isfinite(self.threshold) or self.threshold <= 0:
-            return 0.0
-        return float(self.ratios(features)[0] / self.threshold)
+            return 0.0, 1.0
+        r = float(self.ratios(features)[0])
+        return r / self.threshold, conformal_p_value(self.scores, r)
 
     @classmethod
     def fit(cls, features: np.ndarray, labels, performers, quantile: float = KNOWN_QUANTILE,
@@ -531,7 +532,7 @@ def _margins(scores: np.ndarray) -> np.ndarray:
 
 @dataclass
 class NoveltyModel:
-    """The open set's discriminative step on top of the proto-symbols (issue 11).
+    """The open set's discriminative step on top of the proto-symbols.
 
     A ridge classifier (scikit-learn, one-vs-rest, classes coded +-1) learns the space's
     classes from every proto-symbol's :func:`hmm_features`; a motion is "none of these" when
@@ -569,9 +570,15 @@ class NoveltyModel:
 
     def novelty(self, features: np.ndarray) -> float:
         """Threshold over margin (> 1: "none of these"; 0 when the model never rejects)."""
+        return self.judged(features)[0]
+
+    def judged(self, features: np.ndarray) -> tuple[float, float]:
+        """One motion's :meth:`novelty` and its conformal p-value among the calibration margins
+        (a smaller margin is more unusual; 0 and 1 when the model never rejects)."""
         if not np.isfinite(self.threshold) or self.threshold <= 0:
-            return 0.0
-        return float(min(self.threshold / max(float(self.margins(features)[0]), 1e-12), 1e6))
+            return 0.0, 1.0
+        m = float(self.margins(features)[0])
+        return float(min(self.threshold / max(m, 1e-12), 1e6)), conformal_p_value(self.scores, m, larger_is_unusual=False)
 
     @classmethod
     def fit(cls, features: np.ndarray, labels, performers, quantile: float = NOVELTY_QUANTILE) -> "NoveltyModel | None":

@@ -170,7 +170,7 @@ RECOGNITION_VAR_CEILING = 0.05
 def default_n_states(min_frames: int) -> int:
     """85 % of the frames of the shortest repetition, between 2 and 15 states.
 
-    Measured (issue 11): on HDM05 at 30 fps (shortest clip 14 frames) 11-14 states recognise
+    Measured (the recognition report): on HDM05 at 30 fps (shortest clip 14 frames) 11-14 states recognise
     98-100 % of unseen actors' clips, 7 states (the former default, half the frames) 83-95 %."""
     return int(np.clip(round(0.85 * min_frames), 2, MAX_STATES))
 
