@@ -4,6 +4,8 @@ For one target clip of every HDM05 motion class (actor dg, the first take; actor
 where dg has none), simulated learners (the ``thesis`` family, indices 0-3 of population 0)
 are coached for 4 trials each through the coach service exactly as ``mirrorcoach coach run``
 does (policy fixed alpha 2 with the Table 4.1 adverb, feasibility check on, residual mode).
+Every demonstration shown is performed again by the simulator, apart from the coach, and judged
+against the target by the same tests (joint limits, static and dynamic balance).
 Per class: the share of trials that showed emphasis (alpha_shown times the share of the emphasis
 a repair kept >= 1; goal >= 90 %), how many
 were made feasible by the repair (joint angles held at limits, emphasis taken out of phases
@@ -35,34 +37,53 @@ def targets(hdm05) -> dict:
 
 def main(argv=None) -> int:
     args = parse_args(__doc__, argv)
-    from schemas.common import clip_to_wire
+    from schemas.common import clip_from_wire, clip_to_wire
     from shared.bus.client import Client
+    from shared.coaching.session import _worse
     from shared.io import load_clip
 
     rows = []
     with private_cluster("benchemph") as s, Client(s) as c:
         for label, path in targets(args.hdm05).items():
-            target = clip_to_wire(load_clip(path))
+            clip = load_clip(path).resample(30.0)
+            target, skeleton = clip_to_wire(clip), clip.skeleton.to_json()
+
+            def report(wire):
+                return c.request("simulator", "perform", {"skeleton": skeleton, "clip": wire}, timeout=120)["report"]
+
+            target_report = report(clip_to_wire(clip, False))
             trials = []
             for i in range(LEARNERS):
                 name = f"e-{label}-{i}"[:60]
                 c.request("coach", "start", {"session": name, "target": target, "learner": name, "index": i,
                                              "policy": {"kind": "fixed", "alpha": 2.0, "adverb": "table"},
                                              "replace": True}, timeout=120)
-                info = c.request("coach", "run", {"session": name, "trials": TRIALS}, timeout=60 + 60 * TRIALS)
-                trials += info["trials"]
+                demo, adverb = target, None
+                for _ in range(TRIALS):  # what `coach run` does, through the public verbs: the clips are seen
+                    r = c.request("simulator", "learner_imitate", {"learner": name, "demonstration": demo,
+                                                                   **({"adverb": adverb} if adverb else {})}, timeout=120)
+                    t = c.request("coach", "attempt", {"session": name, "clips": r["attempts"]}, timeout=300)
+                    demo, adverb = t.pop("emphatic"), t["adverb"]
+                    # checked again, apart from the coach: the clip shown, performed by the target's body
+                    t["tempo"] = demo["fps"] / clip.fps
+                    t["passes"] = _worse(report({k: v for k, v in demo.items() if k != "skeleton"}), target_report, clip) is None
+                    trials.append(t)
                 c.request("coach", "delete", {"session": name})
             # shown: the emphasis that reached the screen, alpha scaled by the share a repair kept
             shown = [t for t in trials if t["alpha_shown"] * (t.get("emphasis_kept") or 1.0) >= 1.0]
             repaired = [t for t in trials if t.get("emphasis_kept") is not None]
             lowered = [t for t in trials if t["alpha_reduced"]]
+            slower = [t["tempo"] for t in trials if t["tempo"] < 1.0]
             rows.append({"class": label, "target": path.name, "trials": len(trials), "shown": len(shown),
                          "repaired": len(repaired),
                          "kept": (sum(t["emphasis_kept"] for t in repaired) / len(repaired)) if repaired else None,
+                         "planted": sum("the feet kept" in t["feasibility"] for t in trials),
+                         "slower": len(slower), "slowest": min(slower, default=1.0),
+                         "passes": sum(t["passes"] for t in trials),
                          "lowered": len(lowered), "why_lowered": sorted({t["feasibility"][:90] for t in lowered})[:2]})
             r = rows[-1]
-            print(f"{label}: emphasis shown {r['shown']}/{r['trials']}, repaired {r['repaired']}, lowered {r['lowered']}",
-                  flush=True)
+            print(f"{label}: emphasis shown {r['shown']}/{r['trials']}, repaired {r['repaired']}, lowered {r['lowered']}, "
+                  f"slower {r['slower']}, demonstrations passing the check again {r['passes']}/{r['trials']}", flush=True)
     total = sum(r["trials"] for r in rows)
     shown = sum(r["shown"] for r in rows)
     worst = min(rows, key=lambda r: r["shown"] / r["trials"])
@@ -73,16 +94,25 @@ def main(argv=None) -> int:
           "service (fixed alpha 2 + Table 4.1 adverb, feasibility check on). Shown: alpha_shown x the share of the "
           "emphasis a repair kept >= 1 (goal >= 90 % of trials on every class); a repair keeping less than half lowers "
           "alpha instead. Repaired: the emphatic motion was made feasible (joint angles held at their "
-          "limits, emphasis taken out where the balance fails) instead of lowering alpha; kept: the RMS share of its "
-          "difference from the target that remained.", "",
-          "| class | target | shown | repaired (emphasis kept) | alpha lowered | why lowered (first) |", "|---|---|---|---|---|---|"]
+          "limits, the feet kept where the target stands, shown slower where only its speed needs the ground to push "
+          "outside the feet, emphasis taken out where the balance fails) instead of lowering alpha; kept: the RMS share "
+          "of its difference from the target that remained. The balance tolerance was chosen on actors bd and bk "
+          "(`python -m bench.balance`); these targets are actor dg's. Every demonstration shown is performed again by "
+          "the simulator apart from the coach and judged against the target (passes the check again).", "",
+          "| class | target | shown | repaired (emphasis kept) | feet planted | shown slower (slowest) | "
+          "passes the check again | alpha lowered | why lowered (first) |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         kept = f" ({r['kept']:.0%})" if r["kept"] is not None else ""
-        md.append(f"| {r['class']} | {r['target']} | {r['shown']}/{r['trials']} | {r['repaired']}{kept} | {r['lowered']} | "
-                  f"{(r['why_lowered'] or ['-'])[0]} |")
+        slow = f" ({r['slowest']:.0%})" if r["slower"] else ""
+        md.append(f"| {r['class']} | {r['target']} | {r['shown']}/{r['trials']} | {r['repaired']}{kept} | {r['planted']} | "
+                  f"{r['slower']}{slow} | {r['passes']}/{r['trials']} | {r['lowered']} | {(r['why_lowered'] or ['-'])[0]} |")
+    passes = sum(r["passes"] for r in rows)
+    res["passes"] = passes
     md += ["", f"Emphasis shown in {shown} of {total} trials ({shown / total:.0%}); the lowest class: {worst['class']} "
                f"({worst['shown'] / worst['trials']:.0%}); goal >= 90 % on every class: "
-               f"{'met' if res['worst_share'] >= 0.9 else 'missed'}."]
+               f"{'met' if res['worst_share'] >= 0.9 else 'missed'}. Demonstrations that pass the check again (joint "
+               f"limits, static and dynamic balance against the target, performed apart from the coach): {passes} of "
+               f"{total}; goal all: {'met' if passes == total else 'missed'}."]
     write_results(args.out, "emphasis", res, md)
     print("\n".join(md))
     return 0

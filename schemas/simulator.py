@@ -63,6 +63,23 @@ PERFORM = Endpoint(
 
 JOINT = Str(choices=("shoulder_pitch", "shoulder_roll", "elbow", "knee"))
 
+PLANT = Endpoint(
+    "plant",
+    Message("simulator.plant", Map({
+        "skeleton": F(Str(max_len=2_000_000), "skeleton JSON: build a human body from it"),
+        "mass": F(Float(0.1, 500.0), "body mass in kg (70 by default)", required=False),
+        "clip": F(CLIP, "the motion whose feet are put down, with the body's joint channels"),
+        "reference": F(CLIP, "the motion whose feet stand where this one's must (the target)"),
+    }), doc="the motion's feet where the reference stands on them"),
+    Message("simulator.plant.reply", Map({
+        "clip": F(CLIP, "the motion, its root height and leg angles changed (same channels and frames)"),
+        "changes": F(AnyMap(), "planted, stance_frames, root_height_change_m, leg_angle_change_deg, stance_error_m; "
+                               "or planted false and why"),
+    })),
+    "Keep a motion's feet on the ground where the reference has them there, under the body as the reference's "
+    "are, by the smallest change of the root's height and the legs' angles (footskate cleanup).",
+)
+
 REGRESSOR = Endpoint(
     "regressor",
     Message("simulator.regressor", Map({
@@ -242,7 +259,7 @@ DELETE = Endpoint(
     "Delete an other or a learner.",
 )
 
-ENDPOINTS = {e.verb: e for e in (BODIES, PERFORM, REGRESSOR, OTHER_CREATE, OTHER_ASK, OTHER_PENDING, OTHER_ANSWER, OTHER_REVEAL,
+ENDPOINTS = {e.verb: e for e in (BODIES, PERFORM, PLANT, REGRESSOR, OTHER_CREATE, OTHER_ASK, OTHER_PENDING, OTHER_ANSWER, OTHER_REVEAL,
                                  LEARNER_CREATE, LEARNER_IMITATE, LEARNER_REVEAL, LIST, DELETE)}
 
 EVENTS = {

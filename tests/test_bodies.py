@@ -162,3 +162,71 @@ def test_the_dynamic_balance_check_sees_what_the_static_one_cannot(bundled):
         assert s["frames_outside_support"] == 0  # statically balanced throughout
         counts.append(s["frames_dynamic_outside"])
     assert counts[1] > counts[0] and counts[1] > 20, counts
+
+
+def test_the_support_area_has_heels_so_a_person_standing_still_is_balanced(hdm05):
+    """Every foot bone gives its origin and the far end of its segment (the ball, the toe tips);
+    a bone that starts at the ankle gives the heel too, under the ankle at the sole's height in
+    the rest pose. Without heels a person standing to reach up (dg's grabHighR) had the centre
+    of gravity outside the support on all 64 of its frames; with them on none."""
+    from shared.bodies.body import foot_anchors, foot_points
+    from shared.io import load_clip
+
+    clip = load_clip(sorted((hdm05 / "amc/grabHighR").glob("HDM_dg_*.amc"))[0]).resample(30)
+    body = human_body(clip.skeleton)
+    anchors = foot_anchors(body)
+    assert len(anchors) == 2 * len(body.feet) + 2  # two heels, one per ankle
+    rest = foot_points(body, body.model.qpos0[None, :], anchors)[0]
+    up = body.up_axis
+    heels = rest[2 * len(body.feet):]
+    ankles = [rest[2 * body.feet.index(f)] for f in ("lfoot", "rfoot")]
+    for heel, ankle in zip(heels, ankles):
+        assert 0.02 <= ankle[up] - heel[up] <= 0.2  # under the ankle, at the sole
+        np.testing.assert_allclose(np.delete(heel, up), np.delete(ankle, up), atol=1e-9)
+    support = perform(body, clip)[1]["support"]
+    assert support["frames_outside_support"] == 0, support
+
+
+def _floating(clip, lift_cm: float, frames: slice):
+    """``clip`` with its root raised by ``lift_cm`` in ``frames`` (0.3 s ramps): the feet float."""
+    data = clip.data.copy()
+    bump = np.zeros(clip.n_frames)
+    bump[frames] = 1.0
+    k = np.hanning(11)
+    bump = np.convolve(bump, k / k.sum(), mode="same")
+    unit_cm = 100 * clip.skeleton.unit_m
+    data[:, clip.channels.index("root.ty")] += bump * lift_cm / unit_cm
+    return clip.with_data(data)
+
+
+def test_planting_puts_the_feet_back_where_the_reference_stands(bundled):
+    """A squat whose hips rise 12 cm mid-motion has both feet in the air (the emphatic sneak's
+    fault); planting brings them back to the reference's height within 2 cm by the root's height
+    and the legs' angles, leaves the arms and the trunk as they were, and a motion already
+    standing where the reference does comes back all but unchanged."""
+    from shared.bodies.body import foot_anchors, foot_points
+    from shared.bodies.stance import plant_feet
+    from shared.io import load_clip
+
+    ref = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc").resample(30)
+    body = human_body(ref.skeleton)
+    up = body.up_axis
+    lifted = _floating(ref, 12.0, slice(15, 30))
+    anchors = foot_anchors(body)
+    heights = lambda c: foot_points(body, _qpos_trajectory(body, c), anchors)[..., up]  # noqa: E731
+    ground = heights(ref).min()
+    standing = heights(ref) < ground + 0.05
+    assert np.abs(heights(lifted) - heights(ref))[standing].max() > 0.10
+    planted, changes = plant_feet(body, ref, lifted)
+    assert changes["planted"] and changes["stance_error_m"] < 0.02
+    assert np.abs(heights(planted) - heights(ref))[standing].max() < 0.03
+    assert 0.08 < changes["root_height_change_m"] < 0.14
+    above = [i for i, c in enumerate(ref.channels) if c.split(".")[0] in ("lhumerus", "rhumerus", "thorax", "head")]
+    np.testing.assert_array_equal(planted.data[:, above], lifted.data[:, above])
+    assert planted.channels == lifted.channels and planted.n_frames == lifted.n_frames
+    same, info = plant_feet(body, ref, ref)
+    assert info["root_height_change_m"] < 0.01 and info["leg_angle_change_deg"] < 2.0
+    robot_like = human_body(ref.skeleton)
+    robot_like.feet = []
+    assert plant_feet(robot_like, ref, lifted) == (lifted, {"planted": False,
+                                                            "why": "no feet, no free root or no root height channel"})

@@ -49,6 +49,14 @@ def test_every_simulator_verb_answers_within_its_contract(simulator_service, cli
                                                                 "clip": clip_to_wire(squat, with_skeleton=False)}))
     assert h["body"]["kind"] == "human" and h["body"]["mass"] == pytest.approx(80.0, rel=1e-3)
     assert h["report"]["support"]["checked"] and "joint_limit_violations" in h["report"]
+    # plant: a squat whose hips float 10 cm gets its feet back on the floor (the root's height mostly)
+    lifted = squat.data.copy()
+    lifted[:, squat.channels.index("root.ty")] += 0.10 / squat.skeleton.unit_m
+    p = _ok(contract.PLANT, c.request("simulator", "plant", {"skeleton": squat.skeleton.to_json(),
+                                                            "clip": clip_to_wire(squat.with_data(lifted), False),
+                                                            "reference": clip_to_wire(squat, False)}))
+    assert p["changes"]["planted"] and 0.07 < p["changes"]["root_height_change_m"] < 0.13
+    assert p["clip"]["channels"] == squat.channels and p["clip"]["data"].shape == squat.data.shape
 
     # a simulated other: open and comparative answers, reveal
     _ok(contract.OTHER_CREATE, c.request("simulator", "other_create", {"other": "r2", "params": {"d": 6, "mass": 4.8}}))
@@ -167,6 +175,9 @@ def test_bad_simulator_input_gets_clear_errors_and_the_service_stays_up(simulato
         ("robot motion on a human", "perform", {"skeleton": squat.skeleton.to_json(), "clip": m}, "bad_request"),
         ("bad skeleton JSON", "perform", {"skeleton": "{not json", "clip": m}, "bad_request"),
         ("NaN", "perform", {"body": "self", "clip": nan}, "bad_request"),
+        ("plant without a reference", "plant", {"skeleton": squat.skeleton.to_json(), "clip": human}, "bad_request"),
+        ("plant a robot motion", "plant", {"skeleton": squat.skeleton.to_json(), "clip": m, "reference": human},
+         "bad_request"),
         ("too short to differentiate", "perform", {"body": "self", "clip": dict(m, data=m["data"][:4])}, "bad_request"),
         ("absurd mass", "perform", {"body": "self", "mass": 1e9, "clip": m}, "bad_request"),
         ("negative mass", "other_create", {"other": "x", "params": {"mass": -2.0}}, "bad_request"),

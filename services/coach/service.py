@@ -66,6 +66,13 @@ class BusCoachPorts:
         self._last = (clip, performed_effort(out))  # the check and the effort policy ask about the same clip
         return r["report"], out.select(["cog.x", "cog.y", "cog.z"])
 
+    def plant(self, clip, reference):
+        if self.skeleton is None:
+            return clip, {"planted": False, "why": "the target has no skeleton"}
+        r = self.c.request("simulator", "plant", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False),
+                                                  "reference": clip_to_wire(reference, False)})
+        return clip_from_wire(r["clip"]), r["changes"]
+
     def effort(self, clip):
         if self.skeleton is None:
             return None
@@ -352,6 +359,9 @@ class _Renamed:
 
     def perform(self, clip):
         return self.p.perform(clip)
+
+    def plant(self, clip, reference):
+        return self.p.plant(clip, reference)
 
     def effort(self, clip):
         return self.p.effort(clip)

@@ -100,6 +100,19 @@ def make_service(settings: Settings | None = None) -> Service:
                                   "checked": report["feasible"] is not None})
         return {"clip": clip_to_wire(out, with_skeleton=False), "report": report, "body": b.describe()}
 
+    @svc.cost("plant")
+    def plant_cost(req):
+        return INVERSE_DYNAMICS_BYTES * (req["clip"]["data"].nbytes + req["reference"]["data"].nbytes)
+
+    @svc.handler("plant")
+    def do_plant(req):
+        from shared.bodies.stance import plant_feet
+
+        b = bodies.get(None, req["skeleton"], req["mass"])
+        clip = clip_from_wire(req["clip"], b.skeleton)
+        out, changes = plant_feet(b, clip_from_wire(req["reference"], b.skeleton), clip)
+        return {"clip": clip_to_wire(out, with_skeleton=False), "changes": changes}
+
     @svc.handler("regressor")
     def do_regressor(req):
         from shared.estimation.body import column_names, self_regressor

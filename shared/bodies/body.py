@@ -245,6 +245,52 @@ def _runs(flags: np.ndarray) -> list[list[int]]:
     return [[int(a), int(b)] for a, b in zip(edges[::2], edges[1::2])]
 
 
+def foot_anchors(body: Body) -> list[tuple[int, np.ndarray]]:
+    """The points whose hull is the support area, as (MuJoCo body id, point in that body's frame):
+    each foot bone's origin, the far end of its segment (its centre of mass mirrored through the
+    origin: the ball of the foot, the tips of the toes) and, for a bone that starts at the ankle
+    (its parent is no foot bone), the heel: the point under the ankle at the height of the sole
+    in the rest pose (between 2 and 20 cm below it; a rest pose without flat feet has none)."""
+    m = body.model
+    data = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, data)  # the rest pose
+    up = body.up_axis
+    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f) for f in body.feet]
+    out = []
+    for b in ids:
+        out += [(b, np.zeros(3)), (b, 2 * m.body_ipos[b].copy())]
+    for b in ids:
+        if int(m.body_parentid[b]) in ids:
+            continue
+        ends = [data.xpos[k] + data.xmat[k].reshape(3, 3) @ (2 * m.body_ipos[k]) for k in ids
+                if k == b or int(m.body_parentid[k]) == b]
+        sole = min(e[up] for e in ends)
+        drop = float(data.xpos[b][up] - sole)
+        if 0.02 <= drop <= 0.2:
+            heel = data.xpos[b].copy()
+            heel[up] = sole
+            out.append((b, data.xmat[b].reshape(3, 3).T @ (heel - data.xpos[b])))
+    return out
+
+
+def foot_points(body: Body, q: np.ndarray, anchors: list | None = None) -> np.ndarray:
+    """The support area's points (T, anchors, 3) in metres (:func:`foot_anchors`)."""
+    m = body.model
+    data = mujoco.MjData(m)
+    anchors = foot_anchors(body) if anchors is None else anchors
+    pts = np.empty((len(q), len(anchors), 3))
+    for t in range(len(q)):
+        data.qpos[:] = q[t]
+        mujoco.mj_kinematics(m, data)
+        for k, (b, local) in enumerate(anchors):
+            pts[t, k] = data.xpos[b] + data.xmat[b].reshape(3, 3) @ local
+    return pts
+
+
+#: a foot point within this height of the lowest one bears weight (the support area, the stance)
+CONTACT_BAND = 0.05
+
+
 def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 0.05, wrench=None) -> dict:
     """Frames whose centre-of-gravity ground projection is outside the support area (static
     balance) and, with the root's ``wrench`` (:func:`_root_wrench`), frames whose centre of
@@ -253,18 +299,9 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
     if not body.feet:
         return {"checked": False}
 
-    m = body.model
-    data = mujoco.MjData(m)
-    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f) for f in body.feet]
     up = body.up_axis
     plane = [i for i in range(3) if i != up]
-    pts = np.empty((len(q), 2 * len(ids), 3))
-    for t in range(len(q)):
-        data.qpos[:] = q[t]
-        mujoco.mj_kinematics(m, data)
-        for k, b in enumerate(ids):
-            pts[t, 2 * k] = data.xpos[b]
-            pts[t, 2 * k + 1] = data.xipos[b] * 2 - data.xpos[b]  # far end of the segment
+    pts = foot_points(body, q)
     ground = pts[..., up].min()
     outside, airborne, worst = 0, 0, 0.0
     flags = np.zeros(len(q), bool)
@@ -272,7 +309,7 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
     cop = None if wrench is None else _centre_of_pressure(*wrench, up, ground)
     weight = float(body.mass) * 9.81
     for t in range(len(q)):
-        contact = pts[t][pts[t][:, up] < ground + 0.05][:, plane]
+        contact = pts[t][pts[t][:, up] < ground + CONTACT_BAND][:, plane]
         c = cog[t, plane]
         if len(contact) == 0:
             airborne += 1

@@ -8,6 +8,7 @@ import numpy as np
 
 from shared.bodies.body import perform
 from shared.bodies.human import human_body
+from shared.bodies.stance import plant_feet
 from shared.clip import Clip
 from shared.coaching.effort import performed_effort
 from shared.pss.space import ProtoSymbolSpace
@@ -46,6 +47,11 @@ class LocalCoachPorts:
         out, report = perform(self.body, clip)
         self._last = (clip, performed_effort(out))  # the check and the effort policy ask about the same clip
         return report, out.select(["cog.x", "cog.y", "cog.z"])
+
+    def plant(self, clip, reference):
+        if self.body is None:
+            return clip, {"planted": False, "why": "no body for this target"}
+        return plant_feet(self.body, reference, clip)
 
     def effort(self, clip):
         if self.body is None:
