@@ -721,8 +721,8 @@ def test_a_study_with_scripted_participants_and_a_coach_seat(cluster, bundled, t
 @pytest.mark.slow
 def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
     """A world that does not agree with the method: learners that copy what they see. The
-    report's words are computed, so emphasis must not come out as helping there, and every
-    trial is in tidy.csv. No sensitivity sweep (`--sensitivity-learners 0`): nothing
+    report's words are computed, so emphasis must not come out as helping there, every
+    trial is in tidy.csv, and the same seed gives the same numbers. No sensitivity sweep (`--sensitivity-learners 0`): nothing
     here reads it, and it was a fifth of the test's time."""
     from shared.reproduce.tidy import read
 
@@ -759,6 +759,12 @@ def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
     assert any(p is not None for row in effort["predicted"] for p in row)
     for fig in ("fig6_1", "fig6_2", "fig6_5", "fig6_6", "fig6_7"):
         assert (tmp_path / f"rep/ch4-6/copy_squat_{fig}.png").stat().st_size > 5000
+    # the same seed again on the same (now used) cluster: the same numbers and trials, bit for bit
+    r = cli(env, "reproduce", "ch4", "--out", tmp_path / "again", "--learners", "3", "--targets", "squat", "--families",
+            "copy", "--sensitivity-learners", "0", timeout=900)
+    assert r.returncode == 0, r.stdout + r.stderr
+    for name in ("results.json", "tidy.csv"):
+        assert (tmp_path / "again/ch4-6" / name).read_bytes() == (tmp_path / "rep/ch4-6" / name).read_bytes(), name
     r = cli(env, "reproduce", "ch4", "--out", tmp_path / "rep", "--families", "oracle")
     assert r.returncode == 2 and "oracle" in r.stderr and "Traceback" not in r.stderr
     # the effort policy with a simulated learner that has no strength is refused before anything is made
