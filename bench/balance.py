@@ -1,7 +1,7 @@
 """How far real people are from one another by the balance tests (``python -m bench.balance``).
 
 The coach calls an emphatic motion less balanced than its target when more of its frames are
-off balance where the target is not (``shared.coaching.session.off_balance_share``) than a
+off balance where the target is not (``shared.coaching.feasibility.off_balance_share``) than a
 tolerance. This chooses that tolerance on performances we know were feasible: real takes of
 one motion by one person (HDM05 actors bd and bk, every class, up to 4 takes each, resampled to
 the coach's 30 fps), each judged against each other take as if it were the target, frames
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
 
     from shared.bodies.body import perform
     from shared.bodies.human import human_body
-    from shared.coaching.session import off_balance_share
+    from shared.coaching.feasibility import off_balance_share
     from shared.io import load_clip
 
     groups = defaultdict(list)

@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     args = parse_args(__doc__, argv)
     from schemas.common import clip_from_wire, clip_to_wire
     from shared.bus.client import Client
-    from shared.coaching.session import _worse
+    from shared.coaching.feasibility import worse_than_target
     from shared.io import load_clip
 
     rows = []
@@ -66,7 +66,7 @@ def main(argv=None) -> int:
                     demo, adverb = t.pop("emphatic"), t["adverb"]
                     # checked again, apart from the coach: the clip shown, performed by the target's body
                     t["tempo"] = demo["fps"] / clip.fps
-                    t["passes"] = _worse(report({k: v for k, v in demo.items() if k != "skeleton"}), target_report, clip) is None
+                    t["passes"] = worse_than_target(report({k: v for k, v in demo.items() if k != "skeleton"}), target_report, clip) is None
                     trials.append(t)
                 c.request("coach", "delete", {"session": name})
             # shown: the emphasis that reached the screen, alpha scaled by the share a repair kept

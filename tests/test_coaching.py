@@ -167,7 +167,7 @@ def test_an_infeasible_emphatic_motion_is_made_feasible_where_it_can_be(squat):
     """Joint angles beyond their limits are held at them, channel by channel; phases where the
     centre of gravity leaves the support go back to the target, the rest keeps its emphasis;
     the repaired motion passes the check and the reply says what was changed."""
-    from shared.coaching.session import _outside_frames, _worse, make_feasible
+    from shared.coaching.feasibility import make_feasible, outside_frames, worse_than_target
 
     ports = LocalCoachPorts(squat.skeleton)
     target_report, _ = ports.perform(squat)
@@ -178,14 +178,14 @@ def test_an_infeasible_emphatic_motion_is_made_feasible_where_it_can_be(squat):
     n = squat.n_frames
     mid = slice(n // 3, 2 * n // 3)
     report = perform(squat.with_data(data))
-    assert _worse(report, target_report, squat) is None
+    assert worse_than_target(report, target_report, squat) is None
     over = max(float(squat.column("rtibia.rx").max()), 170.0) + 60.0
     data[mid, k] = over
     bent = squat.with_data(data)
     report = perform(bent)
-    assert "rtibia.rx" in (_worse(report, target_report, squat) or "")
+    assert "rtibia.rx" in (worse_than_target(report, target_report, squat) or "")
     fixed, changes = make_feasible(squat, bent, report, target_report, squat, perform)
-    assert _worse(perform(fixed), target_report, squat) is None and "rtibia.rx" in changes[0]
+    assert worse_than_target(perform(fixed), target_report, squat) is None and "rtibia.rx" in changes[0]
     others = [i for i in range(len(squat.channels)) if i != k]
     np.testing.assert_array_equal(fixed.data[:, others], bent.data[:, others])  # nothing else touched
     # 2. the whole body leaning over (the root pitched 40 degrees) in the middle third only
@@ -195,11 +195,11 @@ def test_an_infeasible_emphatic_motion_is_made_feasible_where_it_can_be(squat):
     data[:, r] += 40.0 * ramp
     lean = squat.with_data(data)
     report = perform(lean)
-    assert "centre of " in (_worse(report, target_report, squat) or "")  # of gravity or of pressure: off balance
+    assert "centre of " in (worse_than_target(report, target_report, squat) or "")  # of gravity or of pressure: off balance
     fixed, changes = make_feasible(squat, lean, report, target_report, squat, perform)
     after = perform(fixed)
-    assert _worse(after, target_report, squat) is None and any("balance" in c for c in changes), changes
-    outside = _outside_frames(report, n)
+    assert worse_than_target(after, target_report, squat) is None and any("balance" in c for c in changes), changes
+    outside = outside_frames(report, n)
     kept = ~outside & (np.abs(fixed.data[:, r] - lean.data[:, r]) < 1e-9)
     assert kept.sum() > 0.3 * n  # the emphasis stays where the balance held
 
@@ -321,7 +321,7 @@ def test_a_motion_balanced_in_every_pose_but_too_fast_is_shown_slower(squat):
     frame, the centre of pressure the swing needs does not. Its shape is feasible, its speed is
     not: the repair shows the same frames slower (the forces beyond the weight fall with the
     square of the speed) instead of taking the emphasis out, and says so."""
-    from shared.coaching.session import TEMPOS, _worse, make_feasible
+    from shared.coaching.feasibility import TEMPOS, make_feasible, worse_than_target
 
     ports = LocalCoachPorts(squat.skeleton)
     still = np.repeat(squat.data[10:11], 60, axis=0)
@@ -335,12 +335,12 @@ def test_a_motion_balanced_in_every_pose_but_too_fast_is_shown_slower(squat):
     target, swing = swung(0.5), swung(2.5)  # the same poses, five times as fast
     target_report, _ = ports.perform(target)
     report, _ = ports.perform(swing)
-    assert "centre of pressure" in (_worse(report, target_report, target) or "")
-    assert _worse(report, target_report, target, dynamic=False) is None
+    assert "centre of pressure" in (worse_than_target(report, target_report, target) or "")
+    assert worse_than_target(report, target_report, target, dynamic=False) is None
     fixed, changes = make_feasible(target, swing, report, target_report, target, lambda c: ports.perform(c)[0])
     assert fixed.fps in [target.fps * t for t in TEMPOS] and "of its speed" in changes[0], changes
     np.testing.assert_array_equal(fixed.data, swing.data)  # every frame as it was, shown slower
-    assert _worse(ports.perform(fixed)[0], target_report, target) is None
+    assert worse_than_target(ports.perform(fixed)[0], target_report, target) is None
 
 
 def test_the_balance_tolerance_is_what_real_takes_measure(hdm05, tmp_path):
@@ -349,7 +349,7 @@ def test_the_balance_tolerance_is_what_real_takes_measure(hdm05, tmp_path):
     import json
 
     from bench.balance import main
-    from shared.coaching.session import BALANCE_TOLERANCE
+    from shared.coaching.feasibility import BALANCE_TOLERANCE
 
     assert main(["--hdm05", str(hdm05), "--out", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "balance.json").read_text())

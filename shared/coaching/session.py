@@ -9,6 +9,8 @@ Ports (the coach service wires them to the bus; tests can wire them to local obj
 * ``generate(space, mix)`` the motion of a weighted mix of proto-symbols;
 * ``perform(clip)`` the simulator's feasibility report and centre-of-gravity trajectory on a
   body built from the target's skeleton;
+* ``plant(clip, reference)`` the clip with its feet where the reference stands on them
+  (:func:`shared.bodies.stance.plant_feet`; unchanged without a body);
 * ``effort(clip)`` the clip's effort on that body (:func:`shared.coaching.effort.effort`), or
   None without a body.
 
@@ -23,7 +25,7 @@ HMM distance); the policy picks alpha and the adverb; the emphatic motion is gen
 ``-alpha`` on the attempt); optionally only the body part with the largest share of the error
 is emphasised (by default the emphasis is applied to the real target, see
 :func:`residual_emphasis`; ``mode="thesis"`` shows ``F_gen(x_s)`` itself); the simulator checks it (no new joint-limit violations against the target's own,
-balance no worse than the target's, within tolerances: see ``_worse``) and alpha is lowered to
+balance no worse than the target's, within tolerances: see :mod:`shared.coaching.feasibility`) and alpha is lowered to
 the largest value of the grid 0.25, 0.5, ... that passes (found by bisection).
 
 **Sub-goal coaching** (thesis 4.6, 7.3; policy ``subgoal``): on the first trial the coach ranks
@@ -46,6 +48,7 @@ import numpy as np
 
 from shared.clip import Clip
 from shared.coaching.effort import EffortEstimate
+from shared.coaching.feasibility import MIN_KEPT, emphasis_kept, make_feasible, worse_than_target
 from shared.coaching.parts import error_shares, partial_emphasis
 from shared.coaching.policies import Policy, table_adverb
 from shared.errors import BadInput
@@ -126,215 +129,6 @@ def check_attempts(session: Session, attempts: list[Clip]) -> None:
         if a.duration < 0.3 or a.n_frames < 10:
             raise BadInput(f"attempt {a.name!r} is too short ({a.n_frames} frames, {a.duration:.2f} s); "
                            "at least 10 frames and 0.3 s", field="clips")
-
-
-MIN_KEPT = 0.5  # a repair that keeps less of the emphasis than this lowers alpha instead
-#: the speeds (shares of the target's) a demonstration may be shown at when only its dynamics fail:
-#: the forces a motion needs beyond its weight scale with its accelerations, by the square of the
-#: speed (Hollerbach 1984, "Dynamic scaling of manipulator trajectories"), its shape not at all
-TEMPOS = (0.8, 0.65, 0.5)
-LIMIT_TOLERANCE = 10.0  # degrees past max(limit, the target's own extreme) before a channel counts
-#: the share of its frames a motion may be off balance where the target is not, per test
-#: (:func:`off_balance_share`): the 95th percentile of real takes of one motion by one person judged
-#: against one another (HDM05 actors bd and bk, 226 pairs matched by DTW; ``python -m bench.balance``,
-#: bench/results/balance.md). The tests are that coarse: two real takes differ by a median 4.5 % /
-#: 12.5 % of their frames, a tenth of the pairs by more than 30 %. Actor dg, whose targets
-#: bench.emphasis reports on, is not among them.
-BALANCE_TOLERANCE = {"outside_runs": 0.56, "dynamic_runs": 0.43}
-
-
-def _worse(report: dict, target_report: dict, target: Clip, dynamic: bool = True) -> str | None:
-    """Why an emphatic motion is less feasible than the target itself, or None: a joint goes
-    more than ``LIMIT_TOLERANCE`` past both its limit and the target's own extreme (real mocap
-    already exceeds the ASF limits), or more of its frames than ``BALANCE_TOLERANCE`` are off
-    balance where the target's are not: the centre of gravity outside the support or (with
-    ``dynamic``) the centre of pressure the motion needs."""
-    worst = None
-    for c, v in report["joint_limit_violations"].items():
-        lo, hi = v["limits"]
-        if c in target.channels:
-            lo, hi = min(lo, float(target.column(c).min())), max(hi, float(target.column(c).max()))
-        over = max(lo - v["min"], v["max"] - hi)
-        if over > LIMIT_TOLERANCE and (worst is None or over > worst[1]):
-            worst = (c, over)
-    if worst:
-        return f"{worst[0]} goes {worst[1]:.0f} degrees past its limit and past the target's own range"
-    s, ts = report["support"], target_report["support"]
-    if s.get("checked") and ts.get("checked"):
-        share = off_balance_share(report, target_report, "outside_runs")
-        if share > BALANCE_TOLERANCE["outside_runs"]:
-            return f"the centre of gravity leaves the support on {share:.0%} of the frames where the target's does not"
-    if dynamic and s.get("dynamic_checked") and ts.get("dynamic_checked"):
-        share = off_balance_share(report, target_report, "dynamic_runs")
-        if share > BALANCE_TOLERANCE["dynamic_runs"]:
-            return (f"the ground reaction it needs acts outside the feet (centre of pressure) or pulls on {share:.0%} "
-                    "of the frames where the target's does not: it would tip over")
-    return None
-
-
-def off_balance_share(report: dict, target_report: dict, kind: str, match: np.ndarray | None = None) -> float:
-    """The share of a motion's frames off balance by one test (``outside_runs``: the centre of
-    gravity outside the support; ``dynamic_runs``: the centre of pressure it needs) where the
-    target, at the matched frame, is not: ``match[t]`` is the target's frame for the motion's
-    frame ``t`` (by default both spread evenly over the same time)."""
-    n, n_t = int(report["frames"]), int(target_report["frames"])
-    if match is None:
-        match = np.linspace(0, n_t - 1, n).round().astype(int)
-    mine = _outside_frames(report, n, kind)
-    theirs = _outside_frames(target_report, n_t, kind)[match]
-    return float(np.mean(mine & ~theirs)) if n else 0.0
-
-
-def _outside_frames(report: dict, n: int, kind: str = "outside_runs") -> np.ndarray:
-    """Frames (n,) the report found off balance: the centre of gravity outside the support
-    (``outside_runs``, static) or the centre of pressure outside it (``dynamic_runs``)."""
-    out = np.zeros(n, bool)
-    for a, b in (report.get("support") or {}).get(kind) or []:
-        out[max(a, 0):min(b, n)] = True
-    return out
-
-
-def make_feasible(base: Clip, demo: Clip, report: dict, target_report: dict, target: Clip,
-                  perform, plant=None) -> tuple[Clip, list[str]]:
-    """Repair an emphatic motion the body cannot perform, keeping the emphasis where it is
-    possible instead of lowering alpha for the whole motion (``perform(clip) -> report``):
-
-    1. per channel: each joint angle held within ``LIMIT_TOLERANCE / 2`` of its limit (or of the
-       target's own extreme, when the target goes further);
-    2. the stance: ``plant(clip) -> (clip, what changed)``, if given, puts the feet where the
-       target stands on them, under the body as the target's are, by the root's height and the
-       legs' angles (:func:`shared.bodies.stance.plant_feet`); after every later change too;
-    3. the tempo: where only the centre of pressure fails (the pose is balanced, its speed is
-       not), the motion is shown slower, at the fastest of ``TEMPOS`` that passes (or the slowest);
-    4. per phase: where the balance fails and the target's does not (the centre of gravity, or
-       the centre of pressure the motion needs, outside the support), the demonstration blends back to the base motion (the target, or the sub-goal), with 0.2 s
-       ramps; widened twice if that is not enough.
-
-    Returns the repaired motion (on ``demo``'s frames) and what was changed, one phrase per
-    change; the caller checks the result (``_worse``) and lowers alpha only if it still fails."""
-    base = base.resample(demo.fps) if base.n_frames != demo.n_frames else base
-    n = min(base.n_frames, demo.n_frames)
-    out = demo.data[:n].copy()
-    ref = base.data[:n]
-    changes = []
-    clamped = []
-    for c, v in report.get("joint_limit_violations", {}).items():
-        if c not in demo.channels:
-            continue
-        lo, hi = v["limits"]
-        if c in target.channels:
-            lo, hi = min(lo, float(target.column(c).min())), max(hi, float(target.column(c).max()))
-        k = demo.channels.index(c)
-        before = out[:, k].copy()
-        out[:, k] = np.clip(out[:, k], lo - LIMIT_TOLERANCE / 2, hi + LIMIT_TOLERANCE / 2)
-        if not np.array_equal(before, out[:, k]):
-            clamped.append(c)
-    if clamped:
-        changes.append(f"{len(clamped)} joint angle(s) held at their limits ({', '.join(clamped[:4])}"
-                       + (", ..." if len(clamped) > 4 else "") + ")")
-    from shared.agents.learner import BODY_PARTS, body_part
-
-    planted: dict[int, tuple[Clip, dict]] = {}  # what planting changed, by the clip it made
-
-    def placed(clip: Clip) -> Clip:
-        if plant is None:
-            return clip
-        clip, info = plant(clip)
-        planted[id(clip)] = (clip, info)
-        return clip
-
-    fixed = placed(demo.with_data(np.vstack([out, demo.data[n:]])))
-    out = fixed.data[:n].copy()
-    ramp = max(1, int(round(0.2 * demo.fps)))
-    grid = np.linspace(0, target.n_frames - 1, n).round().astype(int)
-    target_bad = {kind: _outside_frames(target_report, target.n_frames, kind)[grid]
-                  for kind in ("outside_runs", "dynamic_runs")}
-    parts = np.array([body_part(c) for c in demo.channels])
-    taken: dict[str, float] = {}  # body part (or "all") -> share of the frames its emphasis was taken from
-
-    def off_balance(report) -> np.ndarray:
-        bad = np.zeros(n, bool)  # off balance where the target is not, by each test
-        for kind, t_bad in target_bad.items():
-            bad |= _outside_frames(report, n, kind) & ~t_bad
-        return bad
-
-    def phases(bad: np.ndarray, widen: int) -> np.ndarray:
-        w = _centred(bad.astype(float), np.ones(2 * widen * ramp + 1)) > 0  # widened phases
-        kernel = np.hanning(2 * ramp + 1)
-        return np.clip(_centred(w.astype(float), kernel / kernel.sum()), 0.0, 1.0)
-
-    rep = perform(fixed)
-    if _worse(rep, target_report, target) is not None and _worse(rep, target_report, target, dynamic=False) is None:
-        for tempo in TEMPOS:
-            slower = fixed.with_data(fixed.data, fps=demo.fps * tempo)
-            slower_rep = perform(slower)
-            if _worse(slower_rep, target_report, target) is None or tempo == TEMPOS[-1]:
-                fixed, rep = slower, slower_rep
-                changes.append(f"shown at {tempo:.0%} of its speed (the faster motion needs the ground to push "
-                               "outside the feet)")
-                break
-    # first the body part whose emphasis, taken out of the phases off balance, helps most (the
-    # others keep theirs); then, if the balance still fails, every part in ever wider phases
-    for step in range(len(BODY_PARTS) + 5):
-        if _worse(rep, target_report, target) is None or not (rep.get("support") or {}).get("checked"):
-            break
-        bad = off_balance(rep)
-        if not bad.any():
-            break
-        if step < len(BODY_PARTS):
-            w = phases(bad, 1)
-            tries = []
-            for part in BODY_PARTS:
-                if part in taken:
-                    continue
-                mask = (parts == part).astype(float)
-                trial_clip = placed(fixed.with_data(np.vstack([out - w[:, None] * mask[None, :] * (out - ref),
-                                                               demo.data[n:]])))
-                trial_out = trial_clip.data[:n]
-                trial_rep = perform(trial_clip)
-                tries.append((int(off_balance(trial_rep).sum()), part, trial_out, trial_clip, trial_rep))
-            if not tries:
-                continue
-            count, part, trial_out, trial_clip, trial_rep = min(tries, key=lambda x: x[0])
-            if count >= int(bad.sum()):  # no part alone helps: go on to every part
-                taken.setdefault("parts tried", 0.0)
-                continue
-            out, fixed, rep = trial_out, trial_clip, trial_rep
-            taken[part] = float(np.mean(w > 0.5))
-        else:
-            w = phases(bad, step - len(BODY_PARTS) + 1)
-            fixed = placed(fixed.with_data(np.vstack([out - w[:, None] * (out - ref), demo.data[n:]])))
-            out = fixed.data[:n].copy()
-            rep = perform(fixed)
-            taken["all"] = max(taken.get("all", 0.0), float(np.mean(w > 0.5)))
-    taken.pop("parts tried", None)
-    info = planted.get(id(fixed), (None, {}))[1]
-    if info.get("planted"):
-        changes.append(f"the feet kept where the target stands, under the body (hips moved up to "
-                       f"{100 * info['root_height_change_m']:.0f} cm, leg joints up to {info['leg_angle_change_deg']:.0f} "
-                       "degrees)")
-    if taken:
-        changes.append("the emphasis taken out where the body would lose its balance: " + ", ".join(
-            f"{'every part' if part == 'all' else part} on {share:.0%} of the frames" for part, share in taken.items()))
-    return fixed, changes
-
-
-def _centred(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """``x`` convolved with ``kernel``, centred, as long as ``x`` (whichever is longer)."""
-    full = np.convolve(x, kernel, mode="full")
-    start = (len(kernel) - 1) // 2
-    return full[start:start + len(x)]
-
-
-def _emphasis_kept(base: Clip, demo: Clip, fixed: Clip) -> float:
-    """The RMS of the repaired motion's difference from the base over the emphatic one's."""
-    n = min(base.n_frames, demo.n_frames, fixed.n_frames)
-    chans = [c for c in (base.group("motion") or base.channels) if c in demo.channels]
-    idx = [demo.channels.index(c) for c in chans]
-    b = base.resample(demo.fps).data[:n][:, [base.channels.index(c) for c in chans]] if base.n_frames != demo.n_frames \
-        else base.data[:n][:, [base.channels.index(c) for c in chans]]
-    full = np.sqrt(np.mean((demo.data[:n][:, idx] - b) ** 2))
-    return float(np.sqrt(np.mean((fixed.data[:n][:, idx] - b) ** 2)) / full) if full > 0 else 1.0
 
 
 def _d_cop(target_cog: np.ndarray, attempt_cog: np.ndarray) -> float:
@@ -521,7 +315,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
     def why_not(demo: Clip) -> str | None:
         if session.check and session.target_report:
             report, _ = ports.perform(demo)
-            worse = _worse(report, session.target_report, session.target)
+            worse = worse_than_target(report, session.target_report, session.target)
             if worse is not None:
                 return worse
         return session.effort.beyond(effort_of(demo)) if session.effort is not None else None
@@ -533,7 +327,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
             return None  # only the simulator's check is repaired; felt effort is met by a lower alpha
         fixed, changes = make_feasible(base, demo, ports.perform(demo)[0], session.target_report, session.target,
                                        lambda c: ports.perform(c)[0], lambda c: ports.plant(c, base))
-        share = _emphasis_kept(base, demo, fixed) if changes else 0.0
+        share = emphasis_kept(base, demo, fixed) if changes else 0.0
         return (fixed, share, changes) if share >= MIN_KEPT and why_not(fixed) is None else None
 
     shown, reduced, kept = alpha, False, None
