@@ -219,6 +219,8 @@ def test_planting_puts_the_feet_back_where_the_reference_stands(bundled):
     assert np.abs(heights(lifted) - heights(ref))[standing].max() > 0.10
     planted, changes = plant_feet(body, ref, lifted)
     assert changes["planted"] and changes["stance_error_m"] < 0.02
+    again, _ = plant_feet(body, ref, lifted)  # the reference's stance kept from the first call: the same motion
+    np.testing.assert_array_equal(again.data, planted.data)
     assert np.abs(heights(planted) - heights(ref))[standing].max() < 0.03
     assert 0.08 < changes["root_height_change_m"] < 0.14
     above = [i for i, c in enumerate(ref.channels) if c.split(".")[0] in ("lhumerus", "rhumerus", "thorax", "head")]

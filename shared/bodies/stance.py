@@ -26,6 +26,8 @@ where the target stands allows.
 
 from __future__ import annotations
 
+import threading
+
 import mujoco
 import numpy as np
 
@@ -77,6 +79,30 @@ def _smoothed(delta: np.ndarray, fps: float) -> np.ndarray:
     return np.stack([np.convolve(pad[:, c], kernel, mode="valid") for c in range(delta.shape[1])], axis=1)
 
 
+_REFERENCES: dict = {}  # the last references' stance geometry: a repair plants many motions on one target
+_REFERENCES_LOCK = threading.Lock()  # the simulator answers requests in threads
+
+
+def _reference(body: Body, reference: Clip, fps: float, n: int):
+    """The reference on the motion's ``n`` frames: the support points (``foot_anchors``), their
+    positions (n, points, 3) and the centre of gravity (n, 3); kept for the last 4 references."""
+    key = (id(body.model), hash(reference.data.tobytes()), reference.fps, fps, n)
+    with _REFERENCES_LOCK:
+        hit = _REFERENCES.get(key)
+    if hit is not None and hit[0] is body.model:
+        return hit[1:]
+    ref = reference.resample(fps) if reference.fps != fps else reference
+    grid = np.linspace(0, ref.n_frames - 1, n).round().astype(int)
+    ref_q = _qpos_trajectory(body, ref)[grid]
+    anchors = foot_anchors(body)
+    out = (anchors, foot_points(body, ref_q, anchors), _centres_of_gravity(body, ref_q))
+    with _REFERENCES_LOCK:
+        while len(_REFERENCES) >= 4:
+            _REFERENCES.pop(next(iter(_REFERENCES)))
+        _REFERENCES[key] = (body.model, *out)
+    return out
+
+
 def plant_feet(body: Body, reference: Clip, motion: Clip) -> tuple[Clip, dict]:
     """``motion`` with its feet where ``reference`` has them on the ground (module docstring).
 
@@ -91,13 +117,8 @@ def plant_feet(body: Body, reference: Clip, motion: Clip) -> tuple[Clip, dict]:
     if not body.feet or root_up is None or root_up not in motion.channels:
         return motion, {"planted": False, "why": "no feet, no free root or no root height channel"}
     m = body.model
-    ref = reference.resample(motion.fps) if reference.fps != motion.fps else reference
     n = motion.n_frames
-    grid = np.linspace(0, ref.n_frames - 1, n).round().astype(int)
-    ref_q = _qpos_trajectory(body, ref)[grid]
-    anchors = foot_anchors(body)
-    ref_pts = foot_points(body, ref_q, anchors)
-    ref_cog = _centres_of_gravity(body, ref_q)
+    anchors, ref_pts, ref_cog = _reference(body, reference, motion.fps, n)
     ground = float(ref_pts[..., up].min())
     stance = ref_pts[..., up] < ground + CONTACT_BAND  # (n, points)
     goal = ref_pts[..., up]
@@ -166,7 +187,8 @@ def plant_feet(body: Body, reference: Clip, motion: Clip) -> tuple[Clip, dict]:
         if d.limits is not None:
             data_out[:, i] = np.clip(data_out[:, i], np.minimum(d.limits[0], before), np.maximum(d.limits[1], before))
     planted = motion.with_data(data_out)
-    after = foot_points(body, _qpos_trajectory(body, planted), anchors)[..., up]
+    q[:, adr] += delta  # the planted motion's positions, as the body is driven by them
+    after = foot_points(body, q, anchors)[..., up]
     miss = np.abs(after - goal)[stance]
     return planted, {"planted": True, "stance_frames": int(stance.any(axis=1).sum()),
                      "root_height_change_m": float(np.abs(delta[:, 0]).max()),
