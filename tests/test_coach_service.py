@@ -53,6 +53,7 @@ def test_every_coach_verb_answers_within_its_contract(coach_services, client_of,
     t = _ok(contract.ATTEMPT, c.request("coach", "attempt", {"session": "me", "clips": [clip_to_wire(x) for x in other]}))
     assert t["trial"] == 1 and t["d_p"] > 0 and t["emphatic"]["channels"] == squat.channels and t["adverb"] in (
         None, "a little more", "more", "much more")
+    assert t["emphatic"].get("skeleton"), t["feasibility"]  # repaired or not, a motion a viewer can play as BVH
     fits = {
         "aeu1": {"first_trial_dp": [10.0, 20.0, 30.0]},
         "emu1c": {"simulated_coach": {"n": 50, "alpha": 1.5, "seed": 2}},

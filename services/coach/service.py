@@ -71,7 +71,7 @@ class BusCoachPorts:
             return clip, {"planted": False, "why": "the target has no skeleton"}
         r = self.c.request("simulator", "plant", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False),
                                                   "reference": clip_to_wire(reference, False)})
-        return clip_from_wire(r["clip"]), r["changes"]
+        return clip_from_wire(r["clip"], clip.skeleton), r["changes"]
 
     def effort(self, clip):
         if self.skeleton is None:
