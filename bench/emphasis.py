@@ -7,10 +7,9 @@ does (policy fixed alpha 2 with the Table 4.1 adverb, feasibility check on, resi
 Every demonstration shown is performed again by the simulator, apart from the coach, and judged
 against the target by the same tests (joint limits, static and dynamic balance).
 Per class: the share of trials that showed emphasis (alpha_shown times the share of the emphasis
-a repair kept >= 1; goal >= 90 %), how many
-were made feasible by the repair (joint angles held at limits, emphasis taken out of phases
-where the balance fails) and the mean share of the emphasis they kept, how many still had
-alpha lowered, and why. Writes ``bench/results/emphasis.*``.
+a repair kept >= 1; goal >= 90 %), how many were made feasible by the repair
+(``shared.coaching.feasibility.make_feasible``) and the mean share of the emphasis they kept,
+how many had their feet planted or were shown slower, how many still had alpha lowered, and why. Writes ``bench/results/emphasis.*``.
 """
 
 from __future__ import annotations

@@ -40,8 +40,6 @@ from shared.skeleton import Skeleton
 LEG_DAMPING = 1e-3
 ROOT_DAMPING = 1e-4
 ITERATIONS = 6
-#: weight of a standing foot's place under the centre of gravity (the reference's) against its height
-PLACE_WEIGHT = 1.0
 SMOOTH_S = 0.2
 
 
@@ -168,8 +166,8 @@ def plant_feet(body: Body, reference: Clip, motion: Clip) -> tuple[Clip, dict]:
                 res.append(p[up] - target)
                 if stance[t, k]:  # where the foot stands under the body
                     for i in plane:
-                        rows.append(PLACE_WEIGHT * (jacp[i, cols] - jacc[i, cols]))
-                        res.append(PLACE_WEIGHT * ((p[i] - c[i]) - (ref_pts[t, k, i] - ref_cog[t, i])))
+                        rows.append(jacp[i, cols] - jacc[i, cols])  # weighed like its height
+                        res.append((p[i] - c[i]) - (ref_pts[t, k, i] - ref_cog[t, i]))
             if not rows:
                 break
             j, r = np.array(rows), np.array(res)
