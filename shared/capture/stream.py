@@ -106,6 +106,9 @@ class ReplaySource:
             except OSError:
                 return
             self.served += 1
+            if self.connections is not None and self.served >= self.connections:
+                self._sock.close()  # the last connection: stop listening before it ends, so a reconnect
+                # racing the end of the stream finds no one (not a backlog the close then resets)
             with conn:
                 try:
                     self._play(conn)
