@@ -62,7 +62,7 @@ def main(argv=None) -> int:
             clip = load_clip(f).resample(30.0)
             body = bodies.setdefault(clip.skeleton.to_json(), human_body(clip.skeleton))
             takes.append((clip, perform(body, clip)[1], _features(clip)))
-        for (t_clip, t_rep, t_x), (m_clip, m_rep, m_x) in itertools.permutations(takes, 2):
+        for (_, t_rep, t_x), (m_clip, m_rep, m_x) in itertools.permutations(takes, 2):
             path, _ = dtw_alignment_path(t_x, m_x)
             match = _match(path, m_clip.n_frames)
             for kind in KINDS:

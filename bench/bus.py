@@ -32,6 +32,7 @@ import numpy as np
 
 from bench.common import concurrent, parse_args, private_cluster, stats, write_results
 
+
 def raw_zenoh_roundtrip(settings, n=300, size=100_000) -> dict:
     import zenoh
 

@@ -10,6 +10,8 @@ file order.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 
@@ -29,7 +31,7 @@ def _axis_matrices(axis: str, deg: np.ndarray) -> np.ndarray:
 
 def read_positions(path) -> tuple[list[str], np.ndarray]:
     """(joint names, positions (T, J, 3)) of a BVH file, in its own units and axes."""
-    text = open(path, encoding="latin-1").read()
+    text = Path(path).read_text(encoding="latin-1")
     head, motion = text.split("MOTION", 1)
     toks = head.replace("{", " { ").replace("}", " } ").split()
     names, parents, offsets, chans = [], [], [], []

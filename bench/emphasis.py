@@ -36,7 +36,7 @@ def targets(hdm05) -> dict:
 
 def main(argv=None) -> int:
     args = parse_args(__doc__, argv)
-    from schemas.common import clip_from_wire, clip_to_wire
+    from schemas.common import clip_to_wire
     from shared.bus.client import Client
     from shared.coaching.feasibility import worse_than_target
     from shared.io import load_clip
@@ -47,7 +47,7 @@ def main(argv=None) -> int:
             clip = load_clip(path).resample(30.0)
             target, skeleton = clip_to_wire(clip), clip.skeleton.to_json()
 
-            def report(wire):
+            def report(wire, skeleton=skeleton):
                 return c.request("simulator", "perform", {"skeleton": skeleton, "clip": wire}, timeout=120)["report"]
 
             target_report = report(clip_to_wire(clip, False))

@@ -163,7 +163,6 @@ def main(argv=None) -> int:
     from schemas import CONTRACTS
     from schemas.common import clip_to_wire
     from shared.bus.client import Client, RemoteError, Unavailable
-    from shared.codec import pack
     from shared.io import find_clips, load_clip
 
     cases = [(service, verb, payload) for service, contract in sorted(CONTRACTS.items())

@@ -70,7 +70,7 @@ def cluster(plain: bool, queue: int | None = None):
         for n in ("router", *SERVICES):
             module = "shared.bus.router" if n == "router" else f"services.{n}"
             procs[n] = subprocess.Popen([sys.executable, "-m", module], env=envs[n], cwd=REPO,
-                                        stdout=subprocess.DEVNULL, stderr=open(logs / f"{n}.log", "w"))
+                                        stdout=subprocess.DEVNULL, stderr=open(logs / f"{n}.log", "w"))  # noqa: SIM115 (the child holds it)
         os.environ.clear()
         os.environ.update(envs["cli"])
         from shared.bus.client import Client

@@ -36,7 +36,7 @@ def rss_mb(pid: int) -> float:
 
 
 def cluster_pids(s) -> dict[str, int]:
-    from shared.cluster import read_pid
+    from shared.bus.pidfiles import read_pid
 
     out = {}
     for f in sorted(s.run_dir.glob("*.pid")):
@@ -108,7 +108,7 @@ def main(argv=None) -> int:
     for i, row in enumerate(res["bursts"]):
         md.append(f"| {i + 1} | {row['answered']}/{args.clients} | {row['shm_mb']:.1f} MB | "
                   + " | ".join(f"{row['rss_mb'].get(n, 0):.0f} MB" for n in first["rss_mb"]) + " |")
-    md += ["", f"Growth from burst 1 to burst 2: " + ", ".join(f"{n} {100 * g:+.1f} %" for n, g in growth.items()),
+    md += ["", "Growth from burst 1 to burst 2: " + ", ".join(f"{n} {100 * g:+.1f} %" for n, g in growth.items()),
            "", f"Long run, burst 1 to burst {len(res['bursts'])} ({sessions} more sessions), KB per session: "
                + ", ".join(f"{n} {k:+.1f}" for n, k in slope.items()),
            "", f"Goal (within 10 % of the first burst): /dev/shm {'met' if shm_ok else 'missed'}, "

@@ -7,7 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from bench.common import parse_args, write_results
-from shared.evaluation import evaluate, report_markdown, write_report
+from shared.evaluation import evaluate
+from shared.evaluation_report import report_markdown, write_report
 from shared.io import find_clips, load_clip
 
 

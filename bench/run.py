@@ -71,7 +71,7 @@ def _stretch(clip, factor):
 def _fit_decision(space) -> None:
     """What the pss service fits before it saves a new space: recognition's calibration, discriminant
     ratio and novelty model (:mod:`shared.pss.recognition`; otherwise fitted on first recognition)."""
-    space.calibration, space.discriminant, space.novelty_model
+    _ = space.calibration, space.discriminant, space.novelty_model  # properties that fit on first use
 
 
 def main(argv=None) -> int:
@@ -91,7 +91,7 @@ def main(argv=None) -> int:
     trial = {"frames": [len(r) for r in reps], "features": reps[0].shape[1], "states": 15,
              "features_with_positions": full[0].shape[1]}
     for backend in ("banded", "hmmlearn"):
-        trial[backend] = _time(lambda: fit_hmm(reps, 15, backend=backend), 10 if backend == "banded" else 3)
+        trial[backend] = _time(lambda backend=backend: fit_hmm(reps, 15, backend=backend), 10 if backend == "banded" else 3)
     trial["banded_with_positions"] = _time(lambda: fit_hmm(full, 15), 10)
     res["trial_training"] = trial
     print(f"HMM training, one trial {trial['frames']} frames x {trial['features']} features: "
@@ -124,15 +124,15 @@ def main(argv=None) -> int:
         sp = ProtoSymbolSpace.build(sub, dim=3, n_states=space.params.n_states)
         _fit_decision(sp)
         b = time.perf_counter() - t0
-        r = _time(lambda: sp.recognize(probe), 10)
+        r = _time(lambda sp=sp: sp.recognize(probe), 10)
         growth["clips"].append({"n": n, "build_s": b, "recognize_ms": r["median_ms"]})
     base = feats.encode(kicks[0])
     for frames in (100, 200, 400, 800):
         x = np.vstack([base] * (frames // len(base) + 1))[:frames]
-        growth["frames"].append({"n": frames, "train_ms": _time(lambda: fit_hmm([x], 15), 5)["median_ms"]})
+        growth["frames"].append({"n": frames, "train_ms": _time(lambda x=x: fit_hmm([x], 15), 5)["median_ms"]})
     for d in (20, 60, 119):
         x = base[:, :d]
-        growth["channels"].append({"n": d, "train_ms": _time(lambda: fit_hmm([x] * 5, 15), 5)["median_ms"]})
+        growth["channels"].append({"n": d, "train_ms": _time(lambda x=x: fit_hmm([x] * 5, 15), 5)["median_ms"]})
     res["growth"] = growth
 
     lines = [

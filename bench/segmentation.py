@@ -114,7 +114,7 @@ def cmu_set(root: Path, windows: int = 4, seconds: float = 2.0):
         targets[f"window{w}"] = own.frames(a, b)
         part = metres.frames(a, b)
         reps = []
-        for k in range(5):
+        for _ in range(5):
             rate = float(r.uniform(0.8, 1.25))
             reps.append(replace(part.resample(part.fps / rate), fps=part.fps))
         takes[f"window{w}"] = join(reps, seed=w)

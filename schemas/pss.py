@@ -5,7 +5,22 @@ Keys: ``<prefix>/pss/<verb>`` for requests; ``<prefix>/events/pss/space`` for ch
 
 from __future__ import annotations
 
-from schemas.base import AnyMap, Array, Bool, Bytes, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str, NAME_PATTERN
+from schemas.base import (
+    NAME_PATTERN,
+    AnyMap,
+    Array,
+    Bool,
+    Bytes,
+    Endpoint,
+    F,
+    Float,
+    Int,
+    List,
+    Map,
+    MapOf,
+    Message,
+    Str,
+)
 from schemas.common import CLIP, name
 from shared.clipfiles import FILE_PATTERN, READING_OPTIONS
 from shared.errors import BadInput
@@ -58,8 +73,8 @@ CLIP_FILE = Map({
     "skeleton": F(Bytes(), "an AMC file's skeleton: the ASF file's bytes", required=False),
 })
 
-#: how clip files are read (the CLI's --units, --up, --translations; README "Files from other
-#: tools"); the readers refuse a value they do not know, naming the ones they do
+#: how clip files are read (the CLI's --units, --up, --translations; docs/files.md); the
+#: readers refuse a value they do not know, naming the ones they do
 READING = {k: F(Str(max_len=16), f"clip files' {k} (default: read off the file)", required=False)
            for k in READING_OPTIONS}
 

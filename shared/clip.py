@@ -69,13 +69,13 @@ class Clip:
     def group(self, name: str) -> list[str]:
         return list(self.groups.get(name, []))
 
-    def with_data(self, data: np.ndarray, **changes) -> "Clip":
+    def with_data(self, data: np.ndarray, **changes) -> Clip:
         return replace(self, data=np.asarray(data, dtype=float), **changes)
 
-    def frames(self, start: int, stop: int | None = None) -> "Clip":
+    def frames(self, start: int, stop: int | None = None) -> Clip:
         return self.with_data(self.data[start:stop].copy())
 
-    def add_channels(self, names: list[str], values: np.ndarray, group: str) -> "Clip":
+    def add_channels(self, names: list[str], values: np.ndarray, group: str) -> Clip:
         """A new clip with extra channels (e.g. torques) appended to ``group``."""
         values = np.asarray(values, dtype=float)
         if values.shape != (self.n_frames, len(names)):
@@ -85,7 +85,7 @@ class Clip:
         return replace(self, data=np.hstack([self.data, values]), channels=self.channels + list(names), groups=groups)
 
     # ------------------------------------------------------------------ time
-    def resample(self, fps: float) -> "Clip":
+    def resample(self, fps: float) -> Clip:
         """Linear resampling to ``fps`` over the same duration (angles are continuous, so
         linear interpolation never crosses a wrap)."""
         if not (np.isfinite(fps) and fps > 0):

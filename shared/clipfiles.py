@@ -1,5 +1,6 @@
 """Clip files as they lie on disk, without reading them: where an AMC file's skeleton is, and
-a clip's files packed raw for the bus (the pss service reads them, :func:`read_wire_files`).
+a clip's files packed raw for the bus (the pss service reads them with
+:func:`shared.io.wire.read_wire_files`).
 
 Nothing here imports numpy: ``mirrorcoach space recognize`` sends the files as they are and
 starts in well under 150 ms (issue 11); the reading happens once, in the service.
@@ -11,7 +12,7 @@ import re
 from pathlib import Path
 
 from shared.codec import DEFAULT_MAX_PAYLOAD
-from shared.errors import BadInput, ClipFormatError
+from shared.errors import ClipFormatError
 
 #: what the bus accepts as a clip file's name: a plain name with a clip suffix (never a path)
 FILE_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}\.(amc|bvh|npz|AMC|BVH|NPZ)"
@@ -77,35 +78,3 @@ def wire_file(path, skeleton=None, limit: int = DEFAULT_MAX_PAYLOAD) -> dict:
     if path.suffix.lower() == ".amc":
         out["skeleton"] = _read_bytes(Path(skeleton) if skeleton is not None else find_skeleton(path), limit)
     return out
-
-
-def read_wire_files(files: list[dict], reading: dict | None = None) -> list:
-    """The clips of :func:`wire_file` entries, read as :func:`shared.io.load_clip` reads files
-    (``reading``: units, up, translations), from a private temporary folder."""
-    import tempfile
-
-    from shared.io import load_clip
-
-    reading = {k: v for k, v in (reading or {}).items() if v is not None}
-    clips = []
-    with tempfile.TemporaryDirectory(prefix="mc-files-") as tmp:
-        for i, f in enumerate(files):
-            if not re.fullmatch(FILE_PATTERN, f["name"]):
-                raise BadInput(f"files[{i}].name: {f['name']!r} is not a clip file name (NAME.amc, .bvh or .npz)",
-                               field=f"files[{i}].name")
-            folder = Path(tmp) / str(i)
-            folder.mkdir()
-            path = folder / f["name"]
-            path.write_bytes(f["data"])
-            skeleton = None
-            if path.suffix.lower() == ".amc":
-                if f.get("skeleton") is None:
-                    raise BadInput(f"files[{i}]: an AMC file needs its skeleton (the ASF file's bytes)",
-                                   field=f"files[{i}].skeleton")
-                skeleton = folder / "skeleton.asf"  # read once per content (shared.io.load_skeleton)
-                skeleton.write_bytes(f["skeleton"])
-            try:
-                clips.append(load_clip(path, skeleton=skeleton, **reading))
-            except ClipFormatError as e:  # name the user's file, not the temporary copy
-                raise BadInput(f"{f['name']}: {e.reason}", field=f"files[{i}]") from None
-    return clips

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import ctypes
-import fcntl
 import logging
 import os
 import signal
@@ -37,6 +36,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from shared.bus.config import Settings
+from shared.bus.pidfiles import (
+    local_state,
+    lock_path,
+    pid_alive,
+    read_pid,
+    supervisor_running,
+    take_lock,
+    write_pid,
+)
 from shared.errors import MirrorcoachError
 
 PLAN = Path(__file__).resolve().parent.parent / "deploy" / "cluster.toml"
@@ -67,72 +75,7 @@ def load_plan(path: Path = PLAN) -> list[Proc]:
     return procs
 
 
-def _proc_stat(pid: int) -> tuple[str, str] | None:
-    """(state, start time in clock ticks since boot) of a process, or None if there is none."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            fields = f.read().rsplit(")", 1)[1].split()
-    except (OSError, IndexError):
-        return None
-    return fields[0], fields[19]
-
-
-def _pid_alive(pid: int) -> bool:
-    st = _proc_stat(pid)
-    return st is not None and st[0] not in "ZX"  # a zombie child of ours is not alive
-
-
-def write_pid(path: Path, pid: int) -> None:
-    """``PID STARTTIME``: the start time tells our process from a later one given the same pid."""
-    st = _proc_stat(pid)
-    path.write_text(f"{pid} {st[1] if st else 0}\n")
-
-
-def read_pid(path: Path) -> int | None:
-    """The pid in ``path`` if that very process (same start time) still runs, else None."""
-    try:
-        pid, start = path.read_text().split()
-        pid = int(pid)
-    except (OSError, ValueError):
-        return None
-    st = _proc_stat(pid)
-    return pid if st is not None and st[0] not in "ZX" and st[1] == start else None
-
-
-def _lock_path(s: Settings) -> Path:
-    return s.run_dir / "supervisor.lock"
-
-
-def take_lock(s: Settings, tries: int = 20) -> int | None:
-    """The supervisor's lock (an open fd, held until the process ends), or None when another
-    supervisor holds it. Retries for about a second: ``supervisor_running`` probes it briefly."""
-    fd = os.open(_lock_path(s), os.O_RDWR | os.O_CREAT, 0o600)
-    for _ in range(tries):
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            return fd
-        except BlockingIOError:
-            time.sleep(0.05)
-    os.close(fd)
-    return None
-
-
-def supervisor_running(s: Settings) -> bool:
-    """Whether a supervisor holds this home's lock (a probe with a shared lock, released at once)."""
-    try:
-        fd = os.open(_lock_path(s), os.O_RDONLY)
-    except FileNotFoundError:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-        return False
-    except BlockingIOError:
-        return True
-    finally:
-        os.close(fd)
-
-
-def reap_orphans(s: Settings, plan: list["Proc"], echo=print, grace_s: float = 15.0) -> None:
+def reap_orphans(s: Settings, plan: list[Proc], echo=print, grace_s: float = 15.0) -> None:
     """Children of a supervisor that died (their pid files, same start time) are stopped:
     they got SIGTERM from the kernel and are finishing; after ``grace_s`` they get SIGKILL."""
     pids = {p.name: read_pid(s.run_dir / f"{p.name}.pid") for p in plan}
@@ -145,10 +88,10 @@ def reap_orphans(s: Settings, plan: list["Proc"], echo=print, grace_s: float = 1
             except ProcessLookupError:
                 pass
         deadline = time.monotonic() + grace_s
-        while any(_pid_alive(pid) for pid in left.values()) and time.monotonic() < deadline:
+        while any(pid_alive(pid) for pid in left.values()) and time.monotonic() < deadline:
             time.sleep(0.1)
         for name, pid in left.items():
-            if _pid_alive(pid):
+            if pid_alive(pid):
                 echo(f"{name} (pid {pid}) did not stop in {grace_s:g} s; killing it")
                 os.kill(pid, signal.SIGKILL)
     for p in plan:
@@ -191,7 +134,7 @@ class Supervisor:
         self.s.run_dir.mkdir(parents=True, exist_ok=True)
         lock = take_lock(self.s)
         if lock is None:
-            log.error("another supervisor runs this cluster (it holds %s); exiting", _lock_path(self.s))
+            log.error("another supervisor runs this cluster (it holds %s); exiting", lock_path(self.s))
             return 3
         reap_orphans(self.s, self.plan, echo=log.warning)
         write_pid(self.s.run_dir / "supervisor.pid", os.getpid())
@@ -272,22 +215,6 @@ def status(settings: Settings | None = None) -> list[dict]:
         rows.append({"name": p.name, "pid": read_pid(s.run_dir / f"{p.name}.pid"), "alive": up,
                      "state": "down" if state == "running" else state})
     return rows
-
-
-def local_state(s: Settings, name: str) -> tuple[str, str]:
-    """What this host knows of a process of the cluster from its pid files: ``("frozen",
-    detail)`` (stopped by SIGSTOP or a debugger), ``("running", detail)``, ``("restarting",
-    detail)`` (its supervisor runs, the process does not), or ``("down", "")``. Used to name
-    the cause when a service does not answer (issue 17, row 12)."""
-    pid = read_pid(s.run_dir / f"{name}.pid")
-    if pid is not None:
-        st = _proc_stat(pid)
-        if st is not None and st[0] in "Tt":
-            return "frozen", f"process {pid} is stopped"
-        return "running", f"process {pid}"
-    if supervisor_running(s):
-        return "restarting", f"the supervisor starts it again; its log: {s.log_dir / (name + '.log')}"
-    return "down", ""
 
 
 def private_home(s: Settings) -> None:
@@ -402,13 +329,13 @@ def down(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> 
         return 0
     sup = read_pid(s.run_dir / "supervisor.pid")
     if sup is None:  # the lock is held, but the pid file does not name a live process of ours
-        echo(f"error: a supervisor holds {_lock_path(s)} but {s.run_dir / 'supervisor.pid'} does not name it; "
-             f"find it with `fuser {_lock_path(s)}`")
+        echo(f"error: a supervisor holds {lock_path(s)} but {s.run_dir / 'supervisor.pid'} does not name it; "
+             f"find it with `fuser {lock_path(s)}`")
         return 1
     os.kill(sup, signal.SIGTERM)
     deadline = time.monotonic() + wait_s
     while time.monotonic() < deadline:
-        if not _pid_alive(sup):
+        if not pid_alive(sup):
             echo("cluster stopped")
             return 0
         time.sleep(0.1)

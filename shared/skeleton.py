@@ -60,7 +60,7 @@ class Joint:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Joint":
+    def from_dict(cls, d: dict) -> Joint:
         return cls(
             name=str(d["name"]),
             parent=int(d["parent"]),
@@ -100,7 +100,7 @@ class Skeleton:
     def children(self, i: int) -> list[int]:
         return [k for k, j in enumerate(self.joints) if j.parent == i]
 
-    def check(self) -> "Skeleton":
+    def check(self) -> Skeleton:
         """A tree a reader could have made, or :class:`BadInput` naming the first fault: 1 to
         ``MAX_JOINTS`` joints with unique names, one root first and every joint after its
         parent (so no cycle), known degrees of freedom, an Euler order of x, y, z, finite
@@ -284,7 +284,7 @@ class Skeleton:
         )
 
     @classmethod
-    def from_json(cls, text: str) -> "Skeleton":
+    def from_json(cls, text: str) -> Skeleton:
         try:
             d = json.loads(text)
         except RecursionError:  # a payload nested past the parser's stack: refused like any bad JSON

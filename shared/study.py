@@ -255,7 +255,7 @@ def seat_statistics(rows: list[dict]) -> dict:
     (fig. 5.4, 5.5), Table 5.1 (ANOVA and Tukey-Kramer on the pooled d_p by adverb) and, from
     the demonstrations, EMU-Model 1 per coach (eq. 5.5, and eq. 5.9 corrected on d_h)."""
     from shared.coaching.policies import fit_emu1, fit_emu1_corrected
-    from shared.reproduce.coaching import tukey_table
+    from shared.reproduce.coaching_stats import tukey_table
 
     by = {a: [r["d_p"] for r in rows if r["adverb"] == a] for a in ADVERB_CHOICES}
     coaches = sorted({r["coach"] for r in rows})
@@ -274,7 +274,8 @@ def seat_statistics(rows: list[dict]) -> dict:
 
 def seat_report(rows: list[dict], folder: Path) -> list[str]:
     """The coach seat's section of a study report, with figs. 5.4-5.6 written beside it."""
-    from shared.reproduce.coaching import _fig, tukey_markdown
+    from shared.reproduce.coaching_report import plot_figure
+    from shared.reproduce.coaching_stats import tukey_markdown
 
     st = seat_statistics(rows)
     lines = ["## Coach seat (chapter 5)", "", "| adverb | answers | mean d_p | sd |", "|---|---|---|---|"]
@@ -284,16 +285,16 @@ def seat_report(rows: list[dict], folder: Path) -> list[str]:
     lines += ["", *(["**Table 5.1**:", "", *tukey_markdown(st["table_5_1"])] if st["table_5_1"] else
                     ["Table 5.1 needs at least two answers for every adverb."]), ""]
     y = {a: k for k, a in enumerate(ADVERB_CHOICES)}
-    f54 = _fig(Path(folder) / "fig5_4.png", "d_p of each attempt and the adverb said (fig. 5.4)", "d_p", "adverb",
+    f54 = plot_figure(Path(folder) / "fig5_4.png", "d_p of each attempt and the adverb said (fig. 5.4)", "d_p", "adverb",
                {c: ([r["d_p"] for r in rows if r["coach"] == c], [y[r["adverb"]] for r in rows if r["coach"] == c],
                     None, "o") for c in st["per_coach"]}, None)
-    f55 = _fig(Path(folder) / "fig5_5.png", "mean d_p per adverb (fig. 5.5)", "adverb (0 a little more, 1 more, "
+    f55 = plot_figure(Path(folder) / "fig5_5.png", "mean d_p per adverb (fig. 5.5)", "adverb (0 a little more, 1 more, "
                "2 much more)", "d_p", {c: ([y[a] for a, v in per.items() if v], [np.mean(v) for v in per.values() if v],
                                         None, "o-") for c, per in st["per_coach"].items()}, [0, 1, 2])
     lines += [f"![fig. 5.4]({f54}) ![fig. 5.5]({f55})", ""]
     demos = [r for r in rows if "d_s" in r]
     if demos:
-        f56 = _fig(Path(folder) / "fig5_6.png", "d_s against d_p, per coach (fig. 5.6)", "d_p", "d_s",
+        f56 = plot_figure(Path(folder) / "fig5_6.png", "d_s against d_p, per coach (fig. 5.6)", "d_p", "d_s",
                    {c: ([r["d_p"] for r in demos if r["coach"] == c], [r["d_s"] for r in demos if r["coach"] == c],
                         None, "o") for c in sorted({r["coach"] for r in demos})}, None)
         lines += [f"![fig. 5.6]({f56})", "", "| coach | demonstrations | EMU-Model 1, eq. 5.5 | corrected, eq. 5.9 |",
@@ -306,7 +307,7 @@ def seat_report(rows: list[dict], folder: Path) -> list[str]:
 def sweep_report(p: dict, events: list[dict], folder: Path) -> list[str]:
     """The alpha sweep's section of a study report (figs. 5.7, 5.8 for people): R at the last
     trial per participant and alpha, its mean, and each participant's EMU-Model 2 alphas."""
-    from shared.reproduce.coaching import _fig
+    from shared.reproduce.coaching_report import plot_figure
 
     done = trials_of(events)
     people = list(p["participants"])
@@ -334,11 +335,11 @@ def sweep_report(p: dict, events: list[dict], folder: Path) -> list[str]:
                  "two alphas on both sides yet") + ". `study init --cases 5,6 --emu2 " + str(folder)
               + "` coaches them with these alphas.", ""]
     if series:
-        f57 = _fig(Path(folder) / "fig5_7.png", f"{last} against alpha, mean over participants (fig. 5.7)", "alpha",
+        f57 = plot_figure(Path(folder) / "fig5_7.png", f"{last} against alpha, mean over participants (fig. 5.7)", "alpha",
                    last, series, list(SWEEP_ALPHAS))
         lines.append(f"![fig. 5.7]({f57})")
     if emu2:
-        f58 = _fig(Path(folder) / "fig5_8.png", "EMU-Model 2's alpha per participant (fig. 5.8)", "participant",
+        f58 = plot_figure(Path(folder) / "fig5_8.png", "EMU-Model 2's alpha per participant (fig. 5.8)", "participant",
                    "best alpha of the sweep", {"without adverb": (list(range(len(emu2))), [v[0] for v in emu2.values()],
                                                                   None, "o"),
                                                "with adverb": (list(range(len(emu2))), [v[1] for v in emu2.values()],

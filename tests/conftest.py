@@ -179,7 +179,7 @@ def state_files(env) -> dict:
             if p.is_file()}
 
 
-def assert_refused(client, procs: "Processes", cases) -> None:
+def assert_refused(client, procs: Processes, cases) -> None:
     """Every case ``(name, service, verb, message, code)`` (message: a map, or raw bytes) gets a
     ``reply_err`` with that stable code, a readable message and no traceback; the service
     stays up."""
@@ -198,7 +198,7 @@ def assert_refused(client, procs: "Processes", cases) -> None:
         assert "Traceback" not in procs.log(service), service
 
 
-def kill_during(env: dict, procs: "Processes", service: str, module: str, request, ready, timeout: float = 120.0):
+def kill_during(env: dict, procs: Processes, service: str, module: str, request, ready, timeout: float = 120.0):
     """Run ``request(client)`` in a thread; once ``ready()`` is true, SIGKILL ``service`` and
     start it again. Returns the exception the request ended with (it must end, not hang)."""
     import os

@@ -311,7 +311,7 @@ def test_no_demonstration_brings_a_fixed_step_learner_closer_than_the_target(squ
 def test_the_report_s_word_against_the_target_alone_is_computed_from_the_numbers():
     """Holm-adjusted paired tests of every condition against case 1: a condition clearly lower
     is named; in a world where nothing differs, none is."""
-    from shared.reproduce.coaching import against_target, holm, null_sentence
+    from shared.reproduce.coaching_report import against_target, holm, null_sentence
 
     np.testing.assert_allclose(holm([0.01, 0.04, 0.03, 0.005]), [0.03, 0.06, 0.06, 0.02])
     rng = np.random.default_rng(0)
@@ -333,7 +333,7 @@ def test_the_report_s_word_against_the_target_alone_is_computed_from_the_numbers
 
 
 def test_naive_bayes_across_tasks_is_reported_against_the_own_task():
-    from shared.reproduce.coaching import nb_transfer_lines
+    from shared.reproduce.coaching_report import nb_transfer_lines
 
     rng = np.random.default_rng(1)
     own = 1.0 + rng.uniform(0, 0.05, size=(10, 4))
@@ -350,7 +350,7 @@ def test_every_learner_family_has_a_sensitivity_sweep_of_its_own_parameters():
     from dataclasses import fields
 
     from shared.agents.learner import LearnerParams
-    from shared.reproduce.coaching import SENSITIVITY
+    from shared.reproduce.coaching_stats import SENSITIVITY
 
     assert set(SENSITIVITY) == set(FAMILIES)
     names = {f.name for f in fields(LearnerParams)}
@@ -361,7 +361,7 @@ def test_every_swept_parameter_changes_what_its_family_does(squat):
     """A sensitivity row whose parameter the family ignores would be three identical rows."""
     from dataclasses import asdict
 
-    from shared.reproduce.coaching import SENSITIVITY
+    from shared.reproduce.coaching_stats import SENSITIVITY
 
     base = population(1, 0)[0]
     demo = squat.with_data(squat.data * 1.2)

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from shared.bodies.body import _derivatives, _qpos_trajectory, perform
+from shared.bodies.body import perform, qpos_derivatives, qpos_trajectory
 from shared.bodies.human import human_body
 from shared.bodies.robot import robot, small_humanoid
 from shared.clip import Clip
@@ -37,8 +37,8 @@ def test_the_other_robot_feels_exactly_twice_the_selfs_torques():
 def _replay_accelerations(body, clip):
     """Feed the inverse-dynamics forces back through mj_forward: the accelerations come back."""
     m = body.model
-    q = _qpos_trajectory(body, clip)
-    v, a = _derivatives(m, q, clip.fps)
+    q = qpos_trajectory(body, clip)
+    v, a = qpos_derivatives(m, q, clip.fps)
     d = mujoco.MjData(m)
     worst = 0.0
     for t in range(0, len(q), 7):
@@ -66,7 +66,7 @@ def test_mujoco_kinematics_of_a_human_body_match_the_skeleton(bundled):
 
     clip = load_clip(bundled / "amc/rotateArmsBothBackward1Reps/HDM_bd_rotateArmsBothBackward1Reps_001_120.amc")
     body = human_body(clip.skeleton)
-    q = _qpos_trajectory(body, clip)
+    q = qpos_trajectory(body, clip)
     ours = clip.skeleton.forward_kinematics(clip.data, clip.channels, ends=False)
     ids = [mujoco.mj_name2id(body.model, mujoco.mjtObj.mjOBJ_BODY, j.name) for j in clip.skeleton.joints]
     d = mujoco.MjData(body.model)
@@ -139,14 +139,14 @@ def test_the_dynamic_balance_check_sees_what_the_static_one_cannot(bundled):
     pose held still it is the centre of gravity's ground projection (the weight, straight
     down); arms swung fast keep the centre of gravity over the feet but need a centre of
     pressure outside them, more often the faster they swing."""
-    from shared.bodies.body import _centre_of_pressure, _qpos_trajectory, _root_wrench, inverse_dynamics, perform
+    from shared.bodies.body import _centre_of_pressure, _root_wrench, inverse_dynamics, perform, qpos_trajectory
     from shared.bodies.human import human_body
     from shared.io import load_clip
 
     clip = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc").resample(30)
     body = human_body(clip.skeleton)
     still = clip.with_data(np.repeat(clip.data[10:11], 60, axis=0))
-    q = _qpos_trajectory(body, still)
+    q = qpos_trajectory(body, still)
     _, _, tau, cog = inverse_dynamics(body, q, still.fps)
     force, moment, origin = _root_wrench(body, q, tau)
     plane = [i for i in range(3) if i != body.up_axis]
@@ -213,7 +213,7 @@ def test_planting_puts_the_feet_back_where_the_reference_stands(bundled):
     up = body.up_axis
     lifted = _floating(ref, 12.0, slice(15, 30))
     anchors = foot_anchors(body)
-    heights = lambda c: foot_points(body, _qpos_trajectory(body, c), anchors)[..., up]  # noqa: E731
+    heights = lambda c: foot_points(body, qpos_trajectory(body, c), anchors)[..., up]  # noqa: E731
     ground = heights(ref).min()
     standing = heights(ref) < ground + 0.05
     assert np.abs(heights(lifted) - heights(ref))[standing].max() > 0.10

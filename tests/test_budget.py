@@ -53,9 +53,8 @@ def test_two_requests_that_fit_together_run_together():
 
 def test_a_request_that_can_never_fit_is_refused_at_once():
     b = budget(100)
-    with pytest.raises(BadInput) as e:
-        with b.reserve(80 * MB, "pss/generate", own_held=30 * MB):
-            pass
+    with pytest.raises(BadInput) as e, b.reserve(80 * MB, "pss/generate", own_held=30 * MB):
+        pass
     assert e.value.details["cause"] == "too_large" and "needs about 80 MB" in e.value.message
     assert b.reserved == 0
 
@@ -63,9 +62,8 @@ def test_a_request_that_can_never_fit_is_refused_at_once():
 def test_memory_held_by_payloads_in_flight_counts_and_a_long_wait_is_unavailable():
     held = {"bytes": 60 * MB}
     b = budget(100, wait_s=0.2, held=lambda: held["bytes"])
-    with pytest.raises(Unavailable) as e:
-        with b.reserve(50 * MB, "pss/recognize"):
-            pass
+    with pytest.raises(Unavailable) as e, b.reserve(50 * MB, "pss/recognize"):
+        pass
     assert e.value.details["cause"] == "memory" and "busy" in e.value.message
     held["bytes"] = 10 * MB
     with b.reserve(50 * MB, "pss/recognize"):

@@ -68,9 +68,8 @@ def test_a_group_imports_only_the_module_that_adds_it(bundled):
     assert groups_after("") == sorted(OWN_GROUPS)
     for name, groups in COMMAND_MODULES.items():
         added = set(groups_after(f"import shared.cli.{name}")) - set(OWN_GROUPS)
-        # a module may import another for its helpers (agents uses cluster's client): what it adds is its own
-        others = {g for m, gs in COMMAND_MODULES.items() if m != name for g in gs}
-        assert set(groups) <= added and not (added - set(groups)) - others, (name, added)
+        # command modules share helpers through shared.cli.common, never each other: a module adds its own alone
+        assert added == set(groups), (name, added)
     every = set(groups_after("from shared.cli.app import register\nregister()"))
     assert every == set(OWN_GROUPS) | {g for gs in COMMAND_MODULES.values() for g in gs}
 
@@ -85,8 +84,9 @@ def test_a_group_imports_only_the_module_that_adds_it(bundled):
         assert r.returncode == 0, r.stderr
         return set(r.stdout.splitlines()[-1].split()[1:])
 
-    assert loaded("clip", "info", bundled / SQUAT, "--json") == {"shared.cli.app", "shared.cli.entry"}
-    assert loaded("space", "--help") == {"shared.cli.app", "shared.cli.entry", "shared.cli.cluster"}
+    always = {"shared.cli.app", "shared.cli.common", "shared.cli.entry"}
+    assert loaded("clip", "info", bundled / SQUAT, "--json") == always
+    assert loaded("space", "--help") == always | {"shared.cli.cluster"}
     assert {f"shared.cli.{m}" for m in COMMAND_MODULES} <= loaded("--help")
 
 
@@ -219,7 +219,7 @@ def test_study_aeu_fits_thresholds_from_a_coach_seat_and_a_study_uses_them(bundl
     append(seat, {"event": "plan", "plan": {"participants": {}, "cases": [], "trials": 2, "seed": 0, "study": "s",
                                             "target": "t", "design": "-"}})
     words = ("a little more", "more", "much more")
-    for k, d in enumerate(np.linspace(10, 100, 24)):
+    for d in np.linspace(10, 100, 24):
         append(seat, {"event": "seat", "coach": "c1", "d_p": float(d), "adverb": words[int(d > 40) + int(d > 70)]})
         append(seat, {"event": "seat", "coach": "back", "d_p": float(d), "adverb": words[2 - int(d > 40) - int(d > 70)]})
     r = run("study", "aeu", seat, "--json")

@@ -136,7 +136,7 @@ def test_cli_end_to_end_on_the_cluster(cluster, bundled, tmp_path):
     assert r.returncode == 0, r.stderr
     rec = json.loads(r.stdout)
     assert rec["label"] == "squat1Reps" and len(rec["point"]) == 3 and rec["nearest"][0]["label"] == "squat1Reps"
-    # the command sends the files unread and starts without numpy (its start-up, README "CLI"); the
+    # the command sends the files unread and starts without numpy (its start-up, docs/cli.md); the
     # service reads the AMC with the ASF the command found beside it, and a BVH alike
     probe = ("import sys; from shared.cli.app import main; sys.argv = ['mirrorcoach'] + sys.argv[1:]\n"
              "try:\n    main()\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
@@ -741,7 +741,7 @@ def test_reproduce_coaching_reports_a_null_world_honestly(cluster, tmp_path):
     listed = text.split("Findings that hold on every target, per family:")[1].split("##")[0]
     assert f"- `copy`: {'; '.join(held) if held else 'none'}" in listed, (held, listed)
     # the null world against the target alone: the sentence is computed from results.json
-    from shared.reproduce.coaching import null_sentence
+    from shared.reproduce.coaching_report import null_sentence
 
     results = json.loads((tmp_path / "rep/ch4-6/results.json").read_text())
     results["families"]["copy"]["squat"]["cases"] = {int(k): v for k, v in

@@ -8,8 +8,17 @@ import pytest
 from shared.agents.learner import LearnerParams, SimulatedLearner, population
 from shared.coaching.local import LocalCoachPorts
 from shared.coaching.parts import error_shares, partial_emphasis
-from shared.coaching.policies import (Calibration, Policy, fit_emu1, fit_emu1_corrected, fit_nb, predict_nb,
-                                      projection_distance, simulated_coach_demonstrations, table_adverb)
+from shared.coaching.policies import (
+    Calibration,
+    Policy,
+    fit_emu1,
+    fit_emu1_corrected,
+    fit_nb,
+    predict_nb,
+    projection_distance,
+    simulated_coach_demonstrations,
+    table_adverb,
+)
 from shared.coaching.session import Session, check_attempts, ratio, residual_emphasis, start, trial
 from shared.errors import BadInput
 

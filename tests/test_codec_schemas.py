@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import msgpack
-import numpy as np
 import os
 
+import msgpack
+import numpy as np
 import pytest
 
 from schemas import CONTRACTS

@@ -68,7 +68,7 @@ def _variant(plain, *, scale=1.0, turn=None, every_joint_moves=False, add_form=F
     """The plain clip's skeleton and motion rewritten in another convention."""
     sk, data, chans = plain.skeleton, plain.data.copy(), list(plain.channels)
     r = np.eye(3) if turn is None else turn
-    joints, cols = [], {}
+    joints = []
     for j in sk.joints:
         dofs = list(j.dofs)
         off = r @ j.offset * scale
@@ -391,7 +391,7 @@ def test_blender_reads_our_bvh_as_we_do_and_its_export_is_the_same_motion(plain,
 def test_a_six_channel_body_slides_its_bones_in_mujoco_as_in_our_kinematics(plain, tmp_path):
     import mujoco
 
-    from shared.bodies.body import _qpos_trajectory, perform
+    from shared.bodies.body import perform, qpos_trajectory
     from shared.bodies.human import human_body
     from tests.test_bodies import _replay_accelerations
 
@@ -404,7 +404,7 @@ def test_a_six_channel_body_slides_its_bones_in_mujoco_as_in_our_kinematics(plai
     clip = clip.with_data(moved)
     body = human_body(clip.skeleton)
     assert "ltibia.ty" in body.channels and body.describe()["mass"] == pytest.approx(70.0, abs=0.05)
-    q = _qpos_trajectory(body, clip)
+    q = qpos_trajectory(body, clip)
     ours = clip.skeleton.forward_kinematics(clip.data, clip.channels, ends=False)
     ids = [mujoco.mj_name2id(body.model, mujoco.mjtObj.mjOBJ_BODY, j.name) for j in clip.skeleton.joints]
     d = mujoco.MjData(body.model)

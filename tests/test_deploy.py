@@ -54,7 +54,7 @@ class Procs:
         cmd = [sys.executable, "-m", module]
         if ns:
             cmd = ["ip", "netns", "exec", ns, *cmd]
-        log = open(self.logs / f"{name}.log", "w")
+        log = open(self.logs / f"{name}.log", "w")  # noqa: SIM115 (the process holds it)
         self.procs[name] = subprocess.Popen(cmd, env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=log,
                                             start_new_session=True)
 
@@ -190,11 +190,11 @@ class Net:
     def ip(self, role: str) -> str:
         return f"{self.prefix}.{self.ROLES[role]}"
 
-    def __enter__(self) -> "Net":
+    def __enter__(self) -> Net:
         if os.geteuid() != 0 or shutil.which("ip") is None:
             pytest.skip("network namespaces need root and iproute2 (`ip`)")
         try:
-            for role, ns in self.names.items():
+            for ns in self.names.values():
                 r = _sh("ip", "netns", "add", ns, check=False)
                 if r.returncode != 0:
                     pytest.skip(f"cannot create a network namespace here: {r.stderr.strip()}")

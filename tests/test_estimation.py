@@ -12,8 +12,16 @@ from shared.errors import BadInput
 from shared.estimation.body import self_regressor
 from shared.estimation.conversation import Language, LocalPorts, OtherEstimate, evaluate
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
-from shared.estimation.rules import (THESIS_CANDIDATES, Candidate, candidate_bodies, design_thesis_pairs,
-                                     identification_motions, identify_bodies, identify_thesis, weighted_candidates)
+from shared.estimation.rules import (
+    THESIS_CANDIDATES,
+    Candidate,
+    candidate_bodies,
+    design_thesis_pairs,
+    identification_motions,
+    identify_bodies,
+    identify_thesis,
+    weighted_candidates,
+)
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +77,7 @@ def test_noisy_answers_keep_the_estimate_usable():
     for _ in range(5):
         est.conversation_set(ports)
     assert 1.5 < est.scale() < 2.6  # contradictions are resolved by the least-violating scale
-    with pytest.raises(Exception):
+    with pytest.raises(BadInput, match="at least one shared motion"):
         OtherEstimate(lang, [])
 
 

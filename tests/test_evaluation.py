@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from shared.evaluation import open_set, report_markdown, separation, verdicts
+from shared.evaluation import open_set, verdicts
+from shared.evaluation_report import report_markdown, separation
 from shared.pss.space import performer
 
 

@@ -177,7 +177,8 @@ def test_banded_training_matches_hmmlearn_log_likelihood():
 
 @pytest.mark.parametrize("end_in_last", [True, False])
 def test_scaled_estep_matches_the_log_domain_forward_backward(end_in_last):
-    from shared.pss.hmm import _estep, _estep_scaled, _forward_backward
+    from shared.pss.hmm import _estep, _estep_scaled
+    from shared.pss.likelihood import forward_backward as _forward_backward
 
     rng = np.random.default_rng(7)
     n, lens = 5, [40, 33, 57]
@@ -367,7 +368,7 @@ def _kernel_both_ways(kernel, *args):
 
 @pytest.mark.parametrize("end_in_last", [True, False])
 def test_numpy_twins_of_the_hmm_kernels_match_numba(end_in_last):
-    from shared.pss import hmm
+    from shared.pss import hmm, likelihood
 
     rng = np.random.default_rng(3)
     logb = rng.normal(-20.0, 6.0, size=(90, 7))
@@ -378,10 +379,10 @@ def test_numpy_twins_of_the_hmm_kernels_match_numba(end_in_last):
     assert a[0] and b[0]
     for x, y in zip(a[1:], b[1:]):
         np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-12)
-    a, b = _kernel_both_ways(hmm._forward_backward, logb[:40], log_stay, log_move, end_in_last)
+    a, b = _kernel_both_ways(likelihood.forward_backward, logb[:40], log_stay, log_move, end_in_last)
     for x, y in zip(a, b):
         np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-12)
-    a, b = _kernel_both_ways(hmm._forward_loglik, logb, log_stay, log_move, end_in_last)
+    a, b = _kernel_both_ways(likelihood.forward_loglik, logb, log_stay, log_move, end_in_last)
     np.testing.assert_allclose(a[0], b[0], rtol=1e-12)
     np.testing.assert_allclose(a[1], b[1], rtol=1e-12)
     # a repetition that cannot reach the last state: both say so the same way

@@ -52,7 +52,6 @@ def _state(env):
 def built(pss_service, clips):
     """Space 'base' built once from the bundled bd/bk clips with arm torques."""
     from shared.bus.client import Client
-
     from tests.conftest import settings_of
 
     env, _ = pss_service

@@ -315,7 +315,7 @@ def _synthetic_classes(rng, classes=3, performers=2, n=10, dim=20, shift=0.3):
 
 
 def test_novelty_model_as_documented():
-    from shared.pss.recognition import NoveltyModel, _margins, _ridge
+    from shared.pss.novelty import NoveltyModel, _margins, _ridge
 
     rng = np.random.default_rng(0)
     x, labels, perf, sample = _synthetic_classes(rng)
@@ -446,7 +446,7 @@ def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_the
     # damaged: a projection that does not fit its classes, a header without its threshold, a
     # model of fewer features than the space's motions have
     fewer = {f"discriminant_{k}": getattr(m, k)[:100] for k in ("mean", "scale", "projection")}
-    for name, bad_arrays, bad_header in (
+    for _what, bad_arrays, bad_header in (
             ("projection", {**arrays, "discriminant_projection": m.projection[:, :2]}, header),
             ("header", arrays, {**header, "discriminant": {"classes": m.classes}}),
             ("features", {**arrays, **fewer}, header)):

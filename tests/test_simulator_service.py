@@ -93,7 +93,6 @@ def test_a_person_answers_in_the_others_seat(simulator_service, client_of):
 
     def ask():
         from shared.bus.client import Client
-
         from tests.conftest import settings_of
 
         with Client(settings_of(env)) as c2:
@@ -228,10 +227,9 @@ def test_a_reply_over_the_payload_limit_is_an_error_not_silence(tmp_path_factory
     serve = _serve(tmp_path_factory, "simulator", MIRRORCOACH_MAX_PAYLOAD=120_000)
     env, procs = next(serve)
     try:
-        with Client(settings_of(env)) as c:
-            with pytest.raises(RemoteError) as e:
-                c.request("simulator", "perform", {"skeleton": squat.skeleton.to_json(),
-                                                   "clip": clip_to_wire(squat, with_skeleton=False)}, timeout=120)
+        with Client(settings_of(env)) as c, pytest.raises(RemoteError) as e:
+            c.request("simulator", "perform", {"skeleton": squat.skeleton.to_json(),
+                                               "clip": clip_to_wire(squat, with_skeleton=False)}, timeout=120)
         assert e.value.code == "bad_request" and e.value.details["cause"] == "too_large", e.value.message
         assert "the reply of simulator/perform is" in e.value.message and "shorter clip" in e.value.message
         assert "Traceback" not in procs.log("simulator")

@@ -14,9 +14,17 @@ from shared.errors import BadInput
 from shared.estimation.body import Batch, BodyEstimate, column_names, g_and_gradient, self_regressor
 from shared.estimation.conversation import Language, LocalPorts, OtherEstimate, evaluate, hold
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
-from shared.estimation.rules import (THESIS_CANDIDATES, body_samples, candidate_bodies, design_thesis_pairs,
-                                     identification_motions, identify_bodies, MAX_QUESTIONS, REPEATS)
-from shared.reproduce.ch3 import level, population_summary, trend, verdict, write_report
+from shared.estimation.rules import (
+    MAX_QUESTIONS,
+    REPEATS,
+    THESIS_CANDIDATES,
+    body_samples,
+    candidate_bodies,
+    design_thesis_pairs,
+    identification_motions,
+    identify_bodies,
+)
+from shared.reproduce.ch3_report import level, population_summary, trend, verdict, write_report
 from shared.symbols import f_conv
 
 RULES = ("eq3.8", "f1", "f2", "f3", "f4")
@@ -343,7 +351,7 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
     assert "100 % without noise: met; at least 95 % with 10 % noise: missed" in text and "(lowest with noise: mass, 80 %)" in text
     assert "d = 8 missed" in text and "d = 4 met" in text
     # the thesis's claim of figs. 3.14/3.15 is computed per estimator; equal numbers of questions side by side
-    from shared.reproduce.ch3 import equal_questions_lines, rule_claim_lines
+    from shared.reproduce.ch3_report import equal_questions_lines, rule_claim_lines
 
     def curve_of(thesis_err, body_err):
         rows = []
@@ -360,7 +368,7 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
     eq = equal_questions_lines({"c": curve_of([0.5, 0.4, 0.3], [0.5, 0.2, 0.1])})
     assert "| c | 8 | 30.0 % | 30.0 % | 20.0 % (set 1, 8 asked) | body |" in eq
     # over the population: the body estimator after half the sets against the others after all of them
-    from shared.reproduce.ch3 import equal_population_lines
+    from shared.reproduce.ch3_report import equal_population_lines
 
     def at_half(body_err):
         return {"questions": 24, "thesis_questions": 24, "body_unknown": {"error": body_err, "match": 1.0, "distance": 0.0}}

@@ -23,10 +23,17 @@ from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
 from shared.clip import Clip
 from shared.coaching.effort import EffortEstimate, performed_effort
-from shared.coaching.policies import (SWEEP, Calibration, Policy, best_alpha, fit_emu1_corrected, fit_nb,
-                                      simulated_coach_demonstrations)
-from shared.deadline import check_time, completed
+from shared.coaching.policies import (
+    SWEEP,
+    Calibration,
+    Policy,
+    best_alpha,
+    fit_emu1_corrected,
+    fit_nb,
+    simulated_coach_demonstrations,
+)
 from shared.coaching.session import Session, Trial, session_to_dict, start, trial
+from shared.deadline import check_time, completed
 from shared.errors import BadInput, Conflict, NotFound
 from shared.io import load_clip, save_clip
 from shared.io.atomic import atomic_write

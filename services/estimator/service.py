@@ -29,9 +29,16 @@ from shared.bus.runtime import OneWriter, Service
 from shared.deadline import check_time, completed
 from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
 from shared.estimation.conversation import SPACES, TORQUE_PREFIX, Language, OtherEstimate, hold, with_torques
-from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
-from shared.estimation.rules import (THESIS_CANDIDATES, candidate_bodies, design_thesis_pairs, identification_motions,
-                                     identify_bodies, identify_thesis, weighted_candidates)
+from shared.estimation.motions import ALL, ARM, basic_motions
+from shared.estimation.rules import (
+    THESIS_CANDIDATES,
+    candidate_bodies,
+    design_thesis_pairs,
+    identification_motions,
+    identify_bodies,
+    identify_thesis,
+    weighted_candidates,
+)
 from shared.pss.store import check_name
 from shared.symbols import word
 

@@ -143,7 +143,7 @@ class LearnerParams:
     adverb_response: float = 1.0  # error_based: r, how a word changes the error taken up (< 0: less)
     strength: float | None = None  # effort its body can give, in multiples of the target's (None: unlimited)
 
-    def check(self) -> "LearnerParams":
+    def check(self) -> LearnerParams:
         if self.family not in FAMILIES:
             raise BadInput(f"learner family must be one of {', '.join(FAMILIES)}, got {self.family!r}", field="family")
         for name, lo, hi in (("gain", 0.0, 1.0), ("threshold", 0.0, 90.0), ("overshoot", 0.0, 5.0),

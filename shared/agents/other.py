@@ -72,7 +72,7 @@ class OtherParams:
         except TypeError as e:
             raise BadInput(f"bad body description: {e}", field="body") from None
 
-    def check(self) -> "OtherParams":
+    def check(self) -> OtherParams:
         if self.rule not in RULES:
             raise BadInput(f"unknown conversion rule {self.rule!r}; one of {', '.join(RULES)}", field="rule")
         if self.d not in WORDS:
@@ -236,5 +236,5 @@ class SimulatedOther:
         return {"name": self.name, "asked": self.asked, "params": asdict(self.params)}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "SimulatedOther":
+    def from_dict(cls, d: dict) -> SimulatedOther:
         return cls(d["name"], OtherParams(**d["params"]), asked=int(d.get("asked", 0)))

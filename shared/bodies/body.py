@@ -21,9 +21,8 @@ the clip's own axes) plus the report.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import logging
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -99,7 +98,7 @@ def smooth_window(fps: float, n: int) -> int:
     return min(w, n if n % 2 else n - 1)
 
 
-def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
+def qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
     """Joint positions (T, nq) from the clip, in radians and metres."""
     from scipy.signal import savgol_filter
 
@@ -147,7 +146,7 @@ def _qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
     return q
 
 
-def _derivatives(model, q: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
+def qpos_derivatives(model, q: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
     """Velocities and accelerations (T, nv) by central differences (``mj_differentiatePos``)."""
     n = len(q)
     dt = 1.0 / fps
@@ -186,7 +185,7 @@ def mj_inverse_series(model, q: np.ndarray, v: np.ndarray, a: np.ndarray,
 
 def inverse_dynamics(body: Body, q: np.ndarray, fps: float, warnings: dict | None = None):
     """(qvel, qacc, qfrc_inverse, centre of gravity (T, 3)) for a joint trajectory."""
-    v, a = _derivatives(body.model, q, fps)
+    v, a = qpos_derivatives(body.model, q, fps)
     tau, cog = mj_inverse_series(body.model, q, v, a, warnings)
     return v, a, tau, cog
 
@@ -335,7 +334,7 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
 
 def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
     """The clip performed by ``body``: torques, centre of gravity and a feasibility report."""
-    q = _qpos_trajectory(body, clip)
+    q = qpos_trajectory(body, clip)
     warned: dict = {}
     v, _, tau, cog = inverse_dynamics(body, q, clip.fps, warned)
     for d in body.dofs:  # Coulomb friction, which mj_inverse does not model (damping it does)

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from shared.bodies.body import Body, DofMap, check_mass
-from shared.bodies.segments import _SEGMENTS, map_segments, segment_masses, stature
+from shared.bodies.segments import SEGMENTS, map_segments, segment_masses, stature
 from shared.errors import BadInput
 from shared.skeleton import Skeleton
 
@@ -91,7 +91,7 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
         for a in ([] if j.parent < 0 else _hinge_order(j.euler, j.dofs)):  # the root turns with its free joint
             axis = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}[a]
             b.add_joint(name=f"{j.name}.r{a}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis)
-        radius = _SEGMENTS.get(seg_of[j.name][0], ("", 0.02))[1]
+        radius = SEGMENTS.get(seg_of[j.name][0], ("", 0.02))[1]
         m = max(masses[j.name], MIN_MASS if (j.dofs or j.parent < 0) else 0.0)
         local = pre.T @ (seg_vec * unit)
         length = float(np.linalg.norm(local))

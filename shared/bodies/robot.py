@@ -52,7 +52,7 @@ class BodySpec:
     rest: dict[str, float] = field(default_factory=dict)  # joint -> the spring's rest angle, degrees (springref)
     armature: dict[str, float] = field(default_factory=dict)  # joint -> rotor inertia, kg m^2 (MuJoCo armature)
 
-    def check(self) -> "BodySpec":
+    def check(self) -> BodySpec:
         check_mass(self.mass)
         for group in ("lengths", "shares", "damping", "friction", "stiffness", "rest", "armature"):
             if not isinstance(getattr(self, group), dict):

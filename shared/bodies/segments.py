@@ -46,7 +46,7 @@ _FINGER_WORDS = {"finger", "thumb", "index", "middle", "ring", "pinky"}
 _JOINT_NAMED = {"hip": "thigh", "knee": "shank", "ankle": "foot", "shoulder": "upper_arm", "elbow": "forearm",
                 "wrist": "hand", "collar": "clavicle"}
 # segment -> (de Leva share, capsule radius m)
-_SEGMENTS = {
+SEGMENTS = {
     "pelvis": ("lower_trunk", 0.12), "spine": ("trunk", 0.12), "neck": ("neck", 0.05), "head": ("head", 0.09),
     "clavicle": ("clavicle", 0.04), "upper_arm": ("upper_arm", 0.045), "forearm": ("forearm", 0.035),
     "hand": ("hand", 0.03), "thigh": ("thigh", 0.07), "shank": ("shank", 0.05), "foot": ("foot", 0.04),
@@ -312,7 +312,7 @@ def _segments_by_topology(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], lis
     for n, i in enumerate(chain):
         seg[i] = ("head" if n >= top else "neck", "")
     unusual = []
-    for t, k in limbs:
+    for _, k in limbs:
         if k not in (head, *arms, *legs):
             unusual.extend(tree.subtree(k))
     for i in range(1, len(sk.joints)):  # side branches continue the segment they leave from
@@ -339,9 +339,9 @@ def segment_masses(seg_of: dict[str, tuple[str, str]], mass: float) -> tuple[dic
     over the others in proportion, so that the body weighs ``mass``)."""
     groups: dict[tuple[str, str], list[str]] = {}
     for bone, (seg, side) in seg_of.items():
-        if _SEGMENTS[seg][0]:
-            groups.setdefault((_SEGMENTS[seg][0], side), []).append(bone)
-    sided = {_SEGMENTS[k][0] for k in _SIDED}
+        if SEGMENTS[seg][0]:
+            groups.setdefault((SEGMENTS[seg][0], side), []).append(bone)
+    sided = {SEGMENTS[k][0] for k in _SIDED}
     want = [(p, s) for p in _PERCENT for s in (("l", "r") if p in sided else ("",))]
     missing = [f"{s + ' ' if s else ''}{p}" for p, s in want if (p, s) not in groups]
     present = sum(_PERCENT[p] for p, s in want if (p, s) in groups)

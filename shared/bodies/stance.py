@@ -31,7 +31,7 @@ import threading
 import mujoco
 import numpy as np
 
-from shared.bodies.body import CONTACT_BAND, Body, _qpos_trajectory, foot_anchors, foot_points
+from shared.bodies.body import CONTACT_BAND, Body, foot_anchors, foot_points, qpos_trajectory
 from shared.clip import Clip
 from shared.skeleton import Skeleton
 
@@ -91,7 +91,7 @@ def _reference(body: Body, reference: Clip, fps: float, n: int):
         return hit[1:]
     ref = reference.resample(fps) if reference.fps != fps else reference
     grid = np.linspace(0, ref.n_frames - 1, n).round().astype(int)
-    ref_q = _qpos_trajectory(body, ref)[grid]
+    ref_q = qpos_trajectory(body, ref)[grid]
     anchors = foot_anchors(body)
     out = (anchors, foot_points(body, ref_q, anchors), _centres_of_gravity(body, ref_q))
     with _REFERENCES_LOCK:
@@ -111,7 +111,7 @@ def plant_feet(body: Body, reference: Clip, motion: Clip) -> tuple[Clip, dict]:
     channel, come back unchanged (``{"planted": False, "why": ...}``)."""
     up = body.up_axis
     root_up = f"{body.root}.t{'xyz'[up]}" if body.root else None
-    q = _qpos_trajectory(body, motion)  # a motion without the body's joints is refused here (BadInput)
+    q = qpos_trajectory(body, motion)  # a motion without the body's joints is refused here (BadInput)
     if not body.feet or root_up is None or root_up not in motion.channels:
         return motion, {"planted": False, "why": "no feet, no free root or no root height channel"}
     m = body.model

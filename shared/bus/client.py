@@ -45,7 +45,7 @@ class _Watch:
 
     EVERY_S = 2.0
 
-    def __init__(self, client: "Client", service: str, verb: str, timeout: float):
+    def __init__(self, client: Client, service: str, verb: str, timeout: float):
         self.client, self.service, self.verb = client, service, verb
         self.timeout = timeout  # grows to the verb's limit once MIRRORCOACH_TIMEOUT has passed
         self.longest = max(timeout, client.settings.time_limit, 600.0) + 30.0
@@ -77,7 +77,7 @@ class _Watch:
 
     def _still_there(self) -> bool:
         if self.client.settings.identity is None:
-            from shared.cluster import local_state
+            from shared.bus.pidfiles import local_state
 
             state, _ = local_state(self.client.settings, self.service)
             if state in ("frozen", "restarting"):
@@ -222,7 +222,7 @@ class Client:
     def _no_answer(self, service: str, verb: str, timeout: float, waited: float, size: int = 0) -> Unavailable:
         """Why nothing answered, named (issue 17, row 12): the router is gone, the service is
         frozen, restarting, not running, or alive but slower than the timeout."""
-        from shared.cluster import local_state
+        from shared.bus.pidfiles import local_state
 
         where = {"service": service, "router": self.settings.router}
         if self.settings.identity is not None:  # deployed: no local pid files to read; the tokens say it all

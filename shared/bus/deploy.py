@@ -120,7 +120,7 @@ def _endpoint(addr: str, port: int) -> str:
 
 # ---------------------------------------------------------------------------------- certificates
 def _now():
-    return _dt.datetime.now(_dt.timezone.utc)
+    return _dt.datetime.now(_dt.UTC)
 
 
 def make_ca(days: int, cn: str = "mirrorcoach cluster CA"):

@@ -43,8 +43,8 @@ import signal
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Callable
 
 from schemas.base import Endpoint, Message
 from shared.bus.budget import MB, TRIM_ABOVE, MemoryBudget
@@ -156,7 +156,7 @@ class Service:
         return self._declare(self.costs, verb)
 
     # ------------------------------------------------------------------ life cycle
-    def start(self) -> "Service":
+    def start(self) -> Service:
         import zenoh
 
         missing = set(self.endpoints) - set(self.handlers)

@@ -74,7 +74,7 @@ class ReplaySource:
         self._thread = threading.Thread(target=self._serve, daemon=True, name="replay-source")
         self.served = 0
 
-    def __enter__(self) -> "ReplaySource":
+    def __enter__(self) -> ReplaySource:
         self.start()
         return self
 
@@ -85,7 +85,7 @@ class ReplaySource:
     def address(self) -> str:
         return f"tcp://{self.host}:{self.port}"
 
-    def start(self) -> "ReplaySource":
+    def start(self) -> ReplaySource:
         self._thread.start()
         return self
 
@@ -101,7 +101,7 @@ class ReplaySource:
                 return
             try:
                 conn, _ = self._sock.accept()
-            except (TimeoutError, socket.timeout):
+            except TimeoutError:
                 continue
             except OSError:
                 return
@@ -309,7 +309,7 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                         break
                     try:
                         line = lines.next()
-                    except (TimeoutError, socket.timeout):
+                    except TimeoutError:
                         line = None
                         events.append(f"no frame for {idle:g} s after frame {len(rows)}: the source stopped")
                     except OSError as e:
@@ -481,7 +481,7 @@ class _SoFar:
         self.template: Clip | None = None
         self.header: list[str] | None = None
 
-    def clip(self, header: list[str], rows: "_Rows", values: "_Numbers", frame_time, out: Path) -> Clip:
+    def clip(self, header: list[str], rows: _Rows, values: _Numbers, frame_time, out: Path) -> Clip:
         import numpy as np
 
         numbers = values.array()
@@ -493,7 +493,7 @@ class _SoFar:
         return c
 
 
-def _clip_of(header: list[str], rows: "_Rows", frame_time: float | None, out: Path) -> Clip:
+def _clip_of(header: list[str], rows: _Rows, frame_time: float | None, out: Path) -> Clip:
     """The take so far as a clip (read by the project's BVH reader, conventions and all)."""
     import os
     import tempfile

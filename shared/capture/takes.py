@@ -52,7 +52,7 @@ def join(clips: list[Clip], seed: int = 0, rest: tuple[float, float] = REST, lea
             out[:, angle] += _sway(n, len(angle), r)
         return out
 
-    for k, clip in enumerate(clips):
+    for clip in clips:
         if clip.channels != first.channels:
             raise BadInput(f"clip {clip.name!r} has other channels than {first.name!r}: one performer's clips only")
         data = clip.resample(fps).data.copy()

@@ -7,12 +7,10 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from shared.cli.app import READING, SKELETON_HELP, _fail, app, read_clip
-from shared.cli.cluster import _client, _jsonable, _wire
+from shared.cli.common import READING, SKELETON_HELP, app, client, fail, jsonable, read_clip, wire
 
 sim_app = typer.Typer(help="MuJoCo bodies on the simulator service (needs `make up`).", no_args_is_help=True)
 other_app = typer.Typer(help="Others of chapter 3: simulated agents, or a person answering here.", no_args_is_help=True)
@@ -29,7 +27,7 @@ def _body_request(body: str) -> dict:
         from shared.io import load_skeleton
 
         if not p.is_file():
-            _fail(f"{body}: no such skeleton file")
+            fail(f"{body}: no such skeleton file")
         # read as the motion files are: the root options --units, --up and --translations apply here too
         sk = load_skeleton(p, units=READING["units"]) if p.suffix.lower() == ".asf" else read_clip(p).skeleton
         return {"skeleton": sk.to_json()}
@@ -40,26 +38,26 @@ def _body_request(body: str) -> dict:
 def sim_perform(body: str = typer.Argument(..., help="A robot's name (self, other) or a skeleton file (.asf, .bvh) for a human body."),
                 clip: Path = typer.Argument(..., help="The motion (.amc, .bvh, .npz)."),
                 out: Path = typer.Option(..., "--out", help="Output .npz: the motion plus tau.<joint> and cog.x|y|z channels."),
-                mass: Optional[float] = typer.Option(None, help="Body mass in kg (robots: their own; humans: 70)."),
-                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                mass: float | None = typer.Option(None, help="Body mass in kg (robots: their own; humans: 70)."),
+                skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                 as_json: bool = typer.Option(False, "--json", help="Print the feasibility report as JSON.")):
     """Perform a motion with a body: joint torques (inverse dynamics), centre of gravity, feasibility."""
     from schemas.common import clip_from_wire
     from shared.io import save_clip
 
     if out.suffix.lower() != ".npz":
-        _fail("--out must be a .npz file (BVH and AMC hold motion only; NPZ keeps the torque channels' names)")
+        fail("--out must be a .npz file (BVH and AMC hold motion only; NPZ keeps the torque channels' names)")
     motion = read_clip(clip, skeleton=skeleton)
-    req = {**_body_request(body), "clip": _wire(motion, with_skeleton=False)}
+    req = {**_body_request(body), "clip": wire(motion, with_skeleton=False)}
     if mass is not None:
         req["mass"] = mass
-    with _client() as c:
+    with client() as c:
         r = c.request("simulator", "perform", req)
     performed = clip_from_wire(r["clip"], motion.skeleton)  # the file keeps its body: it can become BVH again
     save_clip(performed, out)
     rep = r["report"]
     if as_json:
-        typer.echo(json.dumps(_jsonable({"file": str(out), "body": r["body"], "report": rep})))
+        typer.echo(json.dumps(jsonable({"file": str(out), "body": r["body"], "report": rep})))
         return
     sensors = performed.group("sensor")
     typer.echo(f"wrote {out}: {performed.n_frames} frames, {len(sensors)} sensor channels "
@@ -83,7 +81,7 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                  d: int = typer.Option(4, help="Density of words: 2, 4, 5, 6, 7 or 8 (5 and 7 are ours; Table 3.1 has 2, 4, 6, 8)."),
                  noise: float = typer.Option(0.0, help="Probability an answer is one bin off."),
                  seed: int = typer.Option(0, help="Seed of the answer noise."),
-                 kind: Optional[str] = typer.Option(None, help="Draw an uneven body from the population (issue 13): "
+                 kind: str | None = typer.Option(None, help="Draw an uneven body from the population (issue 13): "
                                                     "mass, links, payload, shares, damping, friction, joints, legs, mixed "
                                                     "(its mass replaces --mass; see `other reveal`)."),
                  index: int = typer.Option(0, help="Which of the kind's population (0-999)."),
@@ -96,7 +94,7 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
 
         drawn = population(kind, index + 1, seed=population_seed)[index]
         params.update(mass=drawn["mass"], body=drawn["body"], kind=kind, joints=drawn["joints"])
-    with _client() as c:
+    with client() as c:
         r = c.request("simulator", "other_create", {"other": name, "kind": "person" if person else "simulated",
                                                     "params": params, "replace": replace})
     typer.echo(f"created other {r['other']} ({r['kind']})")
@@ -105,26 +103,26 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
 @other_app.command("ask")
 def other_ask(name: str = typer.Argument(..., help="Name of the other."),
               clips: list[Path] = typer.Argument(..., help="One motion (open question) or two (which felt heavier?)."),
-              skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+              skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
               timeout: float = typer.Option(300.0, help="Seconds to wait for a person's answer.")):
     """Ask an other how heavy a motion felt, or which of two motions felt heavier."""
     if len(clips) not in (1, 2):
-        _fail("give one motion (open question) or two (comparative question)")
+        fail("give one motion (open question) or two (comparative question)")
     kind = "open" if len(clips) == 1 else "compare"
     text = "How heavy did that feel?" if kind == "open" else "Which felt heavier, the first or the second?"
     req = {"other": name, "kind": kind, "text": text, "timeout": timeout,
-           "clips": [_wire(read_clip(p, skeleton=skeleton)) for p in clips]}
-    with _client() as c:
+           "clips": [wire(read_clip(p, skeleton=skeleton)) for p in clips]}
+    with client() as c:
         r = c.request("simulator", "other_ask", req, timeout=timeout + 30)
     typer.echo(r["answer"])
 
 
 @other_app.command("answer")
-def other_answer(name: Optional[str] = typer.Argument(None, help="Only this other's questions (default: all)."),
+def other_answer(name: str | None = typer.Argument(None, help="Only this other's questions (default: all)."),
                  folder: Path = typer.Option(Path("questions"), help="Where the motions are written (BVH, or NPZ for robot joint angles)."),
                  wait: float = typer.Option(0.0, help="Seconds to wait for the first question if none is pending."),
                  follow: bool = typer.Option(False, "--follow", help="Keep waiting for more questions (up to --wait after each)."),
-                 answer: Optional[str] = typer.Option(None, help="Answer without a prompt (for scripts)."),
+                 answer: str | None = typer.Option(None, help="Answer without a prompt (for scripts)."),
                  max_questions: int = typer.Option(100, help="Stop after this many questions.")):
     """Take an other's seat: see each pending question and its motion(s) as files, type the answer."""
     from schemas.common import clip_from_wire
@@ -132,7 +130,7 @@ def other_answer(name: Optional[str] = typer.Argument(None, help="Only this othe
 
     deadline = time.monotonic() + max(wait, 0.0)
     answered = 0
-    with _client() as c:
+    with client() as c:
         while answered < max_questions:
             qs = c.request("simulator", "other_pending", {"other": name} if name else {}, timeout=30)["questions"]
             if not qs:
@@ -171,17 +169,17 @@ def other_answer(name: Optional[str] = typer.Argument(None, help="Only this othe
 @other_app.command("reveal")
 def other_reveal(name: str = typer.Argument(...)):
     """Show an other's hidden parameters (for evaluation; the estimator never asks this)."""
-    with _client() as c:
-        typer.echo(json.dumps(_jsonable(c.request("simulator", "other_reveal", {"other": name}))))
+    with client() as c:
+        typer.echo(json.dumps(jsonable(c.request("simulator", "other_reveal", {"other": name}))))
 
 
 @app.command("agents")
 def agents_list(as_json: bool = typer.Option(False, "--json")):
     """Every other and learner on the simulator."""
-    with _client() as c:
+    with client() as c:
         r = c.request("simulator", "list")
     if as_json:
-        typer.echo(json.dumps(_jsonable(r)))
+        typer.echo(json.dumps(jsonable(r)))
         return
     for o in r["others"]:
         typer.echo(f"other    {o['other']:<24} {o['kind']}")
@@ -196,11 +194,11 @@ def agents_list(as_json: bool = typer.Option(False, "--json")):
 def learner_create(name: str = typer.Argument(...), target: Path = typer.Argument(..., help="The target motion."),
                    population_seed: int = typer.Option(0, help="Which seeded population."),
                    index: int = typer.Option(0, help="Which learner of the population."),
-                   skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                   skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                    replace: bool = typer.Option(False, "--replace")):
     """Create a simulated learner of a target motion."""
-    with _client() as c:
-        r = c.request("simulator", "learner_create", {"learner": name, "target": _wire(read_clip(target, skeleton=skeleton)),
+    with client() as c:
+        r = c.request("simulator", "learner_create", {"learner": name, "target": wire(read_clip(target, skeleton=skeleton)),
                                                       "population_seed": population_seed, "index": index,
                                                       "replace": replace})
     typer.echo(f"created learner {r['learner']} ({len(r['channels'])} channels)")
@@ -208,18 +206,18 @@ def learner_create(name: str = typer.Argument(...), target: Path = typer.Argumen
 
 @learner_app.command("imitate")
 def learner_imitate(name: str = typer.Argument(...), demonstration: Path = typer.Argument(..., help="The motion shown."),
-                    adverb: Optional[str] = typer.Option(None, help="a little more | more | much more | more like this"),
+                    adverb: str | None = typer.Option(None, help="a little more | more | much more | more like this"),
                     out: Path = typer.Option(Path("."), help="Folder for the 5 attempts (BVH)."),
-                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+                    skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Show a learner a motion; write its next attempt (5 repetitions) as BVH."""
     from schemas.common import clip_from_wire
     from shared.io import save_clip
 
     demo = read_clip(demonstration, skeleton=skeleton)
-    req = {"learner": name, "demonstration": _wire(demo)}
+    req = {"learner": name, "demonstration": wire(demo)}
     if adverb:
         req["adverb"] = adverb
-    with _client() as c:
+    with client() as c:
         r = c.request("simulator", "learner_imitate", req)
     out.mkdir(parents=True, exist_ok=True)
     for a in r["attempts"]:
@@ -231,7 +229,7 @@ def learner_imitate(name: str = typer.Argument(...), demonstration: Path = typer
 @learner_app.command("delete")
 def learner_delete(name: str = typer.Argument(...)):
     """Delete a simulated learner (a coaching session's learner goes with `coach delete`)."""
-    with _client() as c:
+    with client() as c:
         c.request("simulator", "delete", {"learner": name})
     typer.echo(f"deleted learner {name}")
 
@@ -247,10 +245,10 @@ app.add_typer(estimator_app, name="estimator")
 def dialogue_transcript(dialogue: str = typer.Argument(..., help="Dialogue id (an estimate's name)."),
                         as_json: bool = typer.Option(False, "--json")):
     """Every question and answer of a dialogue, in order."""
-    with _client() as c:
+    with client() as c:
         r = c.request("dialogue", "transcript", {"dialogue": dialogue})
     if as_json:
-        typer.echo(json.dumps(_jsonable(r)))
+        typer.echo(json.dumps(jsonable(r)))
         return
     for line in r["lines"]:
         stamp = time.strftime("%H:%M:%S", time.localtime(line["t"]))
@@ -262,7 +260,7 @@ def dialogue_transcript(dialogue: str = typer.Argument(..., help="Dialogue id (a
 @dialogue_app.command("list")
 def dialogue_list():
     """Every dialogue and its length."""
-    with _client() as c:
+    with client() as c:
         for d in c.request("dialogue", "list")["dialogues"]:
             typer.echo(f"{d['dialogue']:<24} {d['lines']} lines")
 
@@ -292,7 +290,7 @@ def estimator_start(name: str = typer.Argument(..., help="Estimate id."), other:
                     replace: bool = typer.Option(False, "--replace")):
     """Start estimating an other from the self's own experience (step 1)."""
     joints = [j for j in ["shoulder_pitch", "shoulder_roll", "elbow"] + (["knee"] if knee else []) if j not in missing]
-    with _client() as c:
+    with client() as c:
         _print_estimate(c.request("estimator", "start", {"estimate": name, "other": other, "d": d, "g_max": g_max,
                                                          "joints": joints, "missing": missing, "probes": probes,
                                                          "replace": replace}))
@@ -302,7 +300,7 @@ def estimator_start(name: str = typer.Argument(..., help="Estimate id."), other:
 def estimator_converse(name: str = typer.Argument(...), sets: int = typer.Option(3, help="Conversation sets to run."),
                        timeout: float = typer.Option(120.0, help="Seconds to wait for each answer.")):
     """Run conversation sets with the other (eq. 3.2-3.6)."""
-    with _client() as c:
+    with client() as c:
         r = c.request("estimator", "converse", {"estimate": name, "sets": sets, "timeout": timeout},
                       timeout=sets * 20 * (timeout + 10))
     _print_estimate(r["info"])
@@ -316,13 +314,13 @@ def estimator_converse(name: str = typer.Argument(...), sets: int = typer.Option
 def estimator_estimate(name: str = typer.Argument(...), clip: Path = typer.Argument(..., help="A motion of the robot's joints."),
                        method: str = typer.Option("body", help="body (the estimated body, issue 13), interval (one "
                                                   "torque scale) or thesis (eq. 3.5)."),
-                       out: Optional[Path] = typer.Option(None, help="Write the motion with the estimated torques (.npz).")):
+                       out: Path | None = typer.Option(None, help="Write the motion with the estimated torques (.npz).")):
     """How heavy the other would feel a motion, and its estimated torques."""
     from schemas.common import clip_from_wire
     from shared.io import save_clip
 
-    with _client() as c:
-        r = c.request("estimator", "estimate", {"estimate": name, "clip": _wire(read_clip(clip)), "method": method})
+    with client() as c:
+        r = c.request("estimator", "estimate", {"estimate": name, "clip": wire(read_clip(clip)), "method": method})
     typer.echo(f"{r['word']} (k = {r['k']}, g = {r['g']:.4f}, {method})")
     if out is not None:
         save_clip(clip_from_wire(r["clip"]), out)
@@ -335,7 +333,7 @@ def estimator_identify(name: str = typer.Argument(...),
                        method: str = typer.Option("auto", help="auto (pairs chosen on the estimated body, answers weighed "
                                                   "against noise) or thesis (m1/m2, m3/m4).")):
     """Identify the other's conversion rule by comparative questions (thesis 3.4)."""
-    with _client() as c:
+    with client() as c:
         r = c.request("estimator", "identify_rule", {"estimate": name, "candidates": candidates, "method": method})
     for q in r["questions"]:
         typer.echo(f"  asked {q['pair']}: {q['answer']}")
@@ -347,9 +345,9 @@ def estimator_identify(name: str = typer.Argument(...),
 @estimator_app.command("info")
 def estimator_info(name: str = typer.Argument(...), as_json: bool = typer.Option(False, "--json")):
     """An estimate's state."""
-    with _client() as c:
+    with client() as c:
         r = c.request("estimator", "info", {"estimate": name})
-    typer.echo(json.dumps(_jsonable(r))) if as_json else _print_estimate(r)
+    typer.echo(json.dumps(jsonable(r))) if as_json else _print_estimate(r)
 
 
 @app.command("reproduce")
@@ -363,7 +361,7 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                                            "model, reported apart and never tuned on (ch3): springs, armature, gears, "
                                            "coupling, stribeck, fatigue."),
               learners: int = typer.Option(12, help="Simulated learners per experiment group (ch4-6)."),
-              hdm05: Optional[Path] = typer.Option(None, help="HDM05 data (ch4-6 targets; default $MIRRORCOACH_HDM05 or ../shared/data/hdm05)."),
+              hdm05: Path | None = typer.Option(None, help="HDM05 data (ch4-6 targets; default $MIRRORCOACH_HDM05 or ../shared/data/hdm05)."),
               targets: str = typer.Option("squat,throw", help="Targets for ch4-6: squat, throw."),
               families: str = typer.Option("all", help="Learner families for ch4-6, comma-separated: thesis, "
                                            "error_based, two_rate, copy, fixed_step (default all)."),
@@ -377,7 +375,7 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
     known = {"ch3", "ch4", "ch5", "ch6"}
     unknown = [c for c in chapters if c not in known]
     if unknown:
-        _fail(f"unknown chapter(s) {', '.join(unknown)}; available: {', '.join(sorted(known))}")
+        fail(f"unknown chapter(s) {', '.join(unknown)}; available: {', '.join(sorted(known))}")
     settings = Settings()
     started = False
     if not running(settings):
@@ -387,38 +385,37 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
     try:
         with Client(settings) as c:
             if "ch3" in chapters:
-                from shared.reproduce.ch3 import run
-
                 from shared.agents.population import KINDS
+                from shared.reproduce.ch3 import run
 
                 chosen_kinds = list(KINDS) if kinds == "all" else [k.strip() for k in kinds.split(",") if k.strip()]
                 bad = [k for k in chosen_kinds if k not in KINDS]
                 if bad or not chosen_kinds:
-                    _fail(f"unknown kind(s) {bad}; choose from {', '.join(KINDS)}")
+                    fail(f"unknown kind(s) {bad}; choose from {', '.join(KINDS)}")
                 if not 1 <= others <= 1000:
-                    _fail(f"--others must be 1 to 1000, got {others}")
+                    fail(f"--others must be 1 to 1000, got {others}")
                 run(c, out / "ch3", sets=sets, echo=typer.echo, others=others, kinds=chosen_kinds, outside=outside)
             if {"ch4", "ch5", "ch6"} & set(chapters):
                 import os
 
-                from shared.reproduce.coaching import TARGETS
                 from shared.reproduce.coaching import run as run_coaching
+                from shared.reproduce.coaching_stats import TARGETS
 
                 data = hdm05 or Path(os.environ.get("MIRRORCOACH_HDM05") or Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hdm05")
                 chosen = [t.strip() for t in targets.split(",") if t.strip()]
                 bad = [t for t in chosen if t not in TARGETS]
                 if bad or not chosen:
-                    _fail(f"unknown target(s) {bad}; choose from {', '.join(TARGETS)}")
+                    fail(f"unknown target(s) {bad}; choose from {', '.join(TARGETS)}")
                 if not (data / "amc").is_dir():
-                    _fail(f"HDM05 data not found at {data} (give --hdm05 or set MIRRORCOACH_HDM05)")
+                    fail(f"HDM05 data not found at {data} (give --hdm05 or set MIRRORCOACH_HDM05)")
                 from shared.agents.learner import FAMILIES
 
                 fams = list(FAMILIES) if families == "all" else [f.strip() for f in families.split(",") if f.strip()]
                 bad = [f for f in fams if f not in FAMILIES]
                 if bad or not fams:
-                    _fail(f"unknown learner famil(ies) {bad}; choose from {', '.join(FAMILIES)}")
+                    fail(f"unknown learner famil(ies) {bad}; choose from {', '.join(FAMILIES)}")
                 if not 2 <= learners <= 1000 or not 0 <= sensitivity_learners <= 1000:
-                    _fail("--learners must be 2 to 1000 and --sensitivity-learners 0 to 1000 (statistics need two)")
+                    fail("--learners must be 2 to 1000 and --sensitivity-learners 0 to 1000 (statistics need two)")
                 run_coaching(c, data, out / "ch4-6", learners=learners, targets=chosen, families=fams,
                              sensitivity_learners=sensitivity_learners, echo=typer.echo)
     finally:

@@ -11,53 +11,27 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Optional
 
 import typer
 
+from shared.cli.common import (
+    SKELETON_HELP,
+    app,
+    clip_app,
+    fail,
+    load_clips,
+    offline_app,
+    parse_mix,
+    parse_point,
+    read_clip,
+    recognition_text,
+)
 from shared.errors import MirrorcoachError
-
-app = typer.Typer(help="mirrorcoach: motion coaching with the Proto-symbol Space method.", no_args_is_help=True,
-                  pretty_exceptions_enable=False, add_completion=False)
-clip_app = typer.Typer(help="Read, inspect and convert motion clips (ASF/AMC, BVH, NPZ).", no_args_is_help=True)
-offline_app = typer.Typer(help="Proto-symbol spaces as local .npz files, without a cluster (library level).",
-                          no_args_is_help=True)
-app.add_typer(clip_app, name="clip")
-app.add_typer(offline_app, name="offline")
-
-SKELETON_HELP = "ASF skeleton for AMC files (default: found beside the file or in a sibling asf/ folder)."
-#: how this command reads motion files (the root options; README "Files from other tools")
-READING: dict[str, str | None] = {"units": None, "up": None, "translations": None}
-
-
-@app.callback()
-def reading_options(units: Optional[str] = typer.Option(None, "--units", help="Length unit of the motion files: cm, m, mm, "
-                                                        "in or cmu (default: read off the body's height, 1-2.2 m)."),
-                    up: Optional[str] = typer.Option(None, "--up", help="Up axis of BVH files: y or z (default: from "
-                                                     "where the feet are)."),
-                    translations: Optional[str] = typer.Option(None, "--translations", help="BVH position channels: "
-                                                               "'replace' the joint offset (Blender), 'add' to it, or "
-                                                               "'auto' (default: the first frame tells, else Blender).")):
-    """mirrorcoach: motion coaching with the Proto-symbol Space method. The options before the
-    command say how the motion files it reads are to be read."""
-    READING.update(units=units, up=up, translations=translations)
-
-
-def read_clip(path, skeleton=None, label: str | None = None):
-    """:func:`shared.io.load_clip` with the reading options of this command line."""
-    from shared.io import load_clip
-
-    return load_clip(path, skeleton=skeleton, label=label, **READING)
-
-
-def _fail(msg: str) -> None:
-    typer.echo(f"error: {msg}", err=True)
-    raise typer.Exit(2)
 
 
 @clip_app.command("info")
 def clip_info(file: Path = typer.Argument(..., help="Clip file: .amc, .bvh or .npz."),
-              skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+              skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
               as_json: bool = typer.Option(False, "--json", help="Machine-readable output.")):
     """Frames, frame rate, duration, skeleton and channel groups of a clip."""
     import numpy as np
@@ -91,8 +65,8 @@ def clip_info(file: Path = typer.Argument(..., help="Clip file: .amc, .bvh or .n
 @clip_app.command("convert")
 def clip_convert(src: Path = typer.Argument(..., help="Input clip: .amc, .bvh or .npz."),
                  dst: Path = typer.Argument(..., help="Output clip: .bvh, .npz or .amc (chosen by extension)."),
-                 skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-                 fps: Optional[float] = typer.Option(None, "--fps", help="Resample to this frame rate first.")):
+                 skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                 fps: float | None = typer.Option(None, "--fps", help="Resample to this frame rate first.")):
     """Convert a clip between AMC, BVH and NPZ (BVH holds motion only; NPZ keeps everything)."""
     from shared.io import save_clip
 
@@ -100,7 +74,7 @@ def clip_convert(src: Path = typer.Argument(..., help="Input clip: .amc, .bvh or
     if fps is not None:
         c = c.resample(fps)
     if dst.exists() and dst.resolve() == src.resolve():
-        _fail("output would overwrite the input")
+        fail("output would overwrite the input")
     save_clip(c, dst)
     typer.echo(f"wrote {dst} ({c.n_frames} frames at {c.fps:g} fps)")
 
@@ -109,54 +83,13 @@ def clip_convert(src: Path = typer.Argument(..., help="Input clip: .amc, .bvh or
 HOLD_CLIP_MB = 256.0
 
 
-def _load_clips(paths: list[Path], skeleton, label: str | None = None):
-    from rich.progress import track
-
-    from shared.io import find_clips
-
-    files = find_clips(paths)
-    if not files:
-        _fail("no clip files (.amc, .bvh, .npz) under the given paths")
-    clips = [read_clip(f, skeleton=skeleton) for f in track(files, description="reading clips", transient=True,
-                                                             disable=not sys.stderr.isatty())]
-    if label is not None:
-        for c in clips:
-            c.label = label
-    return clips
-
-
-def _parse_point(point: str):
-    import numpy as np
-
-    try:
-        x = np.array([float(v) for v in point.split(",")])
-    except ValueError:
-        _fail(f"--point must be comma-separated numbers, got {point!r}")
-    if not np.all(np.isfinite(x)):
-        _fail("--point coordinates must be finite")
-    return x
-
-
-def _parse_mix(mix: list[str]) -> dict[str, float]:
-    parsed = {}
-    for m in mix:
-        name, sep, w = m.rpartition("=")
-        if not sep or not name:
-            _fail(f"--mix needs NAME=WEIGHT, got {m!r}")
-        try:
-            parsed[name] = float(w)
-        except ValueError:
-            _fail(f"--mix needs NAME=WEIGHT, got {m!r}")
-    return parsed
-
-
 @offline_app.command("build")
 def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)."),
                 paths: list[Path] = typer.Argument(..., help="Clip files or folders; label = the clip's parent folder."),
                 dim: int = typer.Option(3, help="Dimension of the space."),
-                states: Optional[int] = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
+                states: int | None = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
                 group_by: str = typer.Option("clip", help="'clip': a proto-symbol per clip; 'label': one per label."),
-                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                 hold_mb: float = typer.Option(HOLD_CLIP_MB, "--hold-mb", min=0,
                                               help="Clip files held in memory at once, MB together; above it each "
                                                    "file is read twice (statistics, then its HMM) instead of held.")):
@@ -170,7 +103,7 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
 
     files = find_clips(paths)
     lazy = sum(f.stat().st_size for f in files) > hold_mb * 2**20
-    clips = None if lazy else _load_clips(files, skeleton)
+    clips = None if lazy else load_clips(files, skeleton)
     with Progress(transient=True, disable=not sys.stderr.isatty()) as prog:
         if lazy:
             reading = prog.add_task("reading clips (statistics, then one HMM at a time)", total=2 * len(files))
@@ -189,10 +122,10 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
 def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
                     clips: list[Path] = typer.Argument(..., help="Clip(s): several are repetitions of one motion."),
                     as_json: bool = typer.Option(False, "--json"),
-                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+                    skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Recognise a motion: its class with a calibrated confidence (or "none of these"), its
     nearest proto-symbols and its point in the space (eq. 2.6). How the label is decided:
-    README, "How a motion is recognised"."""
+    docs/pss.md, "How a motion is recognised"."""
     from shared.cli import lasting_imports
 
     with lasting_imports():
@@ -230,15 +163,16 @@ def evaluate_recognition(data: Path = typer.Option(Path("../shared/data/hdm05"),
                                                        help="Hold every class out in turn (about a minute per split).")):
     """Recognition report: leave-one-performer-out accuracy, per-class confusions, confidence
     calibration, unknown motions and time per clip, side by side with MiniRocket and DTW."""
-    from shared.evaluation import evaluate, write_report
+    from shared.evaluation import evaluate
+    from shared.evaluation_report import write_report
     from shared.io import find_clips
 
     folder = data / "amc" if (data / "amc").is_dir() else data
     if not folder.is_dir():
-        _fail(f"no clip folder at {folder} (give --data)")
+        fail(f"no clip folder at {folder} (give --data)")
     files = find_clips([folder])
     if not files:
-        _fail(f"no clips under {folder}")
+        fail(f"no clips under {folder}")
     clips = [read_clip(f) for f in files]
     res = evaluate(clips, peers=peers, open_set_test=open_set, progress=lambda m: typer.echo(m, err=True))
     path = write_report(res, out)
@@ -247,29 +181,11 @@ def evaluate_recognition(data: Path = typer.Option(Path("../shared/data/hdm05"),
         typer.echo(f"  {k}: {'met' if ok else 'missed'}")
 
 
-def recognition_text(r: dict) -> str:
-    """What `space recognize` and `offline recognize` print for a person."""
-    if r.get("known", True):
-        head = f"{r['label']}   (confidence {r['confidence']:.2f})"
-    else:
-        why = {"distance": f"it is farther from its nearest class ({r['nearest_label']}) than the space's known "
-                           f"motions are from theirs",
-               "ratio": f"it is not clearly nearer to {r['nearest_label']} than to the next class",
-               "model": "the novelty model finds it between the space's classes"}
-        said = [why[t] for t in r.get("rejected_by") or [] if t in why] or [
-            f"it is farther from every class of the space than its known motions are (nearest class "
-            f"{r['nearest_label']})"]
-        head = f"none of these: {'; '.join(said)} (novelty {r['novelty']:.2f} > 1)"
-    lines = [head, f"point in the space ({', '.join(f'{v:.3f}' for v in r['point'])})", "nearest proto-symbols:"]
-    lines += [f"  {n['distance']:9.3f}  {n['label']:<30} {n['name']}" for n in r["nearest"]]
-    return "\n".join(lines)
-
-
 @offline_app.command("generate")
 def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
                    out: Path = typer.Option(..., "--out", help="Output clip (.bvh or .npz)."),
-                   point: Optional[str] = typer.Option(None, help="Point as comma-separated coordinates."),
-                   mix: Optional[list[str]] = typer.Option(None, help="NAME=W, repeatable; weights sum to 1 (may be negative)."),
+                   point: str | None = typer.Option(None, help="Point as comma-separated coordinates."),
+                   mix: list[str] | None = typer.Option(None, help="NAME=W, repeatable; weights sum to 1 (may be negative)."),
                    method: str = typer.Option("expected", help="'expected' (deterministic) or 'monte_carlo'."),
                    seed: int = typer.Option(0, help="Seed of the Monte Carlo generation.")):
     """Generate a motion from a point or a weighted mix of proto-symbols (eq. 2.7, 4.2)."""
@@ -277,12 +193,12 @@ def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
     from shared.pss.space import ProtoSymbolSpace
 
     if (point is None) == (not mix):
-        _fail("give exactly one of --point or --mix")
+        fail("give exactly one of --point or --mix")
     space = ProtoSymbolSpace.load(space_file)
     if point is not None:
-        clip = space.generate(_parse_point(point), method=method, seed=seed, name=out.stem)
+        clip = space.generate(parse_point(point), method=method, seed=seed, name=out.stem)
     else:
-        clip = space.generate(weights=space.mix_weights(_parse_mix(mix)), method=method, seed=seed, name=out.stem)
+        clip = space.generate(weights=space.mix_weights(parse_mix(mix)), method=method, seed=seed, name=out.stem)
     save_clip(clip, out)
     typer.echo(f"wrote {out} ({clip.n_frames} frames at {clip.fps:g} fps)")
 

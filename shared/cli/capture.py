@@ -10,11 +10,10 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
+from shared.cli.common import SKELETON_HELP, app, fail, read_clip
 
 capture_app = typer.Typer(help="Live motion capture: a clip served as a live BVH stream, a take recorded from one, a "
                                "take cut into the repetitions of a target.", no_args_is_help=True)
@@ -30,7 +29,7 @@ def capture_serve(clips: list[Path] = typer.Argument(..., help="Clips to play (.
                   loop: bool = typer.Option(False, "--loop", help="Play again from the start, forever."),
                   header: bool = typer.Option(True, "--header/--no-header",
                                               help="Send the BVH header first (as most suites do)."),
-                  skeleton: Optional[Path] = typer.Option(None, help=SKELETON_HELP)):
+                  skeleton: Path | None = typer.Option(None, help=SKELETON_HELP)):
     """Serve clips as a live BVH stream (the stand-in for a capture suit) until Ctrl-C: each
     connection gets the next clip (a study's takes, one per trial)."""
     from shared.capture.stream import ReplaySource
@@ -38,11 +37,11 @@ def capture_serve(clips: list[Path] = typer.Argument(..., help="Clips to play (.
     cs = [read_clip(c, skeleton=skeleton) for c in clips]
     for path, c in zip(clips, cs):
         if c.skeleton is None:
-            _fail(f"{path} has no skeleton: a live BVH stream needs one")
+            fail(f"{path} has no skeleton: a live BVH stream needs one")
     try:
         src = ReplaySource(cs, host=host, port=port, header=header, speed=speed, loop=loop)
     except OSError as e:
-        _fail(f"cannot listen on {host}:{port}: {e.strerror or e}")
+        fail(f"cannot listen on {host}:{port}: {e.strerror or e}")
     with src:
         typer.echo(f"serving {len(cs)} clip(s) ({', '.join(p.name for p in clips[:3])}"
                    f"{', ...' if len(cs) > 3 else ''}) on {src.address}", err=True)
@@ -57,9 +56,9 @@ def capture_serve(clips: list[Path] = typer.Argument(..., help="Clips to play (.
 @capture_app.command("record")
 def capture_record(out: Path = typer.Argument(..., help="The take's file (.bvh)."),
                    source: str = typer.Option(..., help="The live source: tcp://HOST:PORT."),
-                   seconds: Optional[float] = typer.Option(None, help="Record this long."),
-                   frames: Optional[int] = typer.Option(None, help="Record this many frames."),
-                   skeleton: Optional[Path] = typer.Option(None, help="A BVH file whose skeleton the stream follows (a "
+                   seconds: float | None = typer.Option(None, help="Record this long."),
+                   frames: int | None = typer.Option(None, help="Record this many frames."),
+                   skeleton: Path | None = typer.Option(None, help="A BVH file whose skeleton the stream follows (a "
                                                                        "stream that sends frames without a header)."),
                    idle: float = typer.Option(2.0, help="Seconds without a frame after which the source counts as "
                                                         "stopped."),
@@ -70,7 +69,7 @@ def capture_record(out: Path = typer.Argument(..., help="The take's file (.bvh).
     from shared.capture.stream import record
 
     if out.suffix.lower() != ".bvh":
-        _fail("a take is written as .bvh")
+        fail("a take is written as .bvh")
     take = record(source, out, seconds=seconds, frames=frames, skeleton=skeleton, idle=idle, reconnect=reconnect)
     if as_json:
         typer.echo(json.dumps(take.to_dict(), indent=1))
@@ -88,8 +87,8 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
                     expected: int = typer.Option(5, help="Repetitions the person was asked for."),
                     background: list[Path] = typer.Option([], help="Other motions (clips) a repetition must be nearer "
                                                                     "to the target than; repeat the option."),
-                    out: Optional[Path] = typer.Option(None, help="Write each repetition here as rep1.bvh, rep2.bvh, ..."),
-                    skeleton: Optional[Path] = typer.Option(None, help=SKELETON_HELP),
+                    out: Path | None = typer.Option(None, help="Write each repetition here as rep1.bvh, rep2.bvh, ..."),
+                    skeleton: Path | None = typer.Option(None, help=SKELETON_HELP),
                     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON.")):
     """Find the repetitions of a target in one continuous take (each with a confidence), and say
     when the take holds fewer or more than expected, or not the target at all."""
@@ -130,17 +129,17 @@ def _take_line(info: dict) -> str:
 
 @capture_app.command("take")
 def capture_take(name: str = typer.Argument(..., help="The take's name (letters, digits, '_', '.', '-')."),
-                 source: Optional[str] = typer.Option(None, help="The live source the service connects to: "
+                 source: str | None = typer.Option(None, help="The live source the service connects to: "
                                                                  "tcp://HOST:PORT (a capture suit, `capture serve`)."),
                  replay: list[Path] = typer.Option([], help="Clips the service plays through a loopback port instead "
                                                             "of a live source (one per connection); repeat the option."),
-                 target: Optional[Path] = typer.Option(None, help="With --expected: end the take once that many "
+                 target: Path | None = typer.Option(None, help="With --expected: end the take once that many "
                                                                   "repetitions of this motion are seen."),
-                 expected: Optional[int] = typer.Option(None, help="Repetitions that end the take (with --target)."),
+                 expected: int | None = typer.Option(None, help="Repetitions that end the take (with --target)."),
                  seconds: float = typer.Option(120.0, help="The take's longest duration."),
                  idle: float = typer.Option(2.0, help="Seconds without a frame that end the take."),
                  reconnect: int = typer.Option(0, help="Connect again this many times when the source stops."),
-                 skeleton: Optional[Path] = typer.Option(None, help="A BVH file whose skeleton the stream follows (a "
+                 skeleton: Path | None = typer.Option(None, help="A BVH file whose skeleton the stream follows (a "
                                                                      "stream without a header)."),
                  replace: bool = typer.Option(False, "--replace", help="Record over a finished take of that name."),
                  wait: bool = typer.Option(True, "--wait/--no-wait", help="Wait for the take to end, showing its frames."),
@@ -148,25 +147,25 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
     """Record a take on the capture service (needs `make up`): its frames are published on the bus
     as they arrive (events/capture/frames); dropped or missing frames, a source that stops or
     comes back and a skeleton that changes are in its events."""
-    from shared.cli.cluster import _client, _wire
+    from shared.cli.common import client, wire
 
     if (source is None) == (not replay):
-        _fail("give either --source tcp://HOST:PORT or --replay FILE (one or more)")
+        fail("give either --source tcp://HOST:PORT or --replay FILE (one or more)")
     msg: dict = {"take": name, "seconds": seconds, "idle": idle, "reconnect": reconnect, "replace": replace}
     if source is not None:
         msg["source"] = source
     else:
-        msg["replay"] = [_wire(read_clip(p)) for p in replay]
+        msg["replay"] = [wire(read_clip(p)) for p in replay]
     if (target is None) != (expected is None):
-        _fail("--target and --expected go together: the take ends once that many repetitions are seen")
+        fail("--target and --expected go together: the take ends once that many repetitions are seen")
     if target is not None:
-        msg["target"], msg["expected"] = _wire(read_clip(target)), expected
+        msg["target"], msg["expected"] = wire(read_clip(target)), expected
     if skeleton is not None:
         try:
             msg["skeleton"] = skeleton.read_text(encoding="latin-1")
         except OSError as e:
-            _fail(f"{skeleton}: {e.strerror or e}")
-    with _client() as c:
+            fail(f"{skeleton}: {e.strerror or e}")
+    with client() as c:
         info = c.request("capture", "record", msg)
         typer.echo(_take_line(info), err=True)
         if wait:
@@ -194,9 +193,9 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
 @capture_app.command("takes")
 def capture_takes(as_json: bool = typer.Option(False, "--json", help="Print as JSON.")):
     """Every take on the capture service, recording or kept."""
-    from shared.cli.cluster import _client
+    from shared.cli.common import client
 
-    with _client() as c:
+    with client() as c:
         takes = c.request("capture", "list", {})["takes"]
     if as_json:
         typer.echo(json.dumps(takes, indent=1))
@@ -210,9 +209,9 @@ def capture_takes(as_json: bool = typer.Option(False, "--json", help="Print as J
 @capture_app.command("stop")
 def capture_stop(name: str = typer.Argument(..., help="The take to end (its frames are kept).")):
     """End a take the capture service is recording."""
-    from shared.cli.cluster import _client
+    from shared.cli.common import client
 
-    with _client() as c:
+    with client() as c:
         typer.echo(_take_line(c.request("capture", "stop", {"take": name})))
 
 
@@ -222,18 +221,18 @@ def capture_cut(name: str = typer.Argument(..., help="A finished take on the cap
                 expected: int = typer.Option(5, help="Repetitions the person was asked for."),
                 background: list[Path] = typer.Option([], help="Other motions a repetition must be nearer to the target "
                                                                 "than; repeat the option."),
-                out: Optional[Path] = typer.Option(None, help="Write the take as take.bvh and each repetition as "
+                out: Path | None = typer.Option(None, help="Write the take as take.bvh and each repetition as "
                                                               "rep1.bvh, rep2.bvh, ... here."),
                 as_json: bool = typer.Option(False, "--json", help="Print the result as JSON.")):
     """Find the repetitions of a target in a take the capture service recorded (each with a
     confidence) and, with --out, write the take and the repetitions as files."""
     from schemas.common import clip_from_wire
-    from shared.cli.cluster import _client, _wire
+    from shared.cli.common import client, wire
     from shared.io import save_clip
 
-    msg = {"take": name, "target": _wire(read_clip(target)), "expected": expected,
-           "background": [_wire(read_clip(b)) for b in background]}
-    with _client() as c:
+    msg = {"take": name, "target": wire(read_clip(target)), "expected": expected,
+           "background": [wire(read_clip(b)) for b in background]}
+    with client() as c:
         r = c.request("capture", "segment", msg)
         whole = c.request("capture", "clip", {"take": name})["clip"] if out is not None else None
     files = []

@@ -6,47 +6,29 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from shared.cli.app import READING, SKELETON_HELP, _fail, _load_clips, _parse_mix, _parse_point, app, read_clip, recognition_text
+from shared.cli.common import (
+    READING,
+    SKELETON_HELP,
+    TIMEOUT_HELP,
+    app,
+    busy,
+    client,
+    fail,
+    jsonable,
+    load_clips,
+    parse_mix,
+    parse_point,
+    read_clip,
+    recognition_text,
+    wire,
+)
 from shared.clipfiles import wire_file, wire_name
 
 space_app = typer.Typer(help="Proto-symbol spaces on the pss service (needs `make up`).", no_args_is_help=True)
 app.add_typer(space_app, name="space")
-
-TIMEOUT_HELP = "Seconds to wait for the service (default: $MIRRORCOACH_TIMEOUT or 120)."
-
-
-def _client(**kw):
-    from shared.bus.client import Client
-
-    return Client(**kw)
-
-
-def _wire(clip, with_skeleton=True) -> dict:
-    from schemas.common import clip_to_wire
-
-    d = clip_to_wire(clip, with_skeleton=with_skeleton)
-    d["name"] = wire_name(d["name"])
-    if "label" in d:
-        d["label"] = wire_name(d["label"])
-    return d
-
-
-def _busy(message: str):
-    from rich.console import Console
-
-    return Console(stderr=True).status(message) if sys.stderr.isatty() else _Quiet()
-
-
-class _Quiet:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
 
 
 def _print_info(info: dict) -> None:
@@ -55,37 +37,27 @@ def _print_info(info: dict) -> None:
                f"{info['n_features']} features, stress-1 {info['stress1']:.3f}")
 
 
-def _jsonable(obj):
-    if hasattr(obj, "tolist"):  # numpy arrays and scalars (without importing numpy)
-        return obj.tolist()
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items() if k != "v"}
-    if isinstance(obj, list):
-        return [_jsonable(v) for v in obj]
-    return obj
-
-
 # ---------------------------------------------------------------------------- space
 @space_app.command("build")
 def space_build(name: str = typer.Argument(..., help="Name of the space (letters, digits, _ . -)."),
                 paths: list[Path] = typer.Argument(..., help="Clip files or folders of clips (.amc, .bvh, .npz)."),
-                label: Optional[str] = typer.Option(None, help="Label of every clip (default: the clip's parent folder)."),
+                label: str | None = typer.Option(None, help="Label of every clip (default: the clip's parent folder)."),
                 dim: int = typer.Option(3, help="Dimension of the space."),
-                states: Optional[int] = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
+                states: int | None = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
                 group_by: str = typer.Option("clip", help="'clip': a proto-symbol per clip; 'label': one per label."),
                 replace: bool = typer.Option(False, "--replace", help="Replace an existing space of that name."),
-                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-                timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+                skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
                 as_json: bool = typer.Option(False, "--json", help="Print the space's info as JSON.")):
     """Build a named space on the pss service from clips (eq. 2.5)."""
-    clips = _load_clips(paths, skeleton, label)
-    req = {"space": name, "clips": [_wire(c) for c in clips], "dim": dim, "group_by": group_by, "replace": replace}
+    clips = load_clips(paths, skeleton, label)
+    req = {"space": name, "clips": [wire(c) for c in clips], "dim": dim, "group_by": group_by, "replace": replace}
     if states is not None:
         req["n_states"] = states
-    with _client() as c, _busy(f"building space {name} from {len(clips)} clips"):
+    with client() as c, busy(f"building space {name} from {len(clips)} clips"):
         info = c.request("pss", "build", req, timeout=timeout)
     if as_json:
-        typer.echo(json.dumps(_jsonable(info)))
+        typer.echo(json.dumps(jsonable(info)))
     else:
         _print_info(info)
 
@@ -93,10 +65,10 @@ def space_build(name: str = typer.Argument(..., help="Name of the space (letters
 @space_app.command("list")
 def space_list(as_json: bool = typer.Option(False, "--json")):
     """Every space on the pss service (and any build that was interrupted)."""
-    with _client() as c:
+    with client() as c:
         r = c.request("pss", "list", timeout=30)
     if as_json:
-        typer.echo(json.dumps(_jsonable(r)))
+        typer.echo(json.dumps(jsonable(r)))
         return
     if not r["spaces"]:
         typer.echo("no spaces (build one with `mirrorcoach space build NAME CLIPS...`)")
@@ -111,10 +83,10 @@ def space_list(as_json: bool = typer.Option(False, "--json")):
 @space_app.command("show")
 def space_show(name: str = typer.Argument(..., help="Space name."), as_json: bool = typer.Option(False, "--json")):
     """A space's proto-symbols, points, parameters and stress."""
-    with _client() as c:
+    with client() as c:
         info = c.request("pss", "info", {"space": name}, timeout=30)
     if as_json:
-        typer.echo(json.dumps(_jsonable(info)))
+        typer.echo(json.dumps(jsonable(info)))
         return
     _print_info(info)
     for s, p in zip(info["proto_symbols"], info["points"]):
@@ -125,8 +97,8 @@ def space_show(name: str = typer.Argument(..., help="Space name."), as_json: boo
 def space_recognize(name: str = typer.Argument(..., help="Space name."),
                     clips: list[Path] = typer.Argument(..., help="Clip(s): several are repetitions of one motion."),
                     top: int = typer.Option(5, help="How many nearest proto-symbols to list."),
-                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-                    timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+                    skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                    timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
                     as_json: bool = typer.Option(False, "--json", help="label, point, nearest as JSON.")):
     """Recognise a motion as a point of the space (eq. 2.6) and list its nearest proto-symbols."""
     import os
@@ -134,16 +106,16 @@ def space_recognize(name: str = typer.Argument(..., help="Space name."),
 
     t_body = time.perf_counter()
     # the files go as they are (the performer's own body: positions are theirs); the service
-    # reads them, so this command starts without numpy (README "How a motion is recognised")
+    # reads them, so this command starts without numpy (docs/pss.md, "How a motion is recognised")
     files = [wire_file(p, skeleton=skeleton) for p in clips]
-    with _client(arrays="lists") as c:
+    with client(arrays="lists") as c:
         r = c.request("pss", "recognize", {"space": name, "files": files, "top": top,
                                            **{k: v for k, v in READING.items() if v is not None}}, timeout=timeout)
     if os.environ.get("MIRRORCOACH_TIMING"):  # for bench/bus.py: the command's own time, start-up excluded
         typer.echo(f"timing: command {1e3 * (time.perf_counter() - t_body):.2f} ms, library {1e3 * r['seconds']:.2f} ms",
                    err=True)
     if as_json:
-        typer.echo(json.dumps(_jsonable(r)))
+        typer.echo(json.dumps(jsonable(r)))
         return
     typer.echo(recognition_text(r))
 
@@ -151,24 +123,24 @@ def space_recognize(name: str = typer.Argument(..., help="Space name."),
 @space_app.command("generate")
 def space_generate(name: str = typer.Argument(..., help="Space name."),
                    out: Path = typer.Option(..., "--out", help="Output clip (.bvh, .npz or .amc)."),
-                   point: Optional[str] = typer.Option(None, help="Point as comma-separated coordinates."),
-                   mix: Optional[list[str]] = typer.Option(None, help="LABEL=W or NAME=W, repeatable; weights sum to 1 (may be negative)."),
+                   point: str | None = typer.Option(None, help="Point as comma-separated coordinates."),
+                   mix: list[str] | None = typer.Option(None, help="LABEL=W or NAME=W, repeatable; weights sum to 1 (may be negative)."),
                    method: str = typer.Option("expected", help="'expected' (deterministic) or 'monte_carlo'."),
                    seed: int = typer.Option(0, help="Seed of the Monte Carlo generation."),
-                   timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+                   timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
                    as_json: bool = typer.Option(False, "--json")):
     """Generate a motion from a point or a mix of proto-symbols (eq. 2.7, 4.2) and write it."""
     from schemas.common import clip_from_wire
     from shared.io import save_clip
 
     if (point is None) == (not mix):
-        _fail("give exactly one of --point or --mix")
+        fail("give exactly one of --point or --mix")
     req = {"space": name, "method": method, "seed": seed, "name": wire_name(out.stem)}
     if point is not None:
-        req["point"] = _parse_point(point)
+        req["point"] = parse_point(point)
     else:
-        req["mix"] = _parse_mix(mix)
-    with _client() as c:
+        req["mix"] = parse_mix(mix)
+    with client() as c:
         r = c.request("pss", "generate", req, timeout=timeout)
     clip = clip_from_wire(r["clip"])
     save_clip(clip, out)
@@ -183,21 +155,21 @@ def space_generate(name: str = typer.Argument(..., help="Space name."),
 @space_app.command("add")
 def space_add(name: str = typer.Argument(..., help="Space name."),
               paths: list[Path] = typer.Argument(..., help="Clip files or folders to add, one proto-symbol each."),
-              label: Optional[str] = typer.Option(None, help="Label for every clip (default: parent folder name)."),
+              label: str | None = typer.Option(None, help="Label for every clip (default: parent folder name)."),
               rebuild: bool = typer.Option(False, "--rebuild/--place",
                                            help="--place (default): the new proto-symbols' points are placed among "
                                                 "the fixed ones, N distances per clip; --rebuild: every point embedded "
                                                 "again (eq. 2.5), N^2 distances."),
-              skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-              timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+              skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+              timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
               as_json: bool = typer.Option(False, "--json")):
     """Add clips to a space as new proto-symbols, without rebuilding the rest by default."""
-    clips = _load_clips(paths, skeleton, label)
-    with _client() as c, _busy(f"adding {len(clips)} clips to {name}"):
-        info = c.request("pss", "add", {"space": name, "clips": [_wire(x) for x in clips], "rebuild": rebuild},
+    clips = load_clips(paths, skeleton, label)
+    with client() as c, busy(f"adding {len(clips)} clips to {name}"):
+        info = c.request("pss", "add", {"space": name, "clips": [wire(x) for x in clips], "rebuild": rebuild},
                          timeout=timeout)
     if as_json:
-        typer.echo(json.dumps(_jsonable(info)))
+        typer.echo(json.dumps(jsonable(info)))
     else:
         _print_info(info)
 
@@ -208,11 +180,11 @@ def space_associate(name: str = typer.Argument(..., help="Space name."),
                     missing: str = typer.Option("sensor", help="What the clip lacks: 'sensor' (its torques and centre "
                                                                 "of gravity, from its motion) or 'frames' (the rest of "
                                                                 "a motion, from its start)."),
-                    out: Optional[Path] = typer.Option(None, "--out", help="Write the estimate: the clip with its "
+                    out: Path | None = typer.Option(None, "--out", help="Write the estimate: the clip with its "
                                                                            "sensor channels (.npz), or the whole motion "
                                                                            "(.bvh, .npz or .amc)."),
-                    skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-                    timeout: Optional[float] = typer.Option(None, help=TIMEOUT_HELP),
+                    skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                    timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
                     as_json: bool = typer.Option(False, "--json")):
     """Associate (eq. 2.8): what the space's proto-symbols say of the part a clip lacks, and
     whether the clip lies within what the space learnt or the estimate extrapolates."""
@@ -220,10 +192,10 @@ def space_associate(name: str = typer.Argument(..., help="Space name."),
     from shared.io import save_clip
 
     if missing not in ("sensor", "frames"):
-        _fail(f"--missing must be 'sensor' or 'frames', got {missing!r}")
+        fail(f"--missing must be 'sensor' or 'frames', got {missing!r}")
     partial = read_clip(clip, skeleton=skeleton)
-    with _client() as c:
-        r = c.request("pss", "associate", {"space": name, "clip": _wire(partial), "missing": missing}, timeout=timeout)
+    with client() as c:
+        r = c.request("pss", "associate", {"space": name, "clip": wire(partial), "missing": missing}, timeout=timeout)
     est = clip_from_wire(r.get("aligned") or r["whole"])
     if out is not None:
         save_clip(est, out)
@@ -251,7 +223,7 @@ def space_associate(name: str = typer.Argument(..., help="Space name."),
 @space_app.command("delete")
 def space_delete(name: str = typer.Argument(..., help="Space name.")):
     """Delete a space from the pss service (and its file)."""
-    with _client() as c:
+    with client() as c:
         c.request("pss", "delete", {"space": name}, timeout=30)
     typer.echo(f"deleted space {name}")
 
@@ -291,12 +263,12 @@ def down():
 
 
 @app.command("schemas")
-def schemas(service: Optional[str] = typer.Argument(None, help="Only this service's contract.")):
+def schemas(service: str | None = typer.Argument(None, help="Only this service's contract.")):
     """Print every request and reply of every service (the contracts in schemas/)."""
     from schemas import CONTRACTS
 
     if service is not None and service not in CONTRACTS:
-        _fail(f"no service {service!r}; services: {', '.join(CONTRACTS)}")
+        fail(f"no service {service!r}; services: {', '.join(CONTRACTS)}")
     for name, mod in CONTRACTS.items():
         if service is not None and name != service:
             continue
@@ -319,8 +291,8 @@ def schemas(service: Optional[str] = typer.Argument(None, help="Only this servic
 
 
 @app.command("dashboard")
-def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file (default: the latest recording)."),
-              screenshot: Optional[Path] = typer.Option(None, help="Instead of opening a window, open the recording "
+def dashboard(recording: Path | None = typer.Argument(None, help="A .rrd file (default: the latest recording)."),
+              screenshot: Path | None = typer.Option(None, help="Instead of opening a window, open the recording "
                                                                      "in the real viewer without a screen and save a "
                                                                      "screenshot of every tab into this folder (needs "
                                                                      "Mesa's Vulkan driver: apt-get install "
@@ -334,7 +306,7 @@ def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file
 
     path = recording or (Settings().home / "recordings" / "latest.rrd")
     if not path.exists():
-        _fail(f"no recording at {path}: run `make demo` (or `make up` and use the cluster) first")
+        fail(f"no recording at {path}: run `make demo` (or `make up` and use the cluster) first")
     path = path.resolve()
     if screenshot is not None:
         from shared.errors import MirrorcoachError
@@ -344,11 +316,11 @@ def dashboard(recording: Optional[Path] = typer.Argument(None, help="A .rrd file
             for p in dashboard_screenshots(path, screenshot, log=Settings().log_dir / "viewer.log"):
                 typer.echo(f"wrote {p}")
         except MirrorcoachError as e:
-            _fail(e.message)
+            fail(e.message)
         except ConnectionError as e:  # the viewer's own refusal (rerun.experimental.ViewerClient)
-            _fail(f"the rerun viewer refused: {str(e).splitlines()[0]}")
+            fail(f"the rerun viewer refused: {str(e).splitlines()[0]}")
         except OSError as e:
-            _fail(f"could not write the screenshots to {screenshot}: {e.strerror or e}")
+            fail(f"could not write the screenshots to {screenshot}: {e.strerror or e}")
         return
     viewer = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
     if (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) and Path(viewer).exists():

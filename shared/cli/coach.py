@@ -5,42 +5,40 @@ from __future__ import annotations
 import json
 import uuid
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
-from shared.cli.cluster import _client, _jsonable, _wire
+from shared.cli.common import SKELETON_HELP, app, client, fail, jsonable, read_clip, wire
 
 coach_app = typer.Typer(help="Coaching sessions with emphatic motions and adverbs (coach service, thesis ch. 4-6).",
                         no_args_is_help=True)
 app.add_typer(coach_app, name="coach")
 
 
-def _target_request(target: str, skeleton: Optional[Path]) -> dict:
+def _target_request(target: str, skeleton: Path | None) -> dict:
     """A clip file, or SPACE:LABEL (a proto-symbol of a pss space)."""
     p = Path(target)
     if not p.exists() and ":" in target:
         space, label = target.split(":", 1)
         return {"target_space": space, "target_label": label}
-    return {"target": _wire(read_clip(p, skeleton=skeleton))}
+    return {"target": wire(read_clip(p, skeleton=skeleton))}
 
 
-def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: Optional[Path],
+def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: Path | None,
             subgoal: bool = False, effort: bool = False) -> dict:
     if policy_file is not None:
         try:
             d = json.loads(policy_file.read_text())
         except (OSError, ValueError) as e:
-            _fail(f"{policy_file}: cannot read a policy ({e})")
+            fail(f"{policy_file}: cannot read a policy ({e})")
         d = dict(d.get("policy", d))
         if effort:
             d["effort"] = True
         return d
     if kind in ("aeu1", "aeu2", "emu2", "nb"):
-        _fail(f"policy {kind} is fitted from data: pass --policy-file (from the coach's policy_fit)")
+        fail(f"policy {kind} is fitted from data: pass --policy-file (from the coach's policy_fit)")
     if body_part and subgoal:
-        _fail("give --body-part or --subgoal, not both")
+        fail("give --body-part or --subgoal, not both")
     return {"kind": kind, "alpha": alpha, "adverb": None if adverb == "none" else adverb, "body_part": body_part,
             "subgoal": subgoal, "effort": effort}
 
@@ -64,9 +62,9 @@ def _print_trial(r: dict, file: Path | None) -> None:
 
 @coach_app.command("start")
 def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SPACE:LABEL (a proto-symbol of a space)."),
-                learner: Optional[str] = typer.Option(None, help="A simulated learner (created if new)."),
+                learner: str | None = typer.Option(None, help="A simulated learner (created if new)."),
                 person: bool = typer.Option(False, "--person", help="A person sends attempts with `coach attempt`."),
-                session: Optional[str] = typer.Option(None, help="Session id (default: a new one)."),
+                session: str | None = typer.Option(None, help="Session id (default: a new one)."),
                 index: int = typer.Option(0, help="Which learner of the seeded population."),
                 population_seed: int = typer.Option(0, help="Seed of the learner population."),
                 policy: str = typer.Option("fixed", help="fixed | emu1 | emu1c (or aeu1, aeu2, emu2, nb with --policy-file)."),
@@ -78,19 +76,19 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
                 family: str = typer.Option("thesis", help="Simulated learner's family: thesis, error_based, copy, "
                                            "two_rate, fixed_step (shared/agents/learner.py)."),
                 effort: bool = typer.Option(False, "--effort", help=EFFORT_HELP),
-                strength: Optional[float] = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
-                policy_file: Optional[Path] = typer.Option(None, help="A fitted policy (JSON)."),
+                strength: float | None = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
+                policy_file: Path | None = typer.Option(None, help="A fitted policy (JSON)."),
                 mode: str = typer.Option("residual", help="residual (emphasis on the real target) or thesis (F_gen(x_s))."),
-                skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                 as_json: bool = typer.Option(False, "--json")):
     """Start a coaching session; prints its id."""
     if person and learner:
-        _fail("give --learner or --person, not both")
+        fail("give --learner or --person, not both")
     if not person and not learner:
-        _fail("give --learner ID (a simulated learner) or --person")
+        fail("give --learner ID (a simulated learner) or --person")
     name = session or f"s{uuid.uuid4().hex[:8]}"
     if strength is not None and not learner:
-        _fail("--strength is a simulated learner's; a person says how heavy it felt with `coach attempt --felt`")
+        fail("--strength is a simulated learner's; a person says how heavy it felt with `coach attempt --felt`")
     req = {"session": name, **_target_request(target, skeleton),
            "policy": _policy(policy, alpha, adverb, body_part, policy_file, subgoal, effort),
            "mode": mode, "index": index, "population_seed": population_seed, "family": family}
@@ -98,17 +96,17 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
         req["learner"] = learner
         if strength is not None:
             req["learner_params"] = {"strength": strength}
-    with _client() as c:
+    with client() as c:
         r = c.request("coach", "start", req)
-    typer.echo(json.dumps(_jsonable(r)) if as_json else name)
+    typer.echo(json.dumps(jsonable(r)) if as_json else name)
 
 
 @coach_app.command("attempt")
 def coach_attempt(session: str = typer.Argument(...),
                   clips: list[Path] = typer.Argument(..., help="The attempt: its repetitions (5 in the thesis)."),
-                  skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                  skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                   out: Path = typer.Option(Path("."), help="Folder for the emphatic motion (BVH)."),
-                  felt: Optional[int] = typer.Option(None, min=1, max=4, help="How heavy the last motion shown felt: "
+                  felt: int | None = typer.Option(None, min=1, max=4, help="How heavy the last motion shown felt: "
                                                      "1 light, 2, 3, 4 at your limit or beyond (sessions started "
                                                      "with --effort)."),
                   as_json: bool = typer.Option(False, "--json", help="alpha, adverb, d_p and the file, as JSON.")):
@@ -117,8 +115,8 @@ def coach_attempt(session: str = typer.Argument(...),
     from shared.io import save_clip
 
     attempts = [read_clip(p, skeleton=skeleton) for p in clips]
-    with _client() as c:
-        r = c.request("coach", "attempt", {"session": session, "clips": [_wire(a) for a in attempts],
+    with client() as c:
+        r = c.request("coach", "attempt", {"session": session, "clips": [wire(a) for a in attempts],
                                            **({"felt": felt} if felt is not None else {})})
     # the emphatic motion comes at the space's rate; it is written at the rate the person recorded at
     demo = clip_from_wire(r["emphatic"]).resample(attempts[0].fps)
@@ -149,29 +147,29 @@ def _print_session(info: dict) -> None:
 @coach_app.command("show")
 def coach_show(session: str = typer.Argument(...), as_json: bool = typer.Option(False, "--json")):
     """A session's trials: d_p, R, alpha, adverb, feasibility."""
-    with _client() as c:
+    with client() as c:
         r = c.request("coach", "state", {"session": session})
-    typer.echo(json.dumps(_jsonable(r))) if as_json else _print_session(r)
+    typer.echo(json.dumps(jsonable(r))) if as_json else _print_session(r)
 
 
 @coach_app.command("run")
 def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
               trials: int = typer.Option(4, help="Trials to run (the first shows the target)."),
-              session: Optional[str] = typer.Option(None, help="Continue this session (default: start one)."),
-              target: Optional[str] = typer.Option(None, help="Target for a new session: a clip file or SPACE:LABEL."),
+              session: str | None = typer.Option(None, help="Continue this session (default: start one)."),
+              target: str | None = typer.Option(None, help="Target for a new session: a clip file or SPACE:LABEL."),
               index: int = typer.Option(0, help="Which learner of the seeded population (new session)."),
               policy: str = typer.Option("fixed"), alpha: float = typer.Option(2.0), adverb: str = typer.Option("table"),
-              body_part: bool = typer.Option(False, "--body-part"), policy_file: Optional[Path] = typer.Option(None),
+              body_part: bool = typer.Option(False, "--body-part"), policy_file: Path | None = typer.Option(None),
               subgoal: bool = typer.Option(False, "--subgoal", help="Coach through sub-goals (thesis 4.6, 7.3)."),
               family: str = typer.Option("thesis", help="Learner family: thesis, error_based, two_rate, copy, fixed_step."),
               effort: bool = typer.Option(False, "--effort", help=EFFORT_HELP),
-              strength: Optional[float] = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
+              strength: float | None = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
               as_json: bool = typer.Option(False, "--json")):
     """Coach a simulated learner for a number of trials (a simulation, not a person)."""
-    with _client() as c:
+    with client() as c:
         if session is None:
             if target is None:
-                _fail("a new session needs --target")
+                fail("a new session needs --target")
             session = f"s{uuid.uuid4().hex[:8]}"
             c.request("coach", "start", {"session": session, **_target_request(target, None), "learner": learner,
                                          "index": index, "family": family,
@@ -179,15 +177,15 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
                                          "policy": _policy(policy, alpha, adverb, body_part, policy_file, subgoal,
                                                            effort)})
         elif strength is not None or effort:
-            _fail("--strength and --effort choose a new session's learner and policy; give --target instead of --session")
+            fail("--strength and --effort choose a new session's learner and policy; give --target instead of --session")
         r = c.request("coach", "run", {"session": session, "trials": trials}, timeout=60 + 30 * trials)
-    typer.echo(json.dumps(_jsonable(r)) if as_json else _print_session(r))
+    typer.echo(json.dumps(jsonable(r)) if as_json else _print_session(r))
 
 
 @coach_app.command("list")
 def coach_list():
     """Every coaching session."""
-    with _client() as c:
+    with client() as c:
         for s in c.request("coach", "list")["sessions"]:
             typer.echo(f"{s['session']:<24} {s['trials']} trial(s)  {s.get('learner') or 'person'}")
 
@@ -203,12 +201,12 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
                idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
                seconds: float = typer.Option(120.0, help="A take's longest duration."),
                retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
-               out: Optional[Path] = typer.Option(None, help="The session's folder: takes, demonstrations and spoken "
+               out: Path | None = typer.Option(None, help="The session's folder: takes, demonstrations and spoken "
                                                              "adverbs (default: ./live-SESSION)."),
                say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb into a .wav beside each "
                                                                      "demonstration."),
                aloud: bool = typer.Option(False, "--aloud", help="Also play it through the speakers (aplay)."),
-               skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+               skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Coach a person live (needs `make up`): each trial's take is recorded from the source by the
     capture service until the expected repetitions are seen, cut into them and sent to the coach;
     the next demonstration is shown in the dashboard and written to the session's folder, and the
@@ -224,32 +222,32 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
     folder.mkdir(parents=True, exist_ok=True)
     tgt = read_clip(target, skeleton=skeleton)
     warm(tgt)
-    with _client() as c:
+    with client() as c:
         try:
             info = c.request("coach", "state", {"session": session})
         except RemoteError as e:
             if e.code != "not_found":
                 raise
-            info = c.request("coach", "start", {"session": session, "target": _wire(tgt),
+            info = c.request("coach", "start", {"session": session, "target": wire(tgt),
                                                 "policy": _policy("fixed", 2.0, "table", False, None)})
             typer.echo(f"started session {session} (policy fixed, alpha 2, the adverbs of Table 4.1)", err=True)
     if info.get("learner"):
-        _fail(f"session {session} coaches the simulated learner {info['learner']}; start one with --person")
+        fail(f"session {session} coaches the simulated learner {info['learner']}; start one with --person")
     controls = Controls(folder)
-    msg = {"source": source, "seconds": seconds, "idle": idle, "target": _wire(tgt), "expected": expected,
+    msg = {"source": source, "seconds": seconds, "idle": idle, "target": wire(tgt), "expected": expected,
            "check_every": 0.1}
     for _ in range(trials):
         trial = len(info.get("trials", [])) + 1
         typer.echo(f"trial {trial}: recording from {source}")
-        with _client() as c:
+        with client() as c:
             got = take_and_cut(c, f"{session}_trial{trial}", msg, controls, retries, lambda t: typer.echo(t, err=True))
             if got.get("word") == "skip":
                 typer.echo("stopped on request (skip)")
                 return
             if got["result"] is None:
-                _fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {trial}")
+                fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {trial}")
             clips = [clip_from_wire(x) for x in got["result"]["clips"]]
-            r = c.request("coach", "attempt", {"session": session, "clips": [_wire(a) for a in clips]})
+            r = c.request("coach", "attempt", {"session": session, "clips": [wire(a) for a in clips]})
             demo = clip_from_wire(r["emphatic"]).resample(clips[0].fps)
             file = folder / f"{session}_trial{r['trial'] + 1}.{'bvh' if demo.skeleton is not None else 'npz'}"
             save_clip(demo, file)

@@ -7,11 +7,10 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 
-from shared.cli.app import app
+from shared.cli.common import app
 
 deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small CA, each process its own certificate, "
                               "Zenoh configs with TLS (mutual authentication) and access control per role.",
@@ -23,9 +22,9 @@ DEFAULT_IDENTITIES = ["pss", "simulator", "coach", "dialogue", "estimator", "cli
 
 @deploy_app.command("init")
 def deploy_init(out: Path = typer.Argument(..., help="Folder for the CA and one sub-folder per identity (new)."),
-                router: List[str] = typer.Option(..., "--router", help="A router: NAME=ADDRESS[:PORT] (it listens there, "
+                router: list[str] = typer.Option(..., "--router", help="A router: NAME=ADDRESS[:PORT] (it listens there, "
                                                  "TLS; default port 7447). Repeat for several routers."),
-                identity: Optional[List[str]] = typer.Option(None, "--identity", help="NAME:ROLE (or ROLE): one "
+                identity: list[str] | None = typer.Option(None, "--identity", help="NAME:ROLE (or ROLE): one "
                                                              "process's identity; roles: pss, simulator, coach, "
                                                              "dialogue, estimator, cli, dashboard. Repeat; two "
                                                              "instances of a service get two names (pss-a:pss, "
@@ -34,7 +33,7 @@ def deploy_init(out: Path = typer.Argument(..., help="Folder for the CA and one 
                 days: int = typer.Option(825, "--days", help="Validity of the certificates, days."),
                 lease_ms: int = typer.Option(3000, "--lease-ms", help="Link lease: a silent host counts as gone "
                                              "after this long (failover time)."),
-                ca: Optional[Path] = typer.Option(None, "--ca", help="Add identities to an existing cluster: its CA "
+                ca: Path | None = typer.Option(None, "--ca", help="Add identities to an existing cluster: its CA "
                                                  "folder (ca.pem, ca.key).")):
     """Make the CA, each identity's key and certificate, and its Zenoh config (TLS + access control).
 
@@ -48,7 +47,7 @@ def deploy_init(out: Path = typer.Argument(..., help="Folder for the CA and one 
 
 @deploy_app.command("acl")
 def deploy_acl(ca: Path = typer.Argument(..., help="The cluster's CA folder (its issued.json lists every identity)."),
-               router: List[Path] = typer.Argument(..., help="Router identity folder(s) to write again.")):
+               router: list[Path] = typer.Argument(..., help="Router identity folder(s) to write again.")):
     """Write routers' access control again from every identity the CA has issued.
 
     After `deploy init NEW --ca CA --identity alice:cli`, alice is in no role of a router written

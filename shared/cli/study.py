@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from shared.cli.app import SKELETON_HELP, _fail, app, read_clip
-from shared.cli.cluster import _client, _wire
+from shared.cli.common import SKELETON_HELP, app, client, fail, read_clip, wire
 
 study_app = typer.Typer(help="Run the thesis's studies with people: participants send their own attempts (fig. 4.3, "
                              "Table 4.2) and human coaches name adverbs from a coach seat (chapter 5).",
@@ -62,15 +60,15 @@ def study_init(folder: Path = FOLDER,
                                          "alpha 0-2.5 without and with the adverb, cases 10-16 and 30-36)."),
                seed: int = typer.Option(..., help="Seed of the assignment of case orders to participants (log it)."),
                trials: int = typer.Option(4, help="Trials per case (the first shows the target)."),
-               emu2: Optional[Path] = typer.Option(None, help="Cases 5, 6: the folder of a study that ran the sweep "
+               emu2: Path | None = typer.Option(None, help="Cases 5, 6: the folder of a study that ran the sweep "
                                                    "with the same participants (their best alphas, `study emu2`), or a "
                                                    "JSON file {participant: [alpha without, alpha with adverb]}."),
-               aeu_scale: Optional[float] = typer.Option(None, help="Cases 7, 8: thesis units per our distance unit."),
-               aeu1: Optional[Path] = typer.Option(None, help="Case 7 with AEU thresholds fitted from human coaches: "
+               aeu_scale: float | None = typer.Option(None, help="Cases 7, 8: thesis units per our distance unit."),
+               aeu1: Path | None = typer.Option(None, help="Case 7 with AEU thresholds fitted from human coaches: "
                                                    "a study folder whose coach seat they answered (e.g. beginners), "
                                                    "or the JSON `study aeu --out` wrote."),
-               aeu2: Optional[Path] = typer.Option(None, help="Case 8 likewise (e.g. experienced coaches)."),
-               skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+               aeu2: Path | None = typer.Option(None, help="Case 8 likewise (e.g. experienced coaches)."),
+               skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Plan a study: counterbalanced, seeded case orders; the target kept in the folder."""
     from shared.study import append, check_new, emu2_from_sweep, expand_cases, plan
 
@@ -81,14 +79,14 @@ def study_init(folder: Path = FOLDER,
         sweep_plan, sweep_events = _study(emu2)
         table = emu2_from_sweep(sweep_plan, sweep_events)
         if not table:
-            _fail(f"{emu2}: no participant has finished two alphas of the sweep on both sides (without and with the "
+            fail(f"{emu2}: no participant has finished two alphas of the sweep on both sides (without and with the "
                   "adverb); run it with `--cases sweep`")
         typer.echo(f"EMU-Model 2 from {emu2}'s sweep: " + ", ".join(f"{k} {v[0]:g} / {v[1]:g}" for k, v in table.items()))
     elif emu2 is not None:
         try:
             table = json.loads(emu2.read_text())
         except (OSError, ValueError) as e:
-            _fail(f"{emu2}: cannot read EMU-Model 2's alphas ({e})")
+            fail(f"{emu2}: cannot read EMU-Model 2's alphas ({e})")
     fitted = {}
     for case, source in ((7, aeu1), (8, aeu2)):
         if source is not None:
@@ -137,22 +135,22 @@ def _aeu_fit(source: Path, coaches: list[str] | None = None) -> dict:
         if coaches:
             rows = [r for r in rows if r["coach"] in coaches]
         if not rows:
-            _fail(f"{source}: no coach-seat answers" + (f" by {', '.join(coaches)}" if coaches else ""))
+            fail(f"{source}: no coach-seat answers" + (f" by {', '.join(coaches)}" if coaches else ""))
         return fit_aeu(rows)
     try:
         fit = json.loads(source.read_text())
         t = [float(x) for x in fit["thresholds"]]
     except (OSError, ValueError, KeyError, TypeError) as e:
-        _fail(f"{source}: not AEU thresholds ({type(e).__name__}: {e}); give a study folder or `study aeu --out`'s file")
+        fail(f"{source}: not AEU thresholds ({type(e).__name__}: {e}); give a study folder or `study aeu --out`'s file")
     if len(t) != 2 or not 0 <= t[0] <= t[1]:
-        _fail(f"{source}: AEU thresholds must be two increasing distances, got {t}")
+        fail(f"{source}: AEU thresholds must be two increasing distances, got {t}")
     return {**fit, "thresholds": t}
 
 
 @study_app.command("aeu")
-def study_aeu(folder: Path = FOLDER, coaches: Optional[str] = typer.Option(None, help="Only these coaches "
+def study_aeu(folder: Path = FOLDER, coaches: str | None = typer.Option(None, help="Only these coaches "
                                                                            "(comma-separated), e.g. one group."),
-              out: Optional[Path] = typer.Option(None, help="Also write the fit as JSON (what `study init --aeu1` reads)."),
+              out: Path | None = typer.Option(None, help="Also write the fit as JSON (what `study init --aeu1` reads)."),
               as_json: bool = typer.Option(False, "--json")):
     """AEU thresholds fitted from the coach seat's answers (thesis 5.3.3, table 5.2): coaches
     whose adverbs run backwards are left out and named; the two d_p cuts most answers agree with."""
@@ -170,7 +168,7 @@ def study_aeu(folder: Path = FOLDER, coaches: Optional[str] = typer.Option(None,
 
 
 @study_app.command("emu2")
-def study_emu2(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None, help="Also write the alphas as JSON "
+def study_emu2(folder: Path = FOLDER, out: Path | None = typer.Option(None, help="Also write the alphas as JSON "
                                                                       "(what `study init --emu2` reads)."),
                as_json: bool = typer.Option(False, "--json")):
     """EMU-Model 2 from a study's alpha sweep (figs. 5.7, 5.8): each participant's alpha whose
@@ -179,7 +177,7 @@ def study_emu2(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None, h
 
     p, events = _study(folder)
     if not set(SWEEP_CASES) & set(p["cases"]):
-        _fail(f"{folder} did not plan the sweep (study init --cases sweep)")
+        fail(f"{folder} did not plan the sweep (study init --cases sweep)")
     table = emu2_from_sweep(p, events)
     done = trials_of(events)
     if out is not None:
@@ -200,13 +198,13 @@ def study_emu2(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None, h
 
 
 @study_app.command("next")
-def study_next(folder: Path = FOLDER, participant: Optional[str] = typer.Option(None, help="This participant's next step."),
+def study_next(folder: Path = FOLDER, participant: str | None = typer.Option(None, help="This participant's next step."),
                as_json: bool = typer.Option(False, "--json")):
     """What to do next: who, which case and trial, what to show and say."""
     from shared.study import next_step, trials_of
 
     p, events = _study(folder)
-    with _client() as c:
+    with client() as c:
         events = _reconcile(c, folder, p, events)
     step = next_step(p, events, participant)
     if step is None:
@@ -224,23 +222,23 @@ def study_next(folder: Path = FOLDER, participant: Optional[str] = typer.Option(
 
 @study_app.command("attempt")
 def study_attempt(folder: Path = FOLDER,
-                  clips: Optional[list[Path]] = typer.Argument(None, help="The participant's attempt: its repetitions "
+                  clips: list[Path] | None = typer.Argument(None, help="The participant's attempt: its repetitions "
                                                                           "(or one continuous --take)."),
                   participant: str = typer.Option(..., help="Whose attempt (the plan's id, e.g. P01)."),
-                  take: Optional[Path] = typer.Option(None, "--take", help="One continuous take of the repetitions "
+                  take: Path | None = typer.Option(None, "--take", help="One continuous take of the repetitions "
                                                                            "(e.g. from `capture record`): cut "
                                                                            "automatically into them."),
                   expected: int = typer.Option(5, help="Repetitions in the take."),
                   say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav "
                                                                         "(espeak-ng)."),
                   aloud: bool = typer.Option(False, "--aloud", help="Also play it through the speakers (aplay)."),
-                  skeleton: Optional[Path] = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
+                  skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """One trial of the participant's current case: recorded, and the next motion written to show/
     (with the adverb spoken into a .wav beside it)."""
     from shared.io import load_clip
 
     if bool(clips) == bool(take):
-        _fail("give the attempt's repetitions as files, or one continuous --take (not both)")
+        fail("give the attempt's repetitions as files, or one continuous --take (not both)")
     if take is not None:
         attempts = _cut(read_clip(take, skeleton=skeleton), load_clip(folder / "target.npz"), expected)
     else:
@@ -254,7 +252,7 @@ def _start_session(c, folder: Path, p: dict, participant: str, case: int) -> Non
     from shared.study import policy, session_name
 
     c.request("coach", "start", {"session": session_name(p["study"], participant, case),
-                                 "target": _wire(load_clip(folder / "target.npz")),
+                                 "target": wire(load_clip(folder / "target.npz")),
                                  "policy": policy(p, participant, case), "replace": True})
 
 
@@ -267,15 +265,15 @@ def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: boo
     from shared.study import append, next_step, session_name, trial_event
 
     p, events = _study(folder)
-    with _client() as c:
+    with client() as c:
         events = _reconcile(c, folder, p, events)
         step = next_step(p, events, participant)
         if step is None:
-            _fail(f"{participant} has done every case")
+            fail(f"{participant} has done every case")
         case, name = step["case"], session_name(p["study"], participant, step["case"])
         if step["trial"] == 1 and not started:
             _start_session(c, folder, p, participant, case)
-        r = c.request("coach", "attempt", {"session": name, "clips": [_wire(a) for a in attempts]})
+        r = c.request("coach", "attempt", {"session": name, "clips": [wire(a) for a in attempts]})
     last = step["trial"] == p["trials"]
     shown = None if last else str(_save_shown(folder, f"{participant}_case{case}_trial{step['trial'] + 1}",
                                               clip_from_wire(r["emphatic"]), attempts[0].fps))
@@ -323,8 +321,8 @@ def study_quit(folder: Path = FOLDER):
 def study_run(folder: Path = FOLDER,
               source: str = typer.Option(..., help="The live source the capture service connects to: tcp://HOST:PORT "
                                                    "(a capture suit's BVH stream, or `capture serve`)."),
-              participant: Optional[str] = typer.Option(None, help="Only this participant's trials."),
-              steps: Optional[int] = typer.Option(None, help="Run this many trials, then stop (default: all)."),
+              participant: str | None = typer.Option(None, help="Only this participant's trials."),
+              steps: int | None = typer.Option(None, help="Run this many trials, then stop (default: all)."),
               expected: int = typer.Option(5, help="Repetitions in each take."),
               idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
               seconds: float = typer.Option(120.0, help="A take's longest duration."),
@@ -347,13 +345,13 @@ def study_run(folder: Path = FOLDER,
 
     target_clip = load_clip(folder / "target.npz")
     warm(target_clip)
-    target = _wire(target_clip)
+    target = wire(target_clip)
     controls = Controls(folder)
     skipped: set[str] = set()
     done = 0
     while steps is None or done < steps:
         p, events = _study(folder)
-        with _client() as c:
+        with client() as c:
             events = _reconcile(c, folder, p, events)
         who_left = [participant] if participant else [w for w in p["participants"] if w not in skipped]
         step = next((x for w in who_left if (x := next_step(p, events, w)) is not None), None)
@@ -365,7 +363,7 @@ def study_run(folder: Path = FOLDER,
         typer.echo(f"{who}, case {case}, trial {n}: recording from {source}")
         msg = {"source": source, "seconds": seconds, "idle": idle, "target": target, "expected": expected,
                "check_every": check_every}
-        with _client() as c:
+        with client() as c:
             if n == 1:  # the coach is ready before the person has finished the take
                 _start_session(c, folder, p, who, case)
             got = take_and_cut(c, f"{who}_case{case}_trial{n}", msg, controls, retries, lambda t: typer.echo(t, err=True))
@@ -376,12 +374,12 @@ def study_run(folder: Path = FOLDER,
                 return
             continue
         if got["result"] is None:
-            _fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {n} of {who}")
+            fail(f"{retries + 1} takes without a repetition of the target: stopped before trial {n} of {who}")
         _trial(folder, who, [clip_from_wire(x) for x in got["result"]["clips"]], say, aloud, started=n == 1)
         line = ready_line(got["info"])
         if line:
             typer.echo(line, err=True)
-        with _client() as c:  # kept beside the study, after the person has their next demonstration
+        with client() as c:  # kept beside the study, after the person has their next demonstration
             save_take(c, got["name"], folder / "takes" / f"{got['name']}.bvh")
         done += 1
         word = controls.next()  # a redo or skip typed now is for the next trial
@@ -399,7 +397,7 @@ def _cut(take, target, expected: int) -> list:
     result = segment(take, target, expected=expected)
     typer.echo(f"take {take.name}: {result.verdict}", err=True)
     if not result.repetitions:
-        _fail(f"no repetition of the target in {take.name}: {result.verdict}")
+        fail(f"no repetition of the target in {take.name}: {result.verdict}")
     return result.cut(take)
 
 
@@ -421,19 +419,19 @@ def study_seat(folder: Path = FOLDER, coach: str = typer.Option(..., help="The h
 
     p, events = _study(folder)
     if not 1 <= count <= 500:
-        _fail(f"--count must be 1 to 500, got {count}")
+        fail(f"--count must be 1 to 500, got {count}")
     target = load_clip(folder / "target.npz")
     done = len([r for r in seat_rows(events) if r["coach"] == coach])
     session = f"seat-{p['study']}-{coach}"[:64]
-    with _client() as c:
+    with client() as c:
         if done == 0:
-            c.request("coach", "start", {"session": session, "target": _wire(target), "replace": True,
+            c.request("coach", "start", {"session": session, "target": wire(target), "replace": True,
                                          "policy": {"kind": "fixed", "alpha": 0.0, "adverb": None}, "check": False})
         for k in range(done, count):
             learner = f"seat-{coach}-{k}"[:64]
-            c.request("simulator", "learner_create", {"learner": learner, "target": _wire(target), "index": k,
+            c.request("simulator", "learner_create", {"learner": learner, "target": wire(target), "index": k,
                                                       "population_seed": seed, "replace": True})
-            demo, attempt = _wire(target), None
+            demo, attempt = wire(target), None
             for _ in range(1 + k % 4):
                 attempt = c.request("simulator", "learner_imitate", {"learner": learner, "demonstration": demo})["attempts"]
             c.request("simulator", "delete", {"learner": learner})
@@ -466,7 +464,7 @@ def _demonstration(c, session: str, target) -> dict:
             break
         except (MirrorcoachError, OSError) as e:
             typer.echo(f"  cannot read {answer}: {e}", err=True)
-    r = c.request("coach", "attempt", {"session": session, "clips": [_wire(demo)]})
+    r = c.request("coach", "attempt", {"session": session, "clips": [wire(demo)]})
     info = c.request("pss", "info", {"space": f"coach-{session}"})
     points = {s["name"].split("-")[0]: [float(v) for v in p] for s, p in zip(info["proto_symbols"], info["points"])}
     n = r["trial"]
@@ -495,10 +493,10 @@ def study_export(folder: Path = FOLDER, out: Path = typer.Option(..., help="CSV 
 
 
 @study_app.command("report")
-def study_report(folder: Path = FOLDER, out: Optional[Path] = typer.Option(None, help="Markdown file (default: "
+def study_report(folder: Path = FOLDER, out: Path | None = typer.Option(None, help="Markdown file (default: "
                                                                                       "FOLDER/report.md).")):
     """The thesis's tables from the study's trials (read like the simulated runs') and the seat's Table 5.1."""
-    from shared.reproduce.coaching import case_tables
+    from shared.reproduce.coaching_report import case_tables
     from shared.study import SWEEP_CASES, seat_report, seat_rows, sweep_report, tidy
 
     p, events = _study(folder)

@@ -101,5 +101,5 @@ class EffortEstimate:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict | None) -> "EffortEstimate | None":
+    def from_dict(cls, d: dict | None) -> EffortEstimate | None:
         return None if d is None else cls(float(d["target"]), [list(a) for a in d.get("answers", [])], d.get("last"))

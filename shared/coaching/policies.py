@@ -65,12 +65,12 @@ class Calibration:
     method: str = "first-trial median"
 
     @classmethod
-    def fit(cls, first_trial_dp) -> "Calibration":
+    def fit(cls, first_trial_dp) -> Calibration:
         d = cls._positive(first_trial_dp)
         return cls(scale=float(147.5 / np.median(d)))
 
     @classmethod
-    def separating(cls, trial_dp) -> "Calibration":
+    def separating(cls, trial_dp) -> Calibration:
         d = cls._positive(trial_dp)
         lo, hi = min(min(t) for t in AEU_THRESHOLDS.values()), max(max(t) for t in AEU_THRESHOLDS.values())
         scales = np.exp(np.linspace(np.log(lo / np.max(d)), np.log(hi / np.min(d)), 400))
@@ -214,7 +214,7 @@ class Policy:
     subgoal: bool = False  # coach through intermediate proto-symbols, worst body part first (session.py)
     effort: bool = False  # ask the learner's felt effort and keep emphasis within its strength (effort.py, 6.5.1)
 
-    def check(self) -> "Policy":
+    def check(self) -> Policy:
         if self.kind not in KINDS:
             raise BadInput(f"policy kind must be one of {', '.join(KINDS)}, got {self.kind!r}", field="kind")
         if not (np.isfinite(self.alpha) and 0.0 <= self.alpha <= 5.0):
@@ -250,7 +250,7 @@ class Policy:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Policy":
+    def from_dict(cls, d: dict) -> Policy:
         known = {k: v for k, v in d.items()
                  if k in cls.__dataclass_fields__ and (v is not None or k in ("adverb", "nb", "thresholds"))}
         return cls(**known).check()

@@ -183,7 +183,6 @@ def residual_emphasis(target: Clip, generated_s: Clip, generated_t: Clip) -> Cli
     grid = np.linspace(0, 1, target.n_frames)
     out = target.data.copy()
     sk = target.skeleton
-    root = sk.root.name if sk is not None else None
     chans = [c for c in (target.group("motion") or target.channels)
              if c in generated_s.channels and c in generated_t.channels]
 

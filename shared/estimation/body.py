@@ -96,7 +96,7 @@ def self_regressor(motion: Clip, joints, missing=()) -> np.ndarray:
     """``Y`` (T, len(joints), P) of ``motion`` on the self's body (columns: :func:`column_names`).
     ``missing``: joints the other lacks; the self holds them still (their channels are dropped)
     and feels nothing there (their rows are zero)."""
-    from shared.bodies.body import _derivatives, _qpos_trajectory, coulomb, mj_inverse_series
+    from shared.bodies.body import coulomb, mj_inverse_series, qpos_derivatives, qpos_trajectory
 
     joints = list(joints)
     missing = tuple(sorted(set(missing)))
@@ -107,8 +107,8 @@ def self_regressor(motion: Clip, joints, missing=()) -> np.ndarray:
     motion = motion.with_data(motion.select(keep), channels=keep, groups={"motion": keep})
     bodies = _column_bodies(missing)
     ref = bodies["none"]
-    q = _qpos_trajectory(ref, motion)
-    v, a = _derivatives(ref.model, q, motion.fps)
+    q = qpos_trajectory(ref, motion)
+    v, a = qpos_derivatives(ref.model, q, motion.fps)
     dof = {d.channel: d.dof for d in ref.dofs}
     rows = [dof.get(j) for j in joints]
     zero = np.zeros_like(v)

@@ -47,14 +47,18 @@ Three estimators are kept side by side:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
 from shared.clip import Clip
 from shared.errors import BadInput
-from shared.symbols import f_conv, f_div
+from shared.estimation.language import Language, evaluate, scale_interval, scale_of
+
+__all__ = ["OtherEstimate", "Ports", "LocalPorts", "SetRecord", "Language", "evaluate", "scale_interval", "scale_of",
+           "hold", "with_torques", "METHODS", "SPACES", "TORQUE_PREFIX"]
 
 TORQUE_PREFIX = "tau."
 PROBE_AMPLITUDES = (0.25, 0.4, 0.55, 0.7, 0.85, 1.0, 1.15)
@@ -69,33 +73,6 @@ INSIDE_BIN = 0.25  # the space estimator moves g this share of a bin inside the 
 #: the model check (:meth:`OtherEstimate.model_check`): misfits beyond the other's own inconsistency
 OUTSIDE_P, OUTSIDE_MARGIN, OUTSIDE_FLOOR, MISFIT_TOLERANCE = 0.01, 0.1, 0.05, 0.25
 CORRECTION_NOISE = 0.5  # the residual correction's noise: this share of a bin's width
-
-
-@dataclass
-class Language:
-    """What the words mean, shared by self and other: density ``d``, the range ``[0, g_max]``
-    split into bins, ``tau_max``, the joints felt, and the conversion rule the self assumes
-    (eq. 3.8 unless identified otherwise)."""
-
-    d: int = 4
-    g_max: float = 1.0
-    tau_max: float = 1.0
-    joints: list[str] = field(default_factory=lambda: ["shoulder_pitch", "shoulder_roll", "elbow"])
-    rule: str = "eq3.8"
-    weights: list[float] | None = None
-    missing: list[str] = field(default_factory=list)  # joints the other lacks: the self imitates without them
-
-    def g(self, tau: np.ndarray) -> float:
-        return f_conv(tau, self.rule, self.tau_max, self.weights)
-
-    def k(self, tau: np.ndarray) -> int:
-        return f_div(self.g(tau), self.d, self.g_max)
-
-    def bounds(self, k: int) -> tuple[float, float]:
-        """The g-interval of bin k (the first and last bins are open-ended)."""
-        lo = self.g_max * (k - 1) / self.d if k > 1 else 0.0
-        hi = self.g_max * k / self.d if k < self.d else np.inf
-        return lo, hi
 
 
 class Ports(Protocol):
@@ -348,7 +325,7 @@ class OtherEstimate:
         atomic_write(path, lambda f: np.savez(f, **arrays))
 
     @classmethod
-    def load(cls, path) -> "OtherEstimate":
+    def load(cls, path) -> OtherEstimate:
         import json
 
         with np.load(path, allow_pickle=False) as z:
@@ -449,7 +426,7 @@ class OtherEstimate:
     def correction(self, ports: Ports):
         """The residual correction of the body estimate from every answer so far
         (:mod:`shared.estimation.correction`; cached until the next answer)."""
-        from shared.estimation.correction import fit, features
+        from shared.estimation.correction import features, fit
 
         n_answers = len(self.body_answers)
         cached = getattr(self, "_correction", None)
@@ -530,63 +507,6 @@ def _on_frames(tau: np.ndarray, n: int) -> np.ndarray:
     src = np.linspace(0.0, 1.0, len(tau))
     dst = np.linspace(0.0, 1.0, n)
     return np.column_stack([np.interp(dst, src, tau[:, j]) for j in range(tau.shape[1])])
-
-
-# ---------------------------------------------------------------------------- the interval method
-def _scale_bounds(answers, language: Language) -> tuple[list[float], list[float]]:
-    lows, highs = [], []
-    for g_self, k in answers:
-        lo, hi = language.bounds(k)
-        g = max(g_self, 1e-12)
-        lows.append(lo / g)
-        highs.append(hi / g)
-    return lows, highs
-
-
-def scale_interval(answers, language: Language) -> tuple[float, float]:
-    """The values of ``s`` (``g_other = s g_self``) that every answer ``(g_self, k)`` allows: the
-    other's word ``k`` puts ``s g_self`` in bin ``k`` (eq. 3.4). Empty (lo > hi) when they contradict."""
-    if not answers:
-        return 0.0, np.inf
-    lows, highs = _scale_bounds(answers, language)
-    return max(lows), min(highs)
-
-
-def scale_of(answers, language: Language) -> float:
-    """The interval estimator's ``s`` (module docstring) from answers ``(g_self, k)``: the middle
-    of :func:`scale_interval`; with only "heavier than" bounds the tightest plus half a bin; with
-    contradictory answers (noise) the ``s`` that violates the bounds least. Needs a rule
-    homogeneous of degree 1 in the torques (eq. 3.8, f1-f4 all are)."""
-    if not answers:
-        return 1.0
-    lows, highs = _scale_bounds(answers, language)
-    lo, hi = max(lows), min(highs)
-    if lo <= hi:
-        if np.isinf(hi):
-            return lo + 0.5 * language.g_max / language.d / max(max(g for g, _ in answers), 1e-12)
-        return 0.5 * (lo + hi)
-    cands = np.unique(np.r_[lows, [h for h in highs if np.isfinite(h)]])
-
-    def violation(x):
-        return sum(max(0.0, a - x) + max(0.0, x - b) for a, b in zip(lows, highs))
-
-    return float(min(cands, key=violation))
-
-
-# ---------------------------------------------------------------------------- evaluation
-def evaluate(language: Language, true_torques: list[np.ndarray], estimated: list[np.ndarray],
-             true_language: Language | None = None) -> dict:
-    """Eq. 3.9 error ``mean |g - g_hat| / g``, the symbol match ratio and the symbol distance
-    ``mean |k - k_hat| / (d - 1)`` (eq. 3.10). ``g`` uses the other's true rule
-    (``true_language``, default the same as the self's)."""
-    truth = true_language or language
-    g = np.array([truth.g(t) for t in true_torques])
-    g_hat = np.array([truth.g(t) for t in estimated])
-    k = np.array([truth.k(t) for t in true_torques])
-    k_hat = np.array([truth.k(t) for t in estimated])
-    return {"error": float(np.mean(np.abs(g - g_hat) / np.maximum(g, 1e-12))),
-            "match": float(np.mean(k == k_hat)),
-            "distance": float(np.mean(np.abs(k - k_hat)) / (truth.d - 1))}
 
 
 class LocalPorts:

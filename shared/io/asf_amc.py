@@ -130,9 +130,7 @@ def read_asf(path, units: str | None = None) -> Skeleton:
                 txt = s[len("limits"):] if key == "limits" else s
                 for a, b in re.findall(r"\(\s*([-+\w.]+)\s+([-+\w.]+)\s*\)", txt):
                     cur["limits"].append((_limit(a), _limit(b)))
-            elif key == "id":
-                pass
-            elif key == "bodymass" or key == "cofmass":
+            elif key == "id" or key == "bodymass" or key == "cofmass":
                 pass
             else:
                 raise ClipFormatError(path, f"unknown bone field {parts[0]!r}", lineno)

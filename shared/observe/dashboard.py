@@ -351,7 +351,7 @@ class Dashboard:
         self.poses[session] = self._pose(session, target)  # drawn again in every trial's block, computed once
         self._people(session, "target", self.poses[session], 0)
 
-    def continue_from(self, old: "Dashboard", budget_bytes: float | None = None, spaces=()) -> None:
+    def continue_from(self, old: Dashboard, budget_bytes: float | None = None, spaces=()) -> None:
         """A new recording goes on from ``old`` with what is still true, not its history: the
         newest session's target, ``spaces`` (the latest event of each, newest first), older
         sessions' targets (at most ``CARRY_OVER`` in all), the estimates' tabs, and the layout.

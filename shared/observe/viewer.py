@@ -76,7 +76,7 @@ class HeadlessViewer:
         self.client = None
 
     # ------------------------------------------------------------------ life cycle
-    def __enter__(self) -> "HeadlessViewer":
+    def __enter__(self) -> HeadlessViewer:
         self.start()
         return self
 
@@ -92,7 +92,7 @@ class HeadlessViewer:
             args.append(str(self.recording))
         if self.log:
             Path(self.log).parent.mkdir(parents=True, exist_ok=True)
-        out = open(self.log, "ab") if self.log else subprocess.DEVNULL
+        out = open(self.log, "ab") if self.log else subprocess.DEVNULL  # noqa: SIM115 (the viewer holds it)
         self.proc = subprocess.Popen(args, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
                                      env={**os.environ, "RERUN_ANALYTICS": "0"})
         deadline = time.monotonic() + self.timeout_s

@@ -147,7 +147,7 @@ class ModelBank:
             self._kernel_weights = np.ones(n_features) if self.weights is None else self.weights
 
     @classmethod
-    def of(cls, models: list[LeftToRightHMM], features=None, ceiling: float | None = None) -> "ModelBank":
+    def of(cls, models: list[LeftToRightHMM], features=None, ceiling: float | None = None) -> ModelBank:
         """The bank of ``models`` seen on ``features`` (all when None; as
         :meth:`LeftToRightHMM.marginal` sees them), diagonal variances capped at ``ceiling``.
         Stacked directly, and the bank's own models are views of its stacked arrays: the HMMs
@@ -165,13 +165,13 @@ class ModelBank:
         bank._weigh(None)
         return bank
 
-    def weighted(self, weights) -> "ModelBank":
+    def weighted(self, weights) -> ModelBank:
         """The same HMMs (the same arrays, not copied) with channel ``weights``."""
         out = copy.copy(self)
         out._weigh(weights)
         return out
 
-    def extended(self, models: list[LeftToRightHMM]) -> "ModelBank":
+    def extended(self, models: list[LeftToRightHMM]) -> ModelBank:
         """This bank with ``models`` after its own: the stacked arrays grow into spare rows
         (:func:`shared.pss.rows.appended`), so adding one HMM to a bank of 3,000 does not copy
         the 3,000 (0.2 s each)."""

@@ -58,9 +58,9 @@ heading and floor position integrated from the yaw rate and the velocity (starti
 from __future__ import annotations
 
 import json
+from typing import TYPE_CHECKING
 
 import numpy as np
-from typing import TYPE_CHECKING
 
 from shared.bodies.segments import body_frame, stature
 from shared.clip import Clip
@@ -119,7 +119,7 @@ def _integrate(rate: np.ndarray, fps: float) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(rate[:-1]) / fps])
 
 
-def _swing_from_vector(v: np.ndarray) -> "Rotation":
+def _swing_from_vector(v: np.ndarray) -> Rotation:
     """The rotation about a horizontal axis taking the vertical to ``v`` (a swing)."""
     from scipy.spatial.transform import Rotation
 
@@ -266,7 +266,7 @@ class MotionFeatures:
 
     # ---------------------------------------------------------------- fitting
     @classmethod
-    def for_clips(cls, clips, sensor: bool = True, on_clip=None) -> "MotionFeatures":
+    def for_clips(cls, clips, sensor: bool = True, on_clip=None) -> MotionFeatures:
         """The feature map for a set of clips: their common motion channels and, if every clip
         has them and ``sensor`` is true, their common sensor channels (standardised).
 
@@ -580,7 +580,7 @@ class MotionFeatures:
         })
 
     @classmethod
-    def from_json(cls, text: str) -> "MotionFeatures":
+    def from_json(cls, text: str) -> MotionFeatures:
         d = json.loads(text)
         sk = Skeleton.from_json(d["skeleton"]) if d["skeleton"] else None
         return cls(sk, d["motion_channels"], d["sensor_channels"], d["sensor_mean"], d["sensor_scale"],

@@ -31,11 +31,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shared.deadline import check_time
 from shared.compiled import kernel
+from shared.deadline import check_time
 from shared.errors import ModelError
-
-LOG2PI = np.log(2.0 * np.pi)
+from shared.pss.likelihood import LOG2PI, as_sequences, emission_logprob, forward_backward, forward_loglik
 
 
 @dataclass
@@ -77,13 +76,13 @@ class LeftToRightHMM:
             return np.einsum("nii->ni", self.covars)
         return self.covars
 
-    def marginal(self, features: np.ndarray) -> "LeftToRightHMM":
+    def marginal(self, features: np.ndarray) -> LeftToRightHMM:
         """The same HMM seen on a subset of its output features (for association, eq. 2.8)."""
         f = np.asarray(features)
         cov = self.covars[:, f][:, :, f] if self.covariance_type == "full" else self.covars[:, f]
         return LeftToRightHMM(self.means[:, f], cov, self.stay.copy(), self.covariance_type)
 
-    def prefix(self, k: int) -> "LeftToRightHMM":
+    def prefix(self, k: int) -> LeftToRightHMM:
         """The first ``k`` states (the start of the motion)."""
         return LeftToRightHMM(self.means[:k], self.covars[:k], self.stay[:k].copy(), self.covariance_type)
 
@@ -96,43 +95,29 @@ class LeftToRightHMM:
 
     def posteriors(self, sequence, end_in_last: bool = True) -> np.ndarray:
         """State posteriors ``gamma_t(i)`` of one sequence (T, N), forward-backward."""
-        x = _as_sequences([sequence], self.n_features)[0]
+        x = as_sequences([sequence], self.n_features)[0]
         logb = emission_logprob(x, self.means, self.covars, self.covariance_type)
-        _, gamma, _, _ = _forward_backward(np.ascontiguousarray(logb), *self._log_transitions(), end_in_last)
+        _, gamma, _, _ = forward_backward(np.ascontiguousarray(logb), *self._log_transitions(), end_in_last)
         return gamma
 
     def log_likelihood_of(self, sequences, end_in_last: bool = True) -> float:
         """Total log-likelihood of the sequences (forward algorithm)."""
-        seqs = _as_sequences(sequences, self.n_features)
+        seqs = as_sequences(sequences, self.n_features)
         total = 0.0
         for x in seqs:
             logb = emission_logprob(x, self.means, self.covars, self.covariance_type)
-            ll, _ = _forward_loglik(logb, *self._log_transitions(), end_in_last)
+            ll, _ = forward_loglik(logb, *self._log_transitions(), end_in_last)
             total += ll
         return float(total)
 
     def progress(self, sequence) -> np.ndarray:
         """Posterior of the state at the last frame when the sequence need not end in the last
         state: how far through the motion a partial observation is (eq. 2.8, missing frames)."""
-        x = _as_sequences([sequence], self.n_features)[0]
+        x = as_sequences([sequence], self.n_features)[0]
         logb = emission_logprob(x, self.means, self.covars, self.covariance_type)
-        _, alpha_last = _forward_loglik(logb, *self._log_transitions(), False)
+        _, alpha_last = forward_loglik(logb, *self._log_transitions(), False)
         p = np.exp(alpha_last - alpha_last.max())
         return p / p.sum()
-
-
-def _as_sequences(sequences, n_features=None) -> list[np.ndarray]:
-    if isinstance(sequences, np.ndarray):
-        sequences = [sequences]
-    seqs = [np.ascontiguousarray(s, dtype=np.float64) for s in sequences]
-    for s in seqs:
-        if s.ndim != 2:
-            raise ModelError(f"a sequence must be frames x features, got shape {s.shape}")
-        if n_features is not None and s.shape[1] != n_features:
-            raise ModelError(f"sequence has {s.shape[1]} features, the model has {n_features}")
-        if not np.all(np.isfinite(s)):
-            raise ModelError("sequence contains NaN or Inf")
-    return seqs
 
 
 #: frames x features above which the diagonal fit computes its emissions and statistics on the
@@ -141,137 +126,6 @@ def _as_sequences(sequences, n_features=None) -> list[np.ndarray]:
 #: numbers are exactly those of the stacked form
 CHUNKED_ABOVE = 2**22
 CHUNK_FRAMES = 4096
-
-
-def emission_logprob(x: np.ndarray, means: np.ndarray, covars: np.ndarray, covariance_type: str) -> np.ndarray:
-    """``log b_i(o_t)`` for every frame and state (eq. 2.2), shape (T, N)."""
-    if covariance_type == "diag":
-        prec = 1.0 / covars
-        out = -0.5 * ((x * x) @ prec.T - 2.0 * x @ (means * prec).T + np.sum(means * means * prec, axis=1))
-        out -= 0.5 * (np.sum(np.log(covars), axis=1) + x.shape[1] * LOG2PI)
-        return out
-    t, d = x.shape
-    out = np.empty((t, means.shape[0]))
-    for i in range(means.shape[0]):
-        chol = np.linalg.cholesky(covars[i])
-        z = np.linalg.solve(chol, (x - means[i]).T)
-        out[:, i] = -0.5 * np.sum(z * z, axis=0) - np.sum(np.log(np.diag(chol))) - 0.5 * d * LOG2PI
-    return out
-
-
-@kernel(cache=True, nogil=True)
-def _logaddexp(a, b):
-    if a == -np.inf:
-        return b
-    if b == -np.inf:
-        return a
-    if a > b:
-        return a + np.log1p(np.exp(b - a))
-    return b + np.log1p(np.exp(a - b))
-
-
-@kernel(cache=True, nogil=True)
-def _forward_loglik(logb, log_stay, log_move, end_in_last):
-    t_len, n = logb.shape
-    alpha = np.full(n, -np.inf)
-    alpha[0] = logb[0, 0]
-    for t in range(1, t_len):
-        new = np.empty(n)
-        new[0] = alpha[0] + log_stay[0] + logb[t, 0]
-        for i in range(1, n):
-            new[i] = _logaddexp(alpha[i] + log_stay[i], alpha[i - 1] + log_move[i - 1]) + logb[t, i]
-        alpha = new
-    if end_in_last:
-        return alpha[n - 1], alpha
-    m = alpha.max()
-    return m + np.log(np.sum(np.exp(alpha - m))), alpha
-
-
-@kernel(cache=True, nogil=True)
-def _forward_backward(logb, log_stay, log_move, end_in_last):
-    """Banded forward-backward in log space. Returns (loglik, gamma (T,N), xi_stay (N,), xi_move (N,))."""
-    t_len, n = logb.shape
-    la = np.full((t_len, n), -np.inf)
-    lb = np.full((t_len, n), -np.inf)
-    la[0, 0] = logb[0, 0]
-    for t in range(1, t_len):
-        la[t, 0] = la[t - 1, 0] + log_stay[0] + logb[t, 0]
-        for i in range(1, n):
-            la[t, i] = _logaddexp(la[t - 1, i] + log_stay[i], la[t - 1, i - 1] + log_move[i - 1]) + logb[t, i]
-    if end_in_last:
-        lb[t_len - 1, n - 1] = 0.0
-        loglik = la[t_len - 1, n - 1]
-    else:
-        for i in range(n):
-            lb[t_len - 1, i] = 0.0
-        m = la[t_len - 1].max()
-        loglik = m + np.log(np.sum(np.exp(la[t_len - 1] - m)))
-    for t in range(t_len - 2, -1, -1):
-        for i in range(n):
-            v = lb[t + 1, i] + log_stay[i] + logb[t + 1, i]
-            if i + 1 < n:
-                v = _logaddexp(v, lb[t + 1, i + 1] + log_move[i] + logb[t + 1, i + 1])
-            lb[t, i] = v
-    gamma = np.exp(la + lb - loglik)
-    xi_stay = np.zeros(n)
-    xi_move = np.zeros(n)
-    for t in range(t_len - 1):
-        for i in range(n):
-            if la[t, i] == -np.inf:
-                continue
-            xi_stay[i] += np.exp(la[t, i] + log_stay[i] + logb[t + 1, i] + lb[t + 1, i] - loglik)
-            if i + 1 < n:
-                xi_move[i] += np.exp(la[t, i] + log_move[i] + logb[t + 1, i + 1] + lb[t + 1, i + 1] - loglik)
-    return loglik, gamma, xi_stay, xi_move
-
-
-def _log_step(prev, log_stay, log_move):
-    """One banded transition in log space: ``log(a_ii p_i + a_(i-1)i p_(i-1))`` per state."""
-    new = prev + log_stay
-    new[1:] = np.logaddexp(new[1:], prev[:-1] + log_move[:-1])
-    return new
-
-
-@_forward_loglik.numpy
-def _forward_loglik_numpy(logb, log_stay, log_move, end_in_last):
-    n = logb.shape[1]
-    alpha = np.full(n, -np.inf)
-    alpha[0] = logb[0, 0]
-    for t in range(1, logb.shape[0]):
-        alpha = _log_step(alpha, log_stay, log_move) + logb[t]
-    if end_in_last:
-        return alpha[n - 1], alpha
-    m = alpha.max()
-    return m + np.log(np.sum(np.exp(alpha - m))), alpha
-
-
-@_forward_backward.numpy
-def _forward_backward_numpy(logb, log_stay, log_move, end_in_last):
-    t_len, n = logb.shape
-    la = np.full((t_len, n), -np.inf)
-    lb = np.full((t_len, n), -np.inf)
-    la[0, 0] = logb[0, 0]
-    for t in range(1, t_len):
-        la[t] = _log_step(la[t - 1], log_stay, log_move) + logb[t]
-    if end_in_last:
-        lb[t_len - 1, n - 1] = 0.0
-        loglik = la[t_len - 1, n - 1]
-    else:
-        lb[t_len - 1] = 0.0
-        m = la[t_len - 1].max()
-        loglik = m + np.log(np.sum(np.exp(la[t_len - 1] - m)))
-    for t in range(t_len - 2, -1, -1):
-        nxt = lb[t + 1] + logb[t + 1]
-        lb[t] = nxt + log_stay
-        lb[t, :-1] = np.logaddexp(lb[t, :-1], nxt[1:] + log_move[:-1])
-    gamma = np.exp(la + lb - loglik)
-    with np.errstate(invalid="ignore"):
-        stay_terms = np.exp(la[:-1] + log_stay + logb[1:] + lb[1:] - loglik)
-        move_terms = np.exp(la[:-1, :-1] + log_move[:-1] + logb[1:, 1:] + lb[1:, 1:] - loglik)
-    xi_stay = np.nansum(np.where(np.isfinite(la[:-1]), stay_terms, 0.0), axis=0)
-    xi_move = np.zeros(n)
-    xi_move[:-1] = np.nansum(np.where(np.isfinite(la[:-1, :-1]), move_terms, 0.0), axis=0)
-    return loglik, gamma, xi_stay, xi_move
 
 
 def uniform_segmentation(seqs: list[np.ndarray], n_states: int, var_floor: float, covariance_type: str):
@@ -327,7 +181,7 @@ def fit_hmm(
         raise ModelError(f"covariance_type must be 'diag' or 'full', got {covariance_type!r}")
     if n_states < 1:
         raise ModelError("n_states must be at least 1")
-    seqs = _as_sequences(sequences)
+    seqs = as_sequences(sequences)
     if not seqs:
         raise ModelError("no sequence to train on")
     d = seqs[0].shape[1]
@@ -379,7 +233,7 @@ def _estep_scaled(logb, bounds, stay, end_in_last):
     scaling, with each frame's emissions shifted by their largest reachable value).
 
     Returns (ok, loglik, gamma (T, N), xi_stay (N,), xi_move (N,)). ``ok`` is False when a
-    scale factor underflowed; the caller then falls back to the log-domain ``_forward_backward``.
+    scale factor underflowed; the caller then falls back to the log-domain ``forward_backward``.
     """
     t_all, n = logb.shape
     gamma = np.zeros((t_all, n))
@@ -520,7 +374,7 @@ def _estep(logb_all, bounds, stay, end_in_last):
     gamma = np.empty_like(logb_all)
     xs, xm, ll = np.zeros(n), np.zeros(n), 0.0
     for lo, hi in zip(bounds[:-1], bounds[1:]):
-        lk, g, s_, m_ = _forward_backward(np.ascontiguousarray(logb_all[lo:hi]), log_stay, log_move, end_in_last)
+        lk, g, s_, m_ = forward_backward(np.ascontiguousarray(logb_all[lo:hi]), log_stay, log_move, end_in_last)
         ll += lk
         gamma[lo:hi] = g
         xs += s_
@@ -542,7 +396,7 @@ def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, t
     if diag and not chunked:
         z = np.hstack([x_all, x_all * x_all])
     it = 0
-    for it in range(1, n_iter + 1):
+    for it in range(1, n_iter + 1):  # noqa: B007 (the count is read after the loop)
         if diag:
             prec = 1.0 / covars
             w = np.vstack([(means * prec).T, -0.5 * prec.T])

@@ -99,7 +99,7 @@ def smacof(f: np.ndarray, dim: int, *, init: np.ndarray | None = None, max_iter:
     step, stress = _guttman_step(f, x)  # the Guttman transform of x and the stress at x
     converged = False
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is read after the loop)
         x = step
         step, new = _guttman_step(f, x)
         if stress - new < eps * total:

@@ -67,29 +67,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from shared.compiled import kernel
+from shared.pss.conformal import KNOWN_QUANTILE, conformal_p_value, conformal_threshold
+from shared.pss.novelty import NOVELTY_QUANTILE, NoveltyModel, hmm_features
 
-KNOWN_QUANTILE = 0.98
-
-
-def conformal_threshold(scores, q: float) -> float:
-    """The split-conformal bound: the ``ceil((n + 1) q)``-th smallest of ``n`` calibration
-    scores, so that a new score of the same kind exceeds it with probability at most ``1 - q``
-    (Vovk et al. 2005); ``inf`` (never reject) when there are too few scores for that level."""
-    s = np.sort(np.asarray(scores, float))
-    k = int(np.ceil((len(s) + 1) * q))
-    return float(s[k - 1]) if 1 <= k <= len(s) else np.inf
-
-
-def conformal_p_value(scores, score: float, larger_is_unusual: bool = True) -> float:
-    """The split-conformal p-value of a new ``score``: ``(1 + #{calibration scores at least as
-    unusual}) / (n + 1)``, the chance that a motion of the kind calibrated on looks at least this
-    unusual (Vovk et al. 2005; :func:`conformal_threshold` rejects where it is at most about
-    ``1 - q``). 1 without calibration scores."""
-    s = np.asarray(scores, float)
-    if not len(s):
-        return 1.0
-    beyond = int(np.sum(s >= score)) if larger_is_unusual else int(np.sum(s <= score))
-    return (1 + beyond) / (len(s) + 1)
+__all__ = ["decide", "rejected_by", "Decision", "TESTS", "calibrate", "Calibration", "channel_weights", "class_distances",
+           "softmax_confidence", "DiscriminantRatio", "NoveltyModel", "hmm_features", "NOVELTY_QUANTILE",
+           "conformal_threshold", "conformal_p_value", "KNOWN_QUANTILE"]
 
 
 def channel_weights(means: np.ndarray, covars: np.ndarray, labels, performers) -> np.ndarray:
@@ -310,8 +293,8 @@ def rejected_by(d: Decision) -> list[str]:
     return [name for name, v in zip(TESTS, (d.distance_novelty, d.ratio_novelty, d.model_novelty)) if v > 1.0]
 
 
-def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_model: "NoveltyModel | None" = None,
-           features: np.ndarray | None = None, discriminant: "DiscriminantRatio | None" = None) -> Decision:
+def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_model: NoveltyModel | None = None,
+           features: np.ndarray | None = None, discriminant: DiscriminantRatio | None = None) -> Decision:
     """Label, calibrated confidence and open-set verdict of one motion. The motion is "none of
     these" when any test says so: the eq. 2.4 distance in its class's spread; whether it is
     clearly nearer to one class than to the next (by the :class:`DiscriminantRatio` given the
@@ -342,7 +325,7 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
 
 
 # ---------------------------------------------------------------------------- the discriminant ratio
-def _shrunk_lda(x: np.ndarray, y: np.ndarray) -> "DiscriminantRatio | None":
+def _shrunk_lda(x: np.ndarray, y: np.ndarray) -> DiscriminantRatio | None:
     """Shrinkage LDA on standardised features, as a :class:`DiscriminantRatio` not yet calibrated
     (it never rejects), or ``None`` when the features do not vary or there is one class.
 
@@ -433,7 +416,7 @@ class DiscriminantRatio:
 
     @classmethod
     def fit(cls, features: np.ndarray, labels, performers, quantile: float = KNOWN_QUANTILE,
-            folds: int = 5) -> "DiscriminantRatio | None":
+            folds: int = 5) -> DiscriminantRatio | None:
         """``None`` when the space has fewer than two classes or its features do not vary."""
         x = np.asarray(features, float)
         y = np.asarray(labels)
@@ -468,7 +451,7 @@ class DiscriminantRatio:
                 "discriminant_projection": self.projection, "discriminant_centres": self.centres}
 
     @classmethod
-    def from_file(cls, header: dict, arrays: dict) -> "DiscriminantRatio":
+    def from_file(cls, header: dict, arrays: dict) -> DiscriminantRatio:
         m = cls([str(c) for c in header["classes"]], arrays["discriminant_mean"], arrays["discriminant_scale"],
                 arrays["discriminant_projection"], arrays["discriminant_centres"], float(header["shrinkage"]),
                 float(header["threshold"]), list(header["scores"]), float(header["quantile"]), header["scheme"])
@@ -482,146 +465,3 @@ def _mean_ratios(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
     d = np.sqrt(((points[:, None, :] - centres[None]) ** 2).sum(axis=-1))
     d.sort(axis=1)
     return d[:, 0] / np.maximum(d[:, 1], 1e-12)
-
-
-# ---------------------------------------------------------------------------- the open set
-#: the conformal level of the novelty model's threshold (see :class:`NoveltyModel`)
-NOVELTY_QUANTILE = 0.95
-
-
-def hmm_features(means: np.ndarray, covars: np.ndarray) -> np.ndarray:
-    """One motion's HMM as a vector for the discriminative step: the state means in order
-    (S x D) and, per channel over the states, their mean, standard deviation, minimum, maximum,
-    mean absolute step between consecutive states, and the mean output standard deviation.
-    ``means`` (S, D) or (N, S, D); ``covars`` diagonal (same shape) or full (..., S, D, D)."""
-    mu = np.asarray(means, float)
-    var = np.asarray(covars, float)
-    if var.ndim == mu.ndim + 1:  # full covariances: their diagonals
-        var = np.diagonal(var, axis1=-2, axis2=-1)
-    one = mu.ndim == 2
-    mu, var = (mu[None], var[None]) if one else (mu, var)
-    step = np.abs(np.diff(mu, axis=1)).mean(axis=1) if mu.shape[1] > 1 else np.zeros_like(mu[:, 0])
-    out = np.concatenate([mu.reshape(len(mu), -1), mu.mean(axis=1), mu.std(axis=1), mu.min(axis=1), mu.max(axis=1),
-                          step, np.sqrt(np.maximum(var, 0.0)).mean(axis=1)], axis=1)
-    return out[0] if one else out
-
-
-def _ridge(x: np.ndarray, y: np.ndarray, alpha: float | None = None, loo: bool = False):
-    """scikit-learn's ridge classifier on standardised features (alpha by its leave-one-out
-    cross-validation when not given)."""
-    from sklearn.linear_model import RidgeClassifier, RidgeClassifierCV
-    from sklearn.preprocessing import StandardScaler
-
-    scaler = StandardScaler().fit(x)
-    z = scaler.transform(x)
-    if alpha is None or loo:
-        model = RidgeClassifierCV(alphas=[alpha] if alpha else np.logspace(-3, 3, 13), store_cv_results=loo).fit(z, y)
-    else:
-        model = RidgeClassifier(alpha=alpha).fit(z, y)
-    return scaler, model
-
-
-def _margins(scores: np.ndarray) -> np.ndarray:
-    """Winning class's score minus the runner-up's (one column: a two-class ridge, +-d)."""
-    s = np.atleast_2d(scores)
-    if s.shape[1] == 1:
-        return 2.0 * np.abs(s[:, 0])
-    top = np.sort(s, axis=1)
-    return top[:, -1] - top[:, -2]
-
-
-@dataclass
-class NoveltyModel:
-    """The open set's discriminative step on top of the proto-symbols.
-
-    A ridge classifier (scikit-learn, one-vs-rest, classes coded +-1) learns the space's
-    classes from every proto-symbol's :func:`hmm_features`; a motion is "none of these" when
-    its winning class beats the runner-up by less than ``threshold``. The threshold is
-    split-conformal (:func:`conformal_threshold`, level ``quantile``) on the margins of the
-    space's own proto-symbols predicted **across performers** (a model of the other performers'
-    proto-symbols judging each performer's), or leave-one-out when the space has one performer.
-
-    Measured on HDM05 (``reports/recognition/report.md``), every class held out in turn: the
-    held-out class's clips stand out more than by the eq. 2.4 distances (the nearest class's
-    distance or its ratio to the next class): AUC 0.97-0.98 against 0.93. The two catch
-    different motions: the model those that resemble several known classes at once (a hop among
-    jogs, a grab among deposits), the distances those far from every class (a person lying
-    down; a linear model extrapolates there and may be sure of a wrong class), so
-    :func:`decide` rejects when any test does. A model of one performer judging another is less
-    sure than the space's model of both judging a new one, so the across-performer level is
-    conservative (at 0.95 it rejected about 1 % of known clips, not 5 %).
-
-    Recognition needs only numpy (the fitted scaler and coefficients are kept as arrays).
-    """
-
-    classes: list[str]
-    mean: np.ndarray
-    scale: np.ndarray
-    coef: np.ndarray  # (classes or 1, features)
-    intercept: np.ndarray
-    threshold: float  # margin below which a motion is "none of these" (-inf: never)
-    scores: list[float]  # the calibration margins
-    quantile: float
-    scheme: str
-
-    def margins(self, features: np.ndarray) -> np.ndarray:
-        z = (np.atleast_2d(np.asarray(features, float)) - self.mean) / self.scale
-        return _margins(z @ self.coef.T + self.intercept)
-
-    def novelty(self, features: np.ndarray) -> float:
-        """Threshold over margin (> 1: "none of these"; 0 when the model never rejects)."""
-        return self.judged(features)[0]
-
-    def judged(self, features: np.ndarray) -> tuple[float, float]:
-        """One motion's :meth:`novelty` and its conformal p-value among the calibration margins
-        (a smaller margin is more unusual; 0 and 1 when the model never rejects)."""
-        if not np.isfinite(self.threshold) or self.threshold <= 0:
-            return 0.0, 1.0
-        m = float(self.margins(features)[0])
-        return float(min(self.threshold / max(m, 1e-12), 1e6)), conformal_p_value(self.scores, m, larger_is_unusual=False)
-
-    @classmethod
-    def fit(cls, features: np.ndarray, labels, performers, quantile: float = NOVELTY_QUANTILE) -> "NoveltyModel | None":
-        """``None`` when the space has fewer than two classes (nothing to tell apart)."""
-        x = np.asarray(features, float)
-        y = np.asarray(labels)
-        if len(set(y)) < 2:
-            return None
-        perf = np.asarray(performers) if performers is not None and len(performers) == len(y) else np.array([""] * len(y))
-        scaler, model = _ridge(x, y)
-        alpha = float(model.alpha_)
-        scores: list[float] = []
-        if len(set(perf)) > 1:
-            scheme = "across performers"
-            for p in sorted(set(perf)):
-                rest = perf != p
-                if len(set(y[rest])) < 2:
-                    continue
-                sc, m = _ridge(x[rest], y[rest], alpha)
-                mine = (perf == p) & np.isin(y, m.classes_)
-                if mine.any():
-                    scores += list(_margins(m.decision_function(sc.transform(x[mine]))))
-        else:
-            scheme = "leave one out"
-            _, m = _ridge(x, y, alpha, loo=True)
-            scores = list(_margins(m.cv_results_[:, :, 0]))
-        threshold = -conformal_threshold(-np.asarray(scores), quantile) if scores else -np.inf
-        coef = np.atleast_2d(model.coef_)
-        return cls([str(c) for c in model.classes_], scaler.mean_.copy(), scaler.scale_.copy(), coef.copy(),
-                   np.atleast_1d(model.intercept_).copy(), float(threshold), [float(v) for v in scores], quantile,
-                   scheme)
-
-    # ------------------------------------------------------------------ files
-    def header(self) -> dict:
-        return {"classes": self.classes, "threshold": self.threshold, "scores": self.scores,
-                "quantile": self.quantile, "scheme": self.scheme}
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {"novelty_mean": self.mean, "novelty_scale": self.scale, "novelty_coef": self.coef,
-                "novelty_intercept": self.intercept}
-
-    @classmethod
-    def from_file(cls, header: dict, arrays: dict) -> "NoveltyModel":
-        return cls(header["classes"], arrays["novelty_mean"], arrays["novelty_scale"], arrays["novelty_coef"],
-                   arrays["novelty_intercept"], float(header["threshold"]), list(header["scores"]),
-                   float(header["quantile"]), header["scheme"])

@@ -19,45 +19,37 @@ loading it gives identical points, distances and generations. Every random step 
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import time
-import uuid
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from shared.clip import Clip
 from shared.errors import BadInput, NotFound
-from shared.io.atomic import atomic_write
-from shared.io.npz import Stacked, savez_stacked
+from shared.pss.association import Associating
 from shared.pss.distance import ModelBank, distance_matrix, distances_to
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
 from shared.pss.mds import Embedding, pair_squares, place_point, smacof
 from shared.pss.rows import appended, spare
+from shared.pss.spacefile import SpaceFile
+from shared.pss.symbol import (  # the space's parts, named here too (its public API, __all__)
+    FORMAT,
+    GEOMETRY_GROUPS,
+    MAX_STATES,
+    READABLE_FORMATS,
+    RECOGNITION_VAR_CEILING,
+    Association,
+    ProtoSymbol,
+    Recognition,
+    SpaceParams,
+    default_n_states,
+    performer,
+)
 from shared.pss.synthesis import combine, generate, point_weights
 
-FORMAT = "mirrorcoach.space/2"
-#: format 1 (mirrorcoach 0.1) has no position group: it loads, generates and associates as it
-#: did, and recognises by the nearest proto-symbol on its angle channels (the old rule)
-READABLE_FORMATS = ("mirrorcoach.space/1", FORMAT)
-GEOMETRY_GROUPS = ("motion", "sensor")
-MAX_STATES = 15
-
-
-@dataclass
-class ProtoSymbol:
-    """One proto-symbol ``lambda`` of the space: an HMM and what it abstracts."""
-
-    name: str
-    label: str
-    hmm: LeftToRightHMM
-    clips: list[str] = field(default_factory=list)
-    n_frames: list[int] = field(default_factory=list)
-    performers: list[str] = field(default_factory=list)  # skeleton names of its clips ("" if none)
+__all__ = ["ProtoSymbolSpace", "ProtoSymbol", "SpaceParams", "Recognition", "Association", "default_n_states",
+           "performer", "FORMAT", "READABLE_FORMATS", "GEOMETRY_GROUPS", "MAX_STATES", "RECOGNITION_VAR_CEILING"]
 
 
 def _stacked(bank: ModelBank, start: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -94,88 +86,7 @@ class _AtRate:
         return c if c.fps == self.fps else c.resample(self.fps)
 
 
-def performer(clip: Clip) -> str:
-    """Who performed a clip, as far as the data tells: the name of its skeleton."""
-    return clip.skeleton.name if clip.skeleton is not None else ""
-
-
-@dataclass
-class Recognition:
-    """Result of ``F_recog`` (eq. 2.6)."""
-
-    point: np.ndarray
-    distances: np.ndarray  # eq. 2.4 distance to every proto-symbol on the geometry groups (placement)
-    nearest: list[tuple[str, str, float]]  # (name, label, recognition distance), nearest first
-    label: str | None  # the decided class; None: "none of these" (open set)
-    label_in_space: str  # label of the nearest point in the space
-    stress: float
-    hmm: LeftToRightHMM
-    seconds: float = 0.0
-    nearest_label: str = ""  # class of the nearest proto-symbol, known or not
-    confidence: float = 1.0  # calibrated probability of nearest_label (of a rejected motion: at most its credibility)
-    novelty: float = 0.0  # > 1: farther than the space's known motions (rejected)
-    recognition_distances: np.ndarray | None = None  # eq. 2.4 on the recognition group
-    decision: object | None = None  # shared.pss.recognition.Decision: each open-set test's novelty
-
-
-@dataclass
-class Association:
-    """Result of eq. 2.8: the point, its weights, the whole generated pattern, and the
-    unobserved part estimated on the observed frames."""
-
-    recognition: Recognition
-    weights: np.ndarray
-    whole: Clip
-    aligned: Clip | None = None
-    progress: float | None = None
-    #: the motion's eq. 2.4 distance to its nearest proto-symbol over the 95th percentile of the
-    #: proto-symbols' own nearest-neighbour distances across performers (same channels): above
-    #: 1 the estimate is an extrapolation beyond what the space learnt
-    reach: float = float("nan")
-
-    @property
-    def extrapolating(self) -> bool:
-        return bool(self.reach > 1.0)
-
-
-@dataclass
-class SpaceParams:
-    n_states: int
-    fps: float = 30.0
-    dim: int = 3
-    covariance_type: str = "diag"
-    var_floor: float = 0.01
-    backend: str = "banded"
-    n_iter: int = 30
-    group_by: str = "clip"
-    #: recognition's variance ceiling (z-scored units, diagonal spaces): see RECOGNITION_VAR_CEILING;
-    #: None for spaces saved before it
-    recognition_var_ceiling: float | None = None
-
-    def to_dict(self):
-        return dict(self.__dict__)
-
-
-#: Recognition compares HMMs by eq. 2.4 with every state variance capped at this value (the
-#: position features are z-scored, so 1 is a channel's whole spread): a long clip of varied
-#: motion (a game studio's 63 s dance) otherwise gets states so broad that every short motion
-#: lies near it. Chosen on data kept apart from what the reports give numbers on: the game
-#: studio's 8 training styles (leave one style out: 34.1 % -> 42.0 % at 0.05, 45.5 % at 0.03)
-#: under the constraint that HDM05's dev split (bd + bk -> dg) stays at 100 % (0.03 gave
-#: 98.4 %). Reported on the other 7 styles and on HDM05's other splits (bench.styles,
-#: reports/recognition).
-RECOGNITION_VAR_CEILING = 0.05
-
-
-def default_n_states(min_frames: int) -> int:
-    """85 % of the frames of the shortest repetition, between 2 and 15 states.
-
-    Measured (the recognition report): on HDM05 at 30 fps (shortest clip 14 frames) 11-14 states recognise
-    98-100 % of unseen actors' clips, 7 states (the former default, half the frames) 83-95 %."""
-    return int(np.clip(round(0.85 * min_frames), 2, MAX_STATES))
-
-
-class ProtoSymbolSpace:
+class ProtoSymbolSpace(Associating, SpaceFile):
     """A named space ``P`` built from a database ``D`` (see module docstring)."""
 
     def __init__(self, params: SpaceParams, features: MotionFeatures, symbols: list[ProtoSymbol],
@@ -201,7 +112,7 @@ class ProtoSymbolSpace:
     @classmethod
     def build(cls, clips: Sequence[Clip], *, n_states: int | None = None, dim: int = 3, fps: float = 30.0,
               covariance_type: str = "diag", var_floor: float = 0.01, backend: str = "banded",
-              group_by: str = "clip", sensor: bool = True, name: str = "space", progress=None) -> "ProtoSymbolSpace":
+              group_by: str = "clip", sensor: bool = True, name: str = "space", progress=None) -> ProtoSymbolSpace:
         """``P = F_build(D)`` (eq. 2.5).
 
         Parameters
@@ -259,7 +170,7 @@ class ProtoSymbolSpace:
 
     @classmethod
     def from_symbols(cls, params: SpaceParams, features: MotionFeatures, symbols: list[ProtoSymbol],
-                     name: str = "space") -> "ProtoSymbolSpace":
+                     name: str = "space") -> ProtoSymbolSpace:
         geo = features.group_indices(GEOMETRY_GROUPS)
         bank = ModelBank.of([s.hmm for s in symbols], None if len(geo) == features.n_features else geo)
         f = distance_matrix(bank)
@@ -270,7 +181,7 @@ class ProtoSymbolSpace:
         space._group_models[("bank",) + GEOMETRY_GROUPS] = bank
         return space
 
-    def added(self, clips: list[Clip]) -> "ProtoSymbolSpace":
+    def added(self, clips: list[Clip]) -> ProtoSymbolSpace:
         """A new space with one proto-symbol per clip added **without rebuilding the rest**: the
         new HMMs, their eq. 2.4 distances to the proto-symbols already there (N per clip, not
         N^2), their points placed among the fixed points as eq. 2.6 places a recognised motion
@@ -329,7 +240,7 @@ class ProtoSymbolSpace:
             space._recognition_matrix = m
         return space
 
-    def _carry_caches(self, space: "ProtoSymbolSpace", n: int) -> None:
+    def _carry_caches(self, space: ProtoSymbolSpace, n: int) -> None:
         """Give ``space`` (this space with proto-symbols added after the first ``n``) this
         space's per-group models, banks and symbol features, extended by the new proto-symbols
         only: recomputing them for every proto-symbol cost an add to a 3,000-clip space 0.7 s."""
@@ -354,7 +265,7 @@ class ProtoSymbolSpace:
             space._group_models[("symbol features",)] = appended(feats, hmm_features(*_stacked(stack, n)))
 
     def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None,
-                as_one: str | None = None) -> "ProtoSymbolSpace":
+                as_one: str | None = None) -> ProtoSymbolSpace:
         """A new space from a modified database (ch. 3 rebuilds every conversation set).
 
         ``as_one``: add the clips as the repetitions of one proto-symbol of that name (a
@@ -651,294 +562,6 @@ class ProtoSymbolSpace:
         c[self.symbol(attempt)] -= alpha
         return c
 
-    # ------------------------------------------------------------------ association
-    def _marginal_scale(self, group: str) -> float:
-        """Factor mapping eq. 2.4 distances on one channel group to the space's (geometry)
-        distances, fitted by least squares on the space's own pairs."""
-        if group not in self._partial_scale:
-            part = distance_matrix(self.models_on((group,)))
-            iu = np.triu_indices(len(self.symbols), 1)
-            num = float(np.sum(part[iu] * self.distances[iu]))
-            den = float(np.sum(part[iu] ** 2))
-            self._partial_scale[group] = num / den if den > 0 else 1.0
-        return self._partial_scale[group]
-
-    def associate(self, clip: Clip, missing: str = "sensor", *, method: str = "expected", seed: int = 0,
-                  weighting: str | None = None) -> Association:
-        """Eq. 2.8: the whole pattern from a partial one.
-
-        ``missing="sensor"``: the clip has the motion channels only; recognition uses the
-        motion part of every proto-symbol (distances rescaled to the full scale), the whole
-        pattern is generated from the point, and the sensor channels are also estimated on
-        the clip's own frames (their expectation under the synthesised HMM's state posteriors).
-
-        ``missing="frames"``: the clip is the start of a motion; how far it reaches is read
-        from the state posterior of its last frame under the best-fitting proto-symbol, and
-        the clip is compared with that many first states of every proto-symbol.
-
-        ``weighting``: how the point becomes proto-symbol weights: ``"affine"`` (exact, may
-        extrapolate) or ``"inverse_distance"`` (convex: the estimate stays among the known
-        patterns, which is steadier for motions outside the space's hull; ch. 3 uses it).
-        ``None``: inverse-distance for missing sensor channels, affine for missing frames.
-        Chosen on HDM05's bd and bk splits (arm torques from motion, eq. 3.9 error against
-        the training mean's: inverse-distance 31 / 24 % below it, affine 17 / 10 %) and
-        reported on dg (32 % below, affine 9 %).
-        """
-        if weighting is None:
-            weighting = "inverse_distance" if missing == "sensor" else "affine"
-        if missing == "sensor":
-            return self._associate_channels(clip, method, seed, weighting)
-        if missing == "frames":
-            return self._associate_frames(clip, method, seed, weighting)
-        raise BadInput(f"missing must be 'sensor' or 'frames', got {missing!r}")
-
-    def _associate_channels(self, clip, method, seed, weighting="affine") -> Association:
-        if not self.features.sensor_channels:
-            raise BadInput(f"space {self.name!r} has no sensor channels to associate")
-        # the motion is recognised on the recognition group (positions where the space has them:
-        # eq. 3.9 error 26.6 % against 33.8 % on the angle channels, HDM05 arm torques, 13 states)
-        group = "position" if self.features.has_position else "motion"
-        seqs = self._sequences(clip, ("motion", "position") if group == "position" else ("motion",))
-        gidx = self.features.feature_indices(group)
-        p = self.params
-        hmm = fit_hmm([x[:, gidx] for x in seqs], p.n_states, covariance_type=p.covariance_type,
-                      var_floor=p.var_floor, backend=p.backend, n_iter=p.n_iter)
-        f = self.bank_on((group,)).distances(hmm) * self._marginal_scale(group)
-        rec = self._place(hmm, f)
-        reach = self._reach((group,), float(np.min(f)) / self._marginal_scale(group))
-        c = self.weights(rec.point, method=weighting)
-        model = self.synthesize(c)
-        whole = self.features.decode(generate(model, method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
-        # the missing channels on the observed frames: E[s_t] = sum_i gamma_t(i) mu_i^S, the state
-        # posteriors read on the recognition group (positions: no Euler branch enters)
-        gamma = model.marginal(gidx).posteriors(seqs[0][:, gidx])
-        sidx = self.features.feature_indices("sensor")
-        est = gamma @ model.means[:, sidx]
-        sens = est * self.features.sensor_scale + self.features.sensor_mean
-        obs = clip.resample(p.fps)
-        aligned = Clip(np.hstack([obs.select(self.features.motion_channels), sens]),
-                       self.features.motion_channels + self.features.sensor_channels, p.fps, obs.skeleton,
-                       {"motion": list(self.features.motion_channels), "sensor": list(self.features.sensor_channels)},
-                       name=f"{clip.name}-associated", label=rec.label)
-        return Association(rec, c, whole, aligned, reach=reach)
-
-    def _associate_frames(self, clip, method, seed, weighting="affine") -> Association:
-        p = self.params
-        groups = ("motion", "sensor") if set(self.features.sensor_channels) <= set(clip.channels) and self.features.sensor_channels else ("motion",)
-        seq = self._sequences(clip, groups, min_frames=2)[0]  # the start of a motion: k <= frames states
-        models = self.models_on(groups)
-        best_ll, best_prog = -np.inf, None
-        for m in models:
-            ll = m.log_likelihood_of([seq], end_in_last=False)
-            if ll > best_ll:
-                best_ll, best_prog = ll, m.progress(seq)
-        k = int(np.argmax(best_prog)) + 1
-        k = int(np.clip(k, 1, min(p.n_states, len(seq))))
-        hmm = fit_hmm([seq], k, covariance_type=p.covariance_type, var_floor=p.var_floor, backend=p.backend, n_iter=p.n_iter)
-        f = distances_to(hmm, [m.prefix(k) for m in models]) * (p.n_states / k)
-        if groups == ("motion",) and self.features.sensor_channels:
-            f = f * self._marginal_scale("motion")
-        rec = self._place(hmm, f)
-        scale = self._marginal_scale("motion") if groups == ("motion",) and self.features.sensor_channels else 1.0
-        reach = self._reach(groups, float(np.min(f)) / scale)
-        c = self.weights(rec.point, method=weighting)
-        whole = self.features.decode(generate(self.synthesize(c), method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
-        return Association(rec, c, whole, None, progress=k / p.n_states, reach=reach)
-
-    def _reach(self, groups: tuple, nearest: float) -> float:
-        """``nearest`` (an eq. 2.4 distance on ``groups``) over the 95th percentile of the
-        proto-symbols' nearest-neighbour distances on the same groups, each to the proto-symbols
-        of other performers when the space has several (a new motion is a new performer's: its
-        own performer's takes are not in the space); cached per groups."""
-        key = ("nearest neighbours",) + tuple(groups)
-        if key not in self._group_models:
-            d = distance_matrix(self.models_on(groups)) if len(self.symbols) > 1 else np.zeros((1, 1))
-            np.fill_diagonal(d, np.inf)
-            perf = np.array(self.performers)
-            if len(set(perf)) > 1:
-                d = np.where(perf[:, None] == perf[None, :], np.inf, d)
-            nn = d.min(axis=1)
-            self._group_models[key] = float(np.quantile(nn[np.isfinite(nn)], 0.95)) if np.isfinite(nn).any() else 0.0
-        ref = self._group_models[key]
-        return float(nearest / ref) if ref > 0 else float("inf")
-
-    # ------------------------------------------------------------------ persistence
-    def _file(self, first: int = 0) -> tuple[dict, dict]:
-        """The header and arrays of a space file holding proto-symbols ``first:`` (0: the whole
-        space; more: a journal entry of the ones :meth:`added` put after them)."""
-        syms = self.symbols[first:]
-        header = {
-            "format": self.format,  # a format-1 space saved again keeps its content, hence its format
-            "name": self.name,
-            "params": self.params.to_dict(),
-            "features": self.features.to_json(),
-            "symbols": [{"name": s.name, "label": s.label, "clips": s.clips, "n_frames": s.n_frames,
-                         "performers": s.performers,
-                         "n_iter": s.hmm.n_iter, "converged": s.hmm.converged, "log_likelihood": s.hmm.log_likelihood,
-                         "hmm_frames": s.hmm.n_frames} for s in syms],
-            "embedding": {"stress": self.embedding.stress, "stress1": self.embedding.stress1,
-                          "n_iter": self.embedding.n_iter, "converged": self.embedding.converged},
-            # recognition's decision (shared/pss/recognition.py), kept so that a loaded space
-            # recognises without refitting it (and without importing scipy.optimize)
-            "calibration": dataclasses.asdict(self.calibration),
-            "novelty": None if self.novelty_model is None else self.novelty_model.header(),
-            "discriminant": None if self.discriminant is None else self.discriminant.header(),
-            "first": first,
-        }
-        arrays = {
-            "means": Stacked([s.hmm.means for s in syms]),  # written symbol by symbol, never stacked
-            "covars": Stacked([s.hmm.covars for s in syms]),
-            "stay": np.stack([s.hmm.stay for s in syms]),
-            "distances": self.distances[first:],  # the rows of these proto-symbols, every column
-            "points": self.points[first:],
-        }
-        if self.recognition_weights is not None:
-            arrays["recognition_weights"] = self.recognition_weights
-        if self.recognition_groups != GEOMETRY_GROUPS and self.params.covariance_type == "diag":
-            # kept so that adding a clip to a loaded space extends it by one row instead of
-            # recomputing N^2 / 2 distances (14 s for 3,000 proto-symbols)
-            arrays["recognition_matrix"] = self.recognition_matrix[first:]
-        for model in (self.novelty_model, self.discriminant):
-            if model is not None:
-                arrays.update(model.arrays())
-        return header, arrays
-
-    def save(self, path) -> Path:
-        """Write the space to one ``.npz`` file, atomically (temporary file, then rename). The
-        file gets a new ``generation``: journal entries of an older file of the same path are
-        not this space's (:meth:`save_added`)."""
-        path = Path(path)
-        header, arrays = self._file()
-        self.generation, self.base_count = uuid.uuid4().hex, len(self.symbols)
-        header["generation"] = self.generation
-        arrays["header"] = np.array(json.dumps(header))
-        atomic_write(path, lambda f: savez_stacked(f, arrays))
-        return path
-
-    def save_added(self, path, first: int) -> Path:
-        """Write only proto-symbols ``first:`` (those :meth:`added` put after the ones of the
-        saved space it came from), their distance rows, points and the refitted decision: a
-        journal entry that :meth:`load` applies to the saved file (``O(N)`` bytes per clip
-        instead of the whole space)."""
-        if self.generation is None:
-            raise BadInput("a journal entry needs the space it adds to saved first")
-        if not 0 < first < len(self.symbols):
-            raise BadInput(f"nothing added after proto-symbol {first} of {len(self.symbols)}")
-        header, arrays = self._file(first)
-        for k in ("params", "features"):  # the saved file's: the same for every entry
-            header.pop(k)
-        header["generation"] = self.generation
-        arrays["header"] = np.array(json.dumps(header))
-        atomic_write(Path(path), lambda f: savez_stacked(f, arrays))
-        return Path(path)
-
-    @staticmethod
-    def _read(path) -> tuple[dict, dict, dict]:
-        """A space file's header, arrays and the open set's fitted tests' arrays."""
-        try:
-            with np.load(path, allow_pickle=False) as z:  # each z[k] is a new array of its own (not copied again)
-                header = json.loads(str(z["header"]))
-                arrays = {k: z[k] for k in ("means", "covars", "stay", "distances", "points")}
-                for k in ("recognition_weights", "recognition_matrix"):
-                    arrays[k] = z[k] if k in z.files else None
-                # the open set's fitted tests, each its header entry and arrays named after it
-                tests = {key: {k: z[k] for k in z.files if k.startswith(f"{key}_")}
-                         for key in ("novelty", "discriminant")}
-        except FileNotFoundError:
-            raise NotFound(f"no space file {path}") from None
-        except (OSError, KeyError, ValueError) as e:
-            raise BadInput(f"{path}: not a readable space file ({e})") from None
-        if header.get("format") not in READABLE_FORMATS:
-            raise BadInput(f"{path}: unknown space format {header.get('format')!r} (this mirrorcoach reads "
-                           f"{', '.join(READABLE_FORMATS)}; a newer mirrorcoach may have written it)")
-        return header, arrays, tests
-
-    @staticmethod
-    def _symbols(header: dict, arrays: dict, params: SpaceParams) -> list[ProtoSymbol]:
-        out = []
-        for i, s in enumerate(header["symbols"]):
-            hmm = LeftToRightHMM(arrays["means"][i], arrays["covars"][i], arrays["stay"][i], params.covariance_type,
-                                 n_iter=s["n_iter"], converged=s["converged"], log_likelihood=s["log_likelihood"],
-                                 n_frames=s["hmm_frames"])
-            out.append(ProtoSymbol(s["name"], s["label"], hmm, s["clips"], s["n_frames"], s.get("performers", [])))
-        return out
-
-    @classmethod
-    def load(cls, path, added=()) -> "ProtoSymbolSpace":
-        """A saved space, with the journal entries ``added`` (:meth:`save_added`, in the order
-        written) applied: an entry of another generation of the file (left by a rewrite) is
-        skipped; one that does not follow the proto-symbols so far is refused."""
-        path = Path(path)
-        header, arrays, tests = cls._read(path)
-        params = SpaceParams(**header["params"])
-        features = MotionFeatures.from_json(header["features"])
-        symbols = cls._symbols(header, arrays, params)
-        e = header["embedding"]
-        emb = Embedding(arrays["points"], e["stress"], e["stress1"], e["n_iter"], e["converged"])
-        distances, rec_matrix = arrays["distances"], arrays["recognition_matrix"]
-        base_count = len(symbols)
-        for entry in added:
-            eh, ea, et = cls._read(entry)
-            if eh.get("generation") != header.get("generation") or eh.get("generation") is None:
-                continue
-            n, m = len(symbols), len(eh["symbols"])
-            if eh.get("first") != n or ea["distances"].shape != (m, n + m):
-                raise BadInput(f"{entry}: a journal entry after proto-symbol {eh.get('first')} ({m} of them), the space "
-                               f"has {n}: the journal is damaged; build the space again")
-            symbols += cls._symbols(eh, ea, params)
-            distances = _grown(distances, ea["distances"])
-            if rec_matrix is not None and ea["recognition_matrix"] is not None:
-                rec_matrix = _grown(rec_matrix, ea["recognition_matrix"])
-            e = eh["embedding"]
-            emb = Embedding(np.vstack([emb.points, ea["points"]]), e["stress"], e["stress1"], e["n_iter"], e["converged"])
-            header = {**header, **{k: eh.get(k) for k in ("calibration", "novelty", "discriminant")}}
-            tests = et
-        space = cls(params, features, symbols, distances, emb, name=header["name"])
-        space.format = header["format"]
-        space.generation, space.base_count = header.get("generation"), base_count
-        if space.recognition_groups != GEOMETRY_GROUPS and params.covariance_type == "diag":
-            # a file written before the channel weights recognises as it did when written (its
-            # calibration was fitted on unweighted distances); rebuilding it gives the weights
-            weights = arrays["recognition_weights"]
-            space._recognition_weights = weights if weights is not None else np.ones(len(space.features.group_indices(
-                space.recognition_groups)))
-            if rec_matrix is not None and rec_matrix.shape == space.distances.shape:
-                space._recognition_matrix = rec_matrix
-        space._restore_decision(header, tests, path)
-        return space
-
-    def _restore_decision(self, header: dict, tests: dict, path) -> None:
-        """Recognition's calibration, novelty model and discriminant ratio as the file holds them."""
-        params = self.params
-        if header.get("calibration"):
-            from shared.pss.recognition import Calibration
-
-            try:
-                cal = Calibration(**header["calibration"])
-                if cal.class_scales is not None and len(cal.class_scales) != len(cal.classes):
-                    raise ValueError(f"{len(cal.class_scales)} class spreads for {len(cal.classes)} classes")
-            except (TypeError, ValueError) as e:
-                raise BadInput(f"{path}: its recognition calibration is unreadable ({e}); build the space again "
-                               "from its clips") from None
-            self._calibration = cal
-        from shared.pss.recognition import DiscriminantRatio, NoveltyModel, hmm_features
-
-        n = len(self.features.group_indices(self.recognition_groups))
-        n_features = len(hmm_features(np.zeros((params.n_states, n)), np.ones((params.n_states, n))))
-        for key, kind, what in (("novelty", NoveltyModel, "novelty model"),
-                                ("discriminant", DiscriminantRatio, "discriminant ratio")):
-            if header.get(key) and tests[key]:
-                try:
-                    model = kind.from_file(header[key], tests[key])
-                    if len(model.mean) != n_features:  # it would fail on the first recognition
-                        raise ValueError(f"it reads {len(model.mean)} features, the space's motions have {n_features}")
-                    setattr(self, f"_{key}", model)
-                except (KeyError, TypeError, ValueError) as e:
-                    raise BadInput(f"{path}: its {what} is unreadable ({type(e).__name__}: {e}); build the space "
-                                   "again from its clips") from None
-            elif header.get("calibration"):  # written before this test: its open set as written (without
-                setattr(self, f"_{key}", False)  # the model; the ratio on eq. 2.4 distances)
-
     # ------------------------------------------------------------------ summary
     def info(self) -> dict:
         return {
@@ -965,13 +588,3 @@ class ProtoSymbolSpace:
                 " (a file written before the novelty model)" if self._novelty is False else " or the novelty model")
                 if len(set(self.labels)) > 1 else " alone (one class: no other class to be nearer to)"),
         }
-
-
-def _grown(matrix: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """A symmetric ``n x n`` matrix extended by ``m`` rows of ``n + m`` columns (and their mirror)."""
-    n, m = len(matrix), len(rows)
-    out = np.empty((n + m, n + m))
-    out[:n, :n] = matrix
-    out[n:, :] = rows
-    out[:n, n:] = rows[:, :n].T
-    return out

@@ -1,0 +1,153 @@
+"""What every command module of the command line shares: the root application and its reading
+options, and the helpers that read clips, parse options, fail with one line, and talk to the
+cluster. Command modules import this module, never each other; :mod:`shared.cli.app` imports
+them (``register``) and adds its own groups. Nothing here imports numpy at import time.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+
+TIMEOUT_HELP = "Seconds to wait for the service (default: $MIRRORCOACH_TIMEOUT or 120)."
+
+app = typer.Typer(help="mirrorcoach: motion coaching with the Proto-symbol Space method.", no_args_is_help=True,
+                  pretty_exceptions_enable=False, add_completion=False)
+clip_app = typer.Typer(help="Read, inspect and convert motion clips (ASF/AMC, BVH, NPZ).", no_args_is_help=True)
+offline_app = typer.Typer(help="Proto-symbol spaces as local .npz files, without a cluster (library level).",
+                          no_args_is_help=True)
+app.add_typer(clip_app, name="clip")
+app.add_typer(offline_app, name="offline")
+
+SKELETON_HELP = "ASF skeleton for AMC files (default: found beside the file or in a sibling asf/ folder)."
+#: how this command reads motion files (the root options; docs/files.md)
+READING: dict[str, str | None] = {"units": None, "up": None, "translations": None}
+
+
+@app.callback()
+def reading_options(units: str | None = typer.Option(None, "--units", help="Length unit of the motion files: cm, m, mm, "
+                                                        "in or cmu (default: read off the body's height, 1-2.2 m)."),
+                    up: str | None = typer.Option(None, "--up", help="Up axis of BVH files: y or z (default: from "
+                                                     "where the feet are)."),
+                    translations: str | None = typer.Option(None, "--translations", help="BVH position channels: "
+                                                               "'replace' the joint offset (Blender), 'add' to it, or "
+                                                               "'auto' (default: the first frame tells, else Blender).")):
+    """mirrorcoach: motion coaching with the Proto-symbol Space method. The options before the
+    command say how the motion files it reads are to be read."""
+    READING.update(units=units, up=up, translations=translations)
+
+
+def read_clip(path, skeleton=None, label: str | None = None):
+    """:func:`shared.io.load_clip` with the reading options of this command line."""
+    from shared.io import load_clip
+
+    return load_clip(path, skeleton=skeleton, label=label, **READING)
+
+
+def fail(msg: str) -> None:
+    typer.echo(f"error: {msg}", err=True)
+    raise typer.Exit(2)
+
+
+def load_clips(paths: list[Path], skeleton, label: str | None = None):
+    from rich.progress import track
+
+    from shared.io import find_clips
+
+    files = find_clips(paths)
+    if not files:
+        fail("no clip files (.amc, .bvh, .npz) under the given paths")
+    clips = [read_clip(f, skeleton=skeleton) for f in track(files, description="reading clips", transient=True,
+                                                             disable=not sys.stderr.isatty())]
+    if label is not None:
+        for c in clips:
+            c.label = label
+    return clips
+
+
+def parse_point(point: str):
+    import numpy as np
+
+    try:
+        x = np.array([float(v) for v in point.split(",")])
+    except ValueError:
+        fail(f"--point must be comma-separated numbers, got {point!r}")
+    if not np.all(np.isfinite(x)):
+        fail("--point coordinates must be finite")
+    return x
+
+
+def parse_mix(mix: list[str]) -> dict[str, float]:
+    parsed = {}
+    for m in mix:
+        name, sep, w = m.rpartition("=")
+        if not sep or not name:
+            fail(f"--mix needs NAME=WEIGHT, got {m!r}")
+        try:
+            parsed[name] = float(w)
+        except ValueError:
+            fail(f"--mix needs NAME=WEIGHT, got {m!r}")
+    return parsed
+
+
+def recognition_text(r: dict) -> str:
+    """What `space recognize` and `offline recognize` print for a person."""
+    if r.get("known", True):
+        head = f"{r['label']}   (confidence {r['confidence']:.2f})"
+    else:
+        why = {"distance": f"it is farther from its nearest class ({r['nearest_label']}) than the space's known "
+                           f"motions are from theirs",
+               "ratio": f"it is not clearly nearer to {r['nearest_label']} than to the next class",
+               "model": "the novelty model finds it between the space's classes"}
+        said = [why[t] for t in r.get("rejected_by") or [] if t in why] or [
+            f"it is farther from every class of the space than its known motions are (nearest class "
+            f"{r['nearest_label']})"]
+        head = f"none of these: {'; '.join(said)} (novelty {r['novelty']:.2f} > 1)"
+    lines = [head, f"point in the space ({', '.join(f'{v:.3f}' for v in r['point'])})", "nearest proto-symbols:"]
+    lines += [f"  {n['distance']:9.3f}  {n['label']:<30} {n['name']}" for n in r["nearest"]]
+    return "\n".join(lines)
+
+
+def client(**kw):
+    from shared.bus.client import Client
+
+    return Client(**kw)
+
+
+def wire(clip, with_skeleton=True) -> dict:
+    from schemas.common import clip_to_wire
+    from shared.clipfiles import wire_name
+
+    d = clip_to_wire(clip, with_skeleton=with_skeleton)
+    d["name"] = wire_name(d["name"])
+    if "label" in d:
+        d["label"] = wire_name(d["label"])
+    return d
+
+
+def busy(message: str):
+    from rich.console import Console
+
+    return Console(stderr=True).status(message) if sys.stderr.isatty() else _Quiet()
+
+
+class _Quiet:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+def jsonable(obj):
+    if hasattr(obj, "tolist"):  # numpy arrays and scalars (without importing numpy)
+        return obj.tolist()
+    if isinstance(obj, dict):
+        return {k: jsonable(v) for k, v in obj.items() if k != "v"}
+    if isinstance(obj, list):
+        return [jsonable(v) for v in obj]
+    return obj
+
+

@@ -1,0 +1,94 @@
+"""The house's layout, drawn from the code: no two modules that need each other (an import
+circle, counting imports inside functions too), no private name imported from another module,
+no module longer than a reader takes in at once."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+REPO = Path(__file__).resolve().parent.parent
+PACKAGES = ("shared", "schemas", "services")
+MAX_LINES = 600
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in PACKAGES:
+        for f in sorted((REPO / pkg).rglob("*.py")):
+            parts = list(f.relative_to(REPO).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = f
+    return out
+
+
+def _imports(mods: dict[str, Path]):
+    """Per module, the modules it imports (anywhere in it), and every private name it imports
+    from another module (``(importer, module, name)``)."""
+
+    def owner(name: str) -> str | None:
+        while name and name not in mods:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    edges, private = {m: set() for m in mods}, []
+    for m, f in mods.items():
+        package = m.split(".") if f.name == "__init__.py" else m.split(".")[:-1]
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [owner(a.name) for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = package[: len(package) - node.level + 1] if node.level else []
+                full = ".".join(base + ([node.module] if node.module else []))
+                if full.split(".")[0] not in PACKAGES:
+                    continue
+                targets = []
+                for a in node.names:
+                    sub = f"{full}.{a.name}"
+                    targets.append(owner(sub) if sub in mods else owner(full))
+                    if a.name.startswith("_") and not a.name.startswith("__") and sub not in mods:
+                        private.append((m, full, a.name))
+            else:
+                continue
+            edges[m].update(t for t in targets if t and t != m)
+    return edges, private
+
+
+def _circles(edges: dict[str, set[str]]) -> list[list[str]]:
+    names = sorted(edges)
+    index = {n: i for i, n in enumerate(names)}
+    pairs = [(index[a], index[b]) for a, bs in edges.items() for b in bs]
+    graph = csr_matrix((np.ones(len(pairs)), tuple(np.array(pairs).T)), shape=(len(names),) * 2)
+    _, label = connected_components(graph, directed=True, connection="strong")
+    groups = [[names[i] for i in np.flatnonzero(label == k)] for k in np.unique(label)]
+    return [g for g in groups if len(g) > 1]
+
+
+def test_the_graph_finds_a_circle_and_a_private_import(tmp_path, monkeypatch):
+    """The check itself: two modules importing each other inside functions are a circle, and a
+    private name taken from another module is found."""
+    pkg = tmp_path / "shared"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("def f():\n    from shared.b import g\n")
+    (pkg / "b.py").write_text("from shared.a import f as _f\nfrom shared.a import _hidden\n")
+    monkeypatch.setattr(__import__(__name__), "REPO", tmp_path)
+    edges, private = _imports(_modules())
+    assert _circles(edges) == [["shared.a", "shared.b"]]
+    assert private == [("shared.b", "shared.a", "_hidden")]
+
+
+def test_no_import_circles_and_no_private_names_across_modules():
+    edges, private = _imports(_modules())
+    assert _circles(edges) == []
+    assert private == []
+
+
+def test_no_module_is_longer_than_a_reader_takes_in():
+    long = {m: n for m, f in _modules().items() if (n := len(f.read_text().splitlines())) > MAX_LINES}
+    assert long == {}, f"modules over {MAX_LINES} lines: {long}"
