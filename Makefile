@@ -8,7 +8,7 @@ OUT     ?= out
 # the local cluster's data, logs and pid files (see shared/bus/config.py for every variable)
 export MIRRORCOACH_HOME ?= $(CURDIR)/var
 
-.PHONY: install bytecode demo test test-quick bench reproduce up down status dashboard clean
+.PHONY: install bytecode demo lint test test-quick bench reproduce up down status dashboard clean
 
 $(STAMP): pyproject.toml
 	@command -v $(PY) >/dev/null 2>&1 || { echo "error: $(PY) not found (mirrorcoach needs Python 3.11)"; exit 1; }
@@ -36,7 +36,12 @@ down: $(STAMP)
 status: $(STAMP)
 	-$(BIN)/mirrorcoach status
 
-test: $(STAMP)
+# style and types, as CI checks them (rules and settings in pyproject.toml)
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/mypy
+
+test: lint
 	@# CI: Blender is the real client of our BVH files (tests/test_conventions.py), Mesa's Vulkan driver lets the
 	@# real rerun viewer run without a screen (tests/test_dashboard.py), espeak-ng says the adverb
 	@# (tests/test_capture_stream.py); elsewhere those tests skip, saying why

@@ -247,10 +247,10 @@ def router_port_taken(endpoint: str) -> str | None:
     if proto != "tcp":
         return None
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            sock.bind((host, port))
+            probe.bind((host, port))
         except OSError as e:
             return (f"the router's port {host}:{port} is in use ({e.strerror}): another program listens there, "
                     f"or a router left by a cluster whose supervisor died; stop it, or choose another port "

@@ -81,7 +81,7 @@ def _array_as_lists(d: dict):
     a.frombytes(data)
     if sys.byteorder == "big" and a.itemsize > 1:
         a.byteswap()
-    flat = [bool(v) for v in a] if dtype == "|b1" else a.tolist()
+    flat: list = [bool(v) for v in a] if dtype == "|b1" else a.tolist()
     for n in reversed(shape[1:]):
         flat = [flat[i:i + n] for i in range(0, len(flat), n)]
     return flat if shape else (flat[0] if flat else None)

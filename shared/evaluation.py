@@ -26,6 +26,7 @@ from __future__ import annotations
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -52,12 +53,12 @@ class RecognitionResult:
 
 
 def _summarise(method, truth, pred, seconds) -> RecognitionResult:
-    per = defaultdict(lambda: [0, 0])
+    per: defaultdict[str, list[int]] = defaultdict(lambda: [0, 0])
     for t, p in zip(truth, pred):
         per[t][1] += 1
         per[t][0] += int(t == p)
     acc = float(np.mean([t == p for t, p in zip(truth, pred)])) if truth else float("nan")
-    return RecognitionResult(method, acc, {k: tuple(v) for k, v in sorted(per.items())},
+    return RecognitionResult(method, acc, {k: (v[0], v[1]) for k, v in sorted(per.items())},
                              float(np.median(seconds)) if len(seconds) else float("nan"), list(pred), list(truth))
 
 
@@ -170,10 +171,10 @@ def pss_alternatives(space: ProtoSymbolSpace, recs, truth: list[str]) -> dict[st
         pred = []
         for r in recs:
             order = np.argsort(r.recognition_distances)[:k]
-            votes = defaultdict(float)
+            votes: defaultdict[str, float] = defaultdict(float)
             for rank, i in enumerate(order):
                 votes[labels[i]] += 1.0 + 1e-3 * (k - rank)  # ties go to the nearer
-            pred.append(max(votes, key=votes.get))
+            pred.append(max(votes, key=lambda label: votes[label]))
         out[f"pss_knn{k}"] = _summarise(f"PSS {k}-NN", truth, pred, [])
     classes = sorted(set(labels))
     perf = np.array(space.performers)
@@ -213,7 +214,7 @@ def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.n
         keep = np.array([c.label != held for c in train])
         tr = [c for c, kp in zip(train, keep) if kp]
         space = ProtoSymbolSpace.build(tr)
-        row = {"held_out": held, "novel": [c.label == held for c in test], "scores": {}}
+        row: dict[str, Any] = {"held_out": held, "novel": [c.label == held for c in test], "scores": {}}
         for c in test:
             r = space.recognize(c)
             _tally(row, "pss", c.label == held, r.decision.novelty)  # and each of the decision's tests alone
@@ -350,7 +351,7 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
         conf = np.array([r.confidence for r in recs])
         # the answer shown: a rejected known clip is not recognised (its confidence is its credibility)
         correct = np.array([r.label == t for r, t in zip(recs, truth)], dtype=float)
-        split = {"train": len(train), "test": len(test), "n_states": space.params.n_states, "build_s": build_s,
+        split: dict[str, Any] = {"train": len(train), "test": len(test), "n_states": space.params.n_states, "build_s": build_s,
                  "robustness": robust,
                  "methods": {"pss": ours.__dict__, "pss_shown": shown.__dict__, "pss_point": point.__dict__,
                              **{k: v.__dict__ for k, v in pss_alternatives(space, recs, truth).items()}},

@@ -261,7 +261,7 @@ def seat_statistics(rows: list[dict]) -> dict:
     coaches = sorted({r["coach"] for r in rows})
     per_coach = {c: {a: [r["d_p"] for r in rows if r["coach"] == c and r["adverb"] == a] for a in ADVERB_CHOICES}
                  for c in coaches}
-    table = tukey_table({a: v for a, v in by.items()}) if all(len(v) >= 2 for v in by.values()) else None
+    table = tukey_table({a: np.asarray(v, float) for a, v in by.items()}) if all(len(v) >= 2 for v in by.values()) else None
     emu1 = {}
     for c in coaches:
         demos = [r for r in rows if r["coach"] == c and "d_s" in r]

@@ -1,6 +1,7 @@
 """The house's layout, drawn from the code: no two modules that need each other (an import
-circle, counting imports inside functions too), no private name imported from another module,
-no module longer than a reader takes in at once."""
+circle, counting imports inside functions too; an import under ``if TYPE_CHECKING:`` names a
+type for annotations and is not one), no private name imported from another module, no module
+longer than a reader takes in at once."""
 
 from __future__ import annotations
 
@@ -39,7 +40,13 @@ def _imports(mods: dict[str, Path]):
     edges, private = {m: set() for m in mods}, []
     for m, f in mods.items():
         package = m.split(".") if f.name == "__init__.py" else m.split(".")[:-1]
-        for node in ast.walk(ast.parse(f.read_text())):
+        tree = ast.parse(f.read_text())
+        typing_only = {id(n) for block in ast.walk(tree) if isinstance(block, ast.If)
+                       and isinstance(block.test, ast.Name) and block.test.id == "TYPE_CHECKING"
+                       for n in ast.walk(block)}
+        for node in ast.walk(tree):
+            if id(node) in typing_only:
+                continue
             if isinstance(node, ast.Import):
                 targets = [owner(a.name) for a in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -77,6 +84,8 @@ def test_the_graph_finds_a_circle_and_a_private_import(tmp_path, monkeypatch):
     (pkg / "__init__.py").write_text("")
     (pkg / "a.py").write_text("def f():\n    from shared.b import g\n")
     (pkg / "b.py").write_text("from shared.a import f as _f\nfrom shared.a import _hidden\n")
+    (pkg / "c.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from shared.d import T\n")
+    (pkg / "d.py").write_text("from shared.c import g\n")
     monkeypatch.setattr(__import__(__name__), "REPO", tmp_path)
     edges, private = _imports(_modules())
     assert _circles(edges) == [["shared.a", "shared.b"]]

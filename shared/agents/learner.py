@@ -82,6 +82,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -234,7 +235,8 @@ class SimulatedLearner:
             raise BadInput("a learner with a strength needs a target with a skeleton (its body is built from it)",
                            field="strength")
         self.felt: int | None = None  # its word for the last demonstration's effort (strength only)
-        self._body, self._target_effort = None, None
+        self._body: Any = None  # the learner's own body (shared.bodies.body.Body), built on first use
+        self._target_effort: float | None = None
 
     def _initial(self) -> np.ndarray:
         m = self.target_phase.copy()

@@ -12,6 +12,7 @@ import re
 import threading
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -64,7 +65,7 @@ class AgentStore:
             self.others, self.learners = others, learners
 
     @staticmethod
-    def _load_other(path: Path) -> tuple[str, object]:
+    def _load_other(path: Path) -> tuple[str, SimulatedOther | PersonOther]:
         d = json.loads(path.read_text())
         kind = d.get("kind", "simulated")
         obj = SimulatedOther.from_dict(d) if kind == "simulated" else PersonOther(d["name"], int(d["params"]["d"]))
@@ -90,6 +91,7 @@ class AgentStore:
         with self.lock:
             if name in self.others and not replace:
                 raise Conflict(f"other {name!r} exists; delete it or create with replace", other=name)
+            obj: SimulatedOther | PersonOther
             if kind == "person":
                 obj = PersonOther(name, int(params.get("d", 4)))
             else:
@@ -132,7 +134,7 @@ class AgentStore:
         header = {"name": lr.name, "trials": lr.trials, "params": asdict(lr.params), "channels": t.channels,
                   "fps": t.fps, "groups": t.groups, "label": t.label, "target_name": t.name,
                   "skeleton": None if t.skeleton is None else t.skeleton.to_json()}
-        arrays = {"target": t.data, "memory": lr.memory, "header": np.array(json.dumps(header))}
+        arrays: dict[str, Any] = {"target": t.data, "memory": lr.memory, "header": np.array(json.dumps(header))}
         if lr.reference is not None:
             arrays["reference"] = lr.reference
         if np.any(lr.fast):

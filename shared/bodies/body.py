@@ -74,7 +74,7 @@ class Body:
     model: mujoco.MjModel
     dofs: list[DofMap]
     mass: float
-    skeleton: object | None = None
+    skeleton: Skeleton | None = None
     root: str | None = None
     feet: list[str] = field(default_factory=list)
     up_axis: int = 2
@@ -190,7 +190,7 @@ def inverse_dynamics(body: Body, q: np.ndarray, fps: float, warnings: dict | Non
     return v, a, tau, cog
 
 
-def _root_wrench(body: Body, q: np.ndarray, tau: np.ndarray):
+def _root_wrench(body: Body, q: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The ground reaction the motion needs: the free root's generalised forces from inverse
     dynamics as a world force ``F`` (T, 3) and a world moment ``M`` (T, 3) about the root's
     origin ``r`` (T, 3); ``None`` for a body without a free root."""
@@ -290,7 +290,8 @@ def foot_points(body: Body, q: np.ndarray, anchors: list | None = None) -> np.nd
 CONTACT_BAND = 0.05
 
 
-def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 0.05, wrench=None) -> dict:
+def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 0.05,
+                    wrench: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
     """Frames whose centre-of-gravity ground projection is outside the support area (static
     balance) and, with the root's ``wrench`` (:func:`_root_wrench`), frames whose centre of
     pressure (zero-moment point) is outside it or whose ground would have to pull (dynamic

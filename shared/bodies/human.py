@@ -61,7 +61,7 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
     g = np.zeros(3)
     g[sk.up_axis] = -9.81
     spec.option.gravity = g
-    bodies = {}
+    bodies: dict = {}
     seg_of, unmapped = map_segments(sk)
     masses, missing = segment_masses(seg_of, mass)
     for i, j in enumerate(sk.joints):

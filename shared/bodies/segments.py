@@ -284,10 +284,11 @@ def _segments_by_topology(sk: Skeleton) -> tuple[dict[str, tuple[str, str]], lis
     if len(upper) < 3 or len(lower) < 2:
         return None
 
-    def pair(ks):  # the two most alike (a left and a right)
-        return list(min(((a, b) for n, a in enumerate(ks) for b in ks[n + 1:]),
-                        key=lambda ab: abs(np.log(tree.branch(ab[0]) / tree.branch(ab[1])))
-                        + 0.1 * abs(len(tree.chain(ab[0])) - len(tree.chain(ab[1])))))
+    def pair(ks: list):  # the two most alike (a left and a right)
+        def unlike(ab) -> float:
+            return abs(np.log(tree.branch(ab[0]) / tree.branch(ab[1]))) + 0.1 * abs(len(tree.chain(ab[0])) - len(tree.chain(ab[1])))
+
+        return list(min(((a, b) for n, a in enumerate(ks) for b in ks[n + 1:]), key=unlike))
 
     named_head = [k for k in upper if any(HEAD_RE.search(sk.joints[i].name) for i in tree.chain(k))]
     head = named_head[0] if len(named_head) == 1 else None

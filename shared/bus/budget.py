@@ -23,6 +23,7 @@ import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from shared.errors import BadInput, Unavailable
 
@@ -30,7 +31,7 @@ log = logging.getLogger("mirrorcoach.budget")
 MB = 2**20
 #: a request whose estimate is above this is followed by a trim of the allocator's free memory
 TRIM_ABOVE = 16 * MB
-_libc = None
+_libc: Any = None  # glibc (ctypes.CDLL) once loaded; False: not glibc
 M_ARENA_MAX = -8  # glibc's mallopt parameter
 
 

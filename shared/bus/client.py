@@ -120,7 +120,7 @@ class Client:
                                   identity=ident.name) from None
             raise Unavailable(f"the cluster is not running (no router at {self.settings.router}; start it with `make up`)",
                               router=self.settings.router) from None
-        self._subs = []
+        self._subs: list = []
 
     def __enter__(self):
         return self

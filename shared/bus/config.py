@@ -62,9 +62,13 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from shared.codec import DEFAULT_MAX_PAYLOAD
 from shared.errors import BadInput
+
+if TYPE_CHECKING:  # annotations only: deploy reads identities with this module's settings
+    from shared.bus.deploy import Identity
 
 LOOPBACK_HOSTS = {"localhost"}
 
@@ -178,7 +182,7 @@ class Settings:
     observer_queue_mb: float = field(default_factory=lambda: _env_num("MIRRORCOACH_OBSERVER_QUEUE_MB", 256.0, float))
     deploy: Path | None = field(default_factory=lambda: Path(_env("MIRRORCOACH_DEPLOY", "")) if _env(
         "MIRRORCOACH_DEPLOY", "") else None)
-    identity: object = None  # shared.bus.deploy.Identity when deployed
+    identity: Identity | None = None  # when deployed
 
     def __post_init__(self):
         if self.deploy is not None:  # several hosts: TLS and the identity's routers, never the loopback default

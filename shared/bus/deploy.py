@@ -153,7 +153,7 @@ def issue(ca_key, ca_cert, cn: str, hosts: list[str], days: int, role: str | Non
     from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
     key = ec.generate_private_key(ec.SECP256R1())
-    sans = []
+    sans: list[x509.GeneralName] = []
     for h in dict.fromkeys([cn, *hosts]):
         try:
             sans.append(x509.IPAddress(ipaddress.ip_address(h)))
@@ -198,7 +198,9 @@ def acl(prefix: str, members: dict[str, list[str]]) -> dict:
     """Zenoh's ``access_control`` section: ``members`` maps a role to the common names of its
     identities (module docstring's table). Default deny; every allowed message listed."""
     p = prefix
-    rules, subjects, policies = [], [], []
+    rules: list[dict] = []
+    subjects: list[dict] = []
+    policies: list[dict] = []
 
     def rule(rid: str, messages: list[str], keys: list[str], flows=("ingress", "egress")):
         if any(r["id"] == rid for r in rules):

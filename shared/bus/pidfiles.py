@@ -38,8 +38,8 @@ def write_pid(path: Path, pid: int) -> None:
 def read_pid(path: Path) -> int | None:
     """The pid in ``path`` if that very process (same start time) still runs, else None."""
     try:
-        pid, start = path.read_text().split()
-        pid = int(pid)
+        number, start = path.read_text().split()
+        pid = int(number)
     except (OSError, ValueError):
         return None
     st = proc_stat(pid)

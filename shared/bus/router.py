@@ -44,7 +44,7 @@ class RefusalLog:
     ``REFUSED a TLS connection: ...``. The rest (Zenoh's trace of every *allowed* decision) is
     dropped, so the log stays small."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.out = os.fdopen(os.dup(2), "w", buffering=1)
         self._seen: dict[tuple, int] = {}
         self._caching: dict[str, str] = {}  # thread -> the key whose permissions it is caching
@@ -63,8 +63,8 @@ class RefusalLog:
                 self.keep(line)
 
     def keep(self, line: str) -> None:
-        thread = _THREAD.search(line)
-        thread = thread.group(0) if thread else ""
+        found = _THREAD.search(line)
+        thread = found.group(0) if found else ""
         who = _WHO.search(line)
         if who:  # a session's id and its certificate's name, for the decisions that give the id only
             self._names[who["zid"]] = who["cn"]

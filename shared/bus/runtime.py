@@ -45,6 +45,7 @@ import time
 import traceback
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 from schemas.base import Endpoint, Message
 from shared.bus.budget import MB, TRIM_ABOVE, MemoryBudget
@@ -94,11 +95,10 @@ class Service:
         self.settings = settings or Settings()
         self.handlers: dict[str, Callable[[dict], dict]] = {}
         self.costs: dict[str, Callable[[dict], float]] = {}
-        self.budget = MemoryBudget(name, self.settings.memory_mb, held=lambda: PAYLOAD_HELD * self._held_bytes)
         self.on_stop: list[Callable[[], None]] = []
         self.on_promote: list[Callable[[], None]] = []  # deployed: before this instance starts to lead
         self.leading = False
-        self._leader_token = None
+        self._leader_token: Any = None
         ident = self.settings.identity
         if ident is not None and ident.role != name:
             raise BadInput(f"MIRRORCOACH_DEPLOY={self.settings.deploy} is the identity of {ident.name!r}, a "
@@ -108,16 +108,17 @@ class Service:
         self._stop = threading.Event()
         self._pool: ThreadPoolExecutor | None = None
         self._wait_pool: ThreadPoolExecutor | None = None
-        self._session = None
-        self._queryable = None
-        self._token = None
-        self._publishers: dict[str, object] = {}
+        self._session: Any = None  # zenoh's Session, queryable, token and publishers once started
+        self._queryable: Any = None
+        self._token: Any = None
+        self._publishers: dict[str, Any] = {}
         self._inflight = 0  # on the workers, running or waiting for one
         self._inflight_bytes = 0
-        self._held_bytes = 0  # payloads of every request in progress, the waiting verbs' too (the budget)
+        self._held_bytes: int = 0  # payloads of every request in progress, the waiting verbs' too (the budget)
+        self.budget = MemoryBudget(name, self.settings.memory_mb, held=lambda: PAYLOAD_HELD * self._held_bytes)
         self._waiting = 0  # verbs that wait for a person, on their own pool
         self._inflight_lock = threading.Lock()
-        self._client = None
+        self._client: Any = None
         self._client_lock = threading.Lock()
         # a worker may still publish while stop() undeclares the publishers (a request past the
         # stop grace): Zenoh's Python objects refuse being used from two threads at once

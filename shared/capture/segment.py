@@ -228,8 +228,8 @@ def _weights(feats) -> np.ndarray:
     lengths = {j.name: float(np.linalg.norm(j.offset)) for j in sk.joints}
     lengths.update({f"{j.name}.end": float(np.linalg.norm(j.end)) for j in sk.joints if j.end is not None})
     names = feats.position_feature_names[:-ROOT_TERMS - 1]
-    w = [lengths.get(n[4:n.index(")")], 0.0) for n in names]
-    w = np.asarray(w) / max(max(w), 1e-9)
+    bones = [lengths.get(n[4:n.index(")")], 0.0) for n in names]
+    w = np.asarray(bones) / max(max(bones), 1e-9)
     return np.append(w, 1.0)
 
 
@@ -341,7 +341,7 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], cohort: float,
 def _greedy(cands: list, key: list[float], accept) -> list:
     """Candidates taken in the order of ``key`` if ``accept``-ed and overlapping none taken by
     more than ``OVERLAP`` of their length."""
-    taken = []
+    taken: list[tuple] = []
     for k in np.argsort(key, kind="stable"):
         x = cands[k]
         if not accept(x):
@@ -394,10 +394,10 @@ def until_repeated(target: Clip, expected: int, rest_after: float = REST_AFTER, 
         if len(v) and v[-max(int(round((rest_after - SMOOTH / 2) * FPS)), 1):].max() >= level:
             return None
         seen = segment(clip, target, expected=expected, background=background, reader=reader)
-        enough.last = (clip, seen)
+        enough.last = (clip, seen)  # type: ignore[attr-defined]  # what the check saw last, for the caller
         if len(seen.repetitions) >= expected and clip.duration - seen.repetitions[-1].end >= rest_after:
             return f"{len(seen.repetitions)} repetitions seen"
         return None
 
-    enough.last = None
+    enough.last = None  # type: ignore[attr-defined]
     return enough

@@ -7,6 +7,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -88,7 +89,7 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                  population_seed: int = typer.Option(2026, help="Seed of the population."),
                  replace: bool = typer.Option(False, "--replace")):
     """Create an other: a simulated agent with hidden parameters, or a person's seat."""
-    params = {"d": d} if person else {"mass": mass, "rule": rule, "d": d, "noise": noise, "seed": seed}
+    params: dict[str, Any] = {"d": d} if person else {"mass": mass, "rule": rule, "d": d, "noise": noise, "seed": seed}
     if kind is not None and not person:
         from shared.agents.population import population
 

@@ -183,8 +183,8 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
     if as_json:
         typer.echo(json.dumps(info, indent=1))
     else:
-        for e in info["events"]:
-            typer.echo(f"  {e}", err=True)
+        for event in info["events"]:
+            typer.echo(f"  {event}", err=True)
         typer.echo(_take_line(info))
     if info["state"] == "failed":
         raise typer.Exit(1)

@@ -179,7 +179,10 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
         elif strength is not None or effort:
             fail("--strength and --effort choose a new session's learner and policy; give --target instead of --session")
         r = c.request("coach", "run", {"session": session, "trials": trials}, timeout=60 + 30 * trials)
-    typer.echo(json.dumps(jsonable(r)) if as_json else _print_session(r))
+    if as_json:
+        typer.echo(json.dumps(jsonable(r)))
+    else:
+        _print_session(r)
 
 
 @coach_app.command("list")

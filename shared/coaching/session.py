@@ -358,7 +358,8 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
             # (feasibility falls with alpha): log2 checks instead of one per step
             reduced = True
             grid = [round(ALPHA_STEP * k, 6) for k in range(1, int(np.ceil(alpha / ALPHA_STEP - 1e-9)))]
-            lo, hi, best = 0, len(grid) - 1, None
+            lo, hi = 0, len(grid) - 1
+            best: tuple | None = None
             while lo <= hi:
                 mid = (lo + hi) // 2
                 candidate = show(grid[mid])

@@ -163,9 +163,9 @@ def g_and_gradient(y: np.ndarray, theta: np.ndarray, rule: str = "eq3.8", tau_ma
         g = a[t].sum()
         grad = s[t] @ y[t]
     elif rule == "f4":
-        t, j = np.unravel_index(int(a.argmax()), a.shape)
-        g = a[t, j]
-        grad = s[t, j] * y[t, j]
+        tf, jf = np.unravel_index(int(a.argmax()), a.shape)
+        g = a[tf, jf]
+        grad = s[tf, jf] * y[tf, jf]
     else:
         raise BadInput(f"unknown conversion rule {rule!r}")
     return float(g), grad

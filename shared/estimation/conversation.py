@@ -49,7 +49,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -122,7 +122,7 @@ class OtherEstimate:
         self.motions = motions
         self.probes = PROBES_PER_SET if probes is True else int(probes)
         self.body_answers: list[tuple[str, int]] = []  # (question key, k): the body estimator's answers
-        self._body = None
+        self._body: Any = None  # the body estimate (shared.estimation.body.BodyEstimate), on first use
         self._saved_body: dict | None = None  # theta, s and how many answers they were fitted to, from a file
         self._regressors: dict = {}
         self.other = ""  # the other's name, for the service
@@ -313,7 +313,7 @@ class OtherEstimate:
                   "other": self.other, "notes": self.notes, "dont_know": self.dont_know,
                   "answers": self.answers, "sets": [asdict(r) for r in self.sets],
                   "motions": [{"name": m.name, "channels": m.channels, "fps": m.fps} for m in self.motions]}
-        arrays = {"header": np.array(json.dumps(header))}
+        arrays: dict[str, Any] = {"header": np.array(json.dumps(header))}
         for i, m in enumerate(self.motions):
             arrays[f"motion{i}"] = m.data
         for i, t in enumerate(self.torques):
@@ -450,7 +450,7 @@ class OtherEstimate:
             t.append((lo + hi) / 2 / g - 1.0)
             noise.append(spread / g)
             n.append(np.mean(where) / max(n_answers - 1, 1))
-        corr = fit(np.array(x), np.array(t), np.array(noise), np.array(n)) if x else fit([], [], [], [])
+        corr = fit(np.array(x), np.array(t), np.array(noise), np.array(n))  # no answers yet: no correction
         self._correction = (n_answers, corr)
         return corr
 

@@ -12,6 +12,7 @@ import bisect
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -56,7 +57,7 @@ def read_asf(path, units: str | None = None) -> Skeleton:
     section = None
     length_unit = 1.0
     angle_scale = 1.0  # degrees per file unit of angle
-    root = {"order": ["tx", "ty", "tz", "rx", "ry", "rz"], "axis": "xyz", "position": [0, 0, 0], "orientation": [0, 0, 0]}
+    root: dict[str, Any] = {"order": ["tx", "ty", "tz", "rx", "ry", "rz"], "axis": "xyz", "position": [0, 0, 0], "orientation": [0, 0, 0]}
     bones: dict[str, dict] = {}
     bone_order: list[str] = []
     hierarchy: dict[str, list[str]] = {}
@@ -165,7 +166,7 @@ def read_asf(path, units: str | None = None) -> Skeleton:
         return d / nrm * b["length"] if nrm > 0 else np.zeros(3)
 
     joints: list[Joint] = []
-    index = {}
+    index: dict[str, int] = {}
     for name in order:
         if name == "root":
             pre = euler_matrix(root["axis"], np.asarray(root["orientation"]) * angle_scale)
@@ -262,9 +263,9 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
         end = starts[k + 1][0] if k + 1 < len(starts) else len(tokens)
         _floats(path, starts[k][1], tokens[starts[k][0]:end])  # raises, naming the number and the line
         raise ClipFormatError(path, "unreadable number", starts[k][1])
-    data = np.zeros(n_frames * nch)
-    data[np.array(where, dtype=np.int64)] = values
-    data = data.reshape(n_frames, nch)
+    flat = np.zeros(n_frames * nch)
+    flat[np.array(where, dtype=np.int64)] = values
+    data = flat.reshape(n_frames, nch)
     # angles in the unit the AMC declares (:RADIANS / :DEGREES), else its ASF's; lengths stay file units
     scale = {"radians": 180.0 / math.pi, "degrees": 1.0}.get(declared, skeleton.__dict__.get("amc_angle_scale", 1.0))
     if scale != 1.0:

@@ -7,9 +7,10 @@ import errno
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 
-def atomic_write(path, write: Callable[[object], None]) -> Path:
+def atomic_write(path, write: Callable[[BinaryIO], object]) -> Path:
     """Call ``write(binary_file)`` on a temporary file and move it to ``path``."""
     import tempfile  # here: a command that only reads does not pay its import (1 ms)
 

@@ -324,7 +324,7 @@ def bvh_lines(clip: Clip) -> tuple[list[str], list[str]]:
 
     emit(0, 0)
     # BVH frame lines list channels in the order the hierarchy declares them (depth first)
-    declared = []
+    declared: list[str] = []
     stack = [0]
     while stack:
         i = stack.pop()

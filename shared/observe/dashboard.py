@@ -128,7 +128,7 @@ def _front(x: float, distance: float, up: int) -> rrb.EyeControls3D:
 
 def _series_style(rec, entity: str, name: str, colour, markers: bool = True) -> None:
     """A series' name and colour (and markers, for values per trial or per set), once."""
-    parts = [rr.SeriesLines(colors=[colour], names=[name])]
+    parts: list = [rr.SeriesLines(colors=[colour], names=[name])]
     if markers:
         parts.append(rr.SeriesPoints(colors=[colour], markers=["circle"], marker_sizes=[4.0], names=[name]))
     rec.log(entity, *parts, static=True)
@@ -151,7 +151,7 @@ class Dashboard:
 
     def __init__(self, path=None, viewer_url: str | None = None, application_id: str = "mirrorcoach"):
         self.rec = rr.RecordingStream(application_id)
-        sinks = []
+        sinks: list = []
         if path is not None:
             sinks.append(rr.FileSink(str(path)))
         if viewer_url:

@@ -17,6 +17,7 @@ import socket
 import subprocess
 import time
 from pathlib import Path
+from typing import Any
 
 from shared.errors import BadInput, Unavailable
 
@@ -73,7 +74,7 @@ class HeadlessViewer:
         self.log = log
         self.timeout_s = timeout_s
         self.proc: subprocess.Popen | None = None
-        self.client = None
+        self.client: Any = None  # rerun's viewer client once started
 
     # ------------------------------------------------------------------ life cycle
     def __enter__(self) -> HeadlessViewer:
@@ -148,7 +149,7 @@ class HeadlessViewer:
         """The blueprint as the viewer has it, and its tabs: ``{name: container key}`` in order."""
         info = self.client.get_blueprint()
         bp = info.blueprint
-        tabs = next((v["ContainerBlueprint"] for v in bp.values()
+        tabs: dict = next((v["ContainerBlueprint"] for v in bp.values()
                      if v.get("ContainerBlueprint", {}).get("container_kind") == "Tabs"), {"contents": []})
         named = {}
         for c in tabs["contents"]:  # a tab is a container or a view of the blueprint, with a display name

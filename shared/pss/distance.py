@@ -227,3 +227,12 @@ def distance_matrix(models: list[LeftToRightHMM] | ModelBank, weights=None) -> n
     for i in range(n - 1):  # the lower triangle from the upper, without a second N x N
         out[i + 1:, i] = out[i, i + 1:]
     return out
+
+
+def bank_parameters(bank: ModelBank, start: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The means and covariances of a bank's HMMs from ``start`` on, stacked (a diagonal bank's
+    own arrays; full covariances stacked here)."""
+    if bank.diag:
+        return bank.means[start:], bank.vars[start:]
+    ms = bank.models[start:]
+    return np.stack([m.means for m in ms]), np.stack([m.covars for m in ms])

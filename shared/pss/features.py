@@ -219,7 +219,7 @@ class MotionFeatures:
         if self.position_mean.shape != (n_p,) or self.position_scale.shape != (n_p,):
             raise BadInput(f"position standardisation needs {n_p} values per statistic")
         self.feature_names = names + self.position_feature_names + [f"std({c})" for c in self.sensor_channels]
-        self._angle_joints = None  # (names, Euler orders, pre-rotations) of the angle joints, for _foreign
+        self._angle_joints: tuple | None = None  # (names, Euler orders, pre-rotations) of the angle joints, for _foreign
 
     # ---------------------------------------------------------------- the position group
     def _position_names(self) -> list[str]:
@@ -284,7 +284,7 @@ class MotionFeatures:
         positions = bool(base._position_names())
         # the mean and deviation over every frame of every clip, clip by clip (a stack of all the
         # frames held 0.5 GB for 1,000 game-studio clips); shifted by the first clip's mean
-        sums = {"sensor": None, "position": None}
+        sums: dict[str, list | None] = {"sensor": None, "position": None}
         count, largest = 0, 0.0
 
         def add(key: str, values: np.ndarray) -> None:

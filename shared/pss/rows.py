@@ -48,3 +48,14 @@ def appended(array: np.ndarray, rows: np.ndarray) -> np.ndarray:
         return out
     buf[n:n + k] = rows
     return buf[:n + k]
+
+
+def padded(matrix: np.ndarray, size: int) -> np.ndarray:
+    """A symmetric ``matrix`` in the top left of a ``size`` x ``size`` one, the rest zero
+    (written once: zeros then a copy wrote 72 MB twice at 3,000 proto-symbols)."""
+    n = len(matrix)
+    out = np.empty((size, size))
+    out[:n, :n] = matrix
+    out[n:] = 0.0
+    out[:n, n:] = 0.0
+    return out

@@ -21,18 +21,19 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from shared.clip import Clip
 from shared.errors import BadInput, NotFound
-from shared.pss.association import Associating
-from shared.pss.distance import ModelBank, distance_matrix, distances_to
+from shared.pss import association, spacefile
+from shared.pss.distance import ModelBank, bank_parameters, distance_matrix, distances_to
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
 from shared.pss.mds import Embedding, pair_squares, place_point, smacof
-from shared.pss.rows import appended, spare
-from shared.pss.spacefile import SpaceFile
+from shared.pss.rows import appended, padded, spare
 from shared.pss.symbol import (  # the space's parts, named here too (its public API, __all__)
     FORMAT,
     GEOMETRY_GROUPS,
@@ -48,31 +49,14 @@ from shared.pss.symbol import (  # the space's parts, named here too (its public
 )
 from shared.pss.synthesis import combine, generate, point_weights
 
+if TYPE_CHECKING:  # annotations only: recognition's decision is imported where it is fitted
+    from shared.pss.recognition import Calibration
+
 __all__ = ["ProtoSymbolSpace", "ProtoSymbol", "SpaceParams", "Recognition", "Association", "default_n_states",
            "performer", "FORMAT", "READABLE_FORMATS", "GEOMETRY_GROUPS", "MAX_STATES", "RECOGNITION_VAR_CEILING"]
 
 
-def _stacked(bank: ModelBank, start: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """The means and covariances of a bank's HMMs from ``start`` on, stacked (a diagonal bank's
-    own arrays; full covariances stacked here)."""
-    if bank.diag:
-        return bank.means[start:], bank.vars[start:]
-    ms = bank.models[start:]
-    return np.stack([m.means for m in ms]), np.stack([m.covars for m in ms])
-
-
-def _padded(matrix: np.ndarray, size: int) -> np.ndarray:
-    """A symmetric ``matrix`` in the top left of a ``size`` x ``size`` one, the rest zero
-    (written once: zeros then a copy wrote 72 MB twice at 3,000 proto-symbols)."""
-    n = len(matrix)
-    out = np.empty((size, size))
-    out[:n, :n] = matrix
-    out[n:] = 0.0
-    out[:n, n:] = 0.0
-    return out
-
-
-class _AtRate:
+class _AtRate(Sequence):
     """A sequence of clips seen at ``fps`` (each resampled when taken, none kept)."""
 
     def __init__(self, clips: Sequence[Clip], fps: float):
@@ -81,12 +65,12 @@ class _AtRate:
     def __len__(self) -> int:
         return len(self.clips)
 
-    def __getitem__(self, i: int) -> Clip:
+    def __getitem__(self, i):  # an index (a Clip); Sequence also allows slices, which nothing here takes
         c = self.clips[i]
         return c if c.fps == self.fps else c.resample(self.fps)
 
 
-class ProtoSymbolSpace(Associating, SpaceFile):
+class ProtoSymbolSpace:
     """A named space ``P`` built from a database ``D`` (see module docstring)."""
 
     def __init__(self, params: SpaceParams, features: MotionFeatures, symbols: list[ProtoSymbol],
@@ -99,12 +83,12 @@ class ProtoSymbolSpace(Associating, SpaceFile):
         self.name = name
         self.format = FORMAT
         self._partial_scale: dict[str, float] = {}
-        self._group_models: dict[tuple, object] = {}  # per channel groups: models, banks, symbol features
-        self._calibration = None
-        self._novelty = None  # fitted on first use; False: a file written before it (the distance rule)
-        self._discriminant = None  # likewise; False: a file written before it (the eq. 2.4 ratio)
-        self._recognition_matrix = None
-        self._recognition_weights = None  # computed on first use, or read from the file
+        self._group_models: dict[tuple, Any] = {}  # per channel groups: models, banks, symbol features
+        self._calibration: Calibration | None = None
+        self._novelty: Any = None  # NoveltyModel, fitted on first use; False: a file written before it
+        self._discriminant: Any = None  # DiscriminantRatio, likewise; False: written before it (eq. 2.4 ratio)
+        self._recognition_matrix: np.ndarray | None = None
+        self._recognition_weights: np.ndarray | None = None  # computed on first use, or read from the file
         self.generation: str | None = None  # the saved file's (save), which journal entries name
         self.base_count = 0  # proto-symbols in that file (the rest are in journal entries)
 
@@ -202,7 +186,7 @@ class ProtoSymbolSpace(Associating, SpaceFile):
             names.add(c.name)
         n, new = len(self.symbols), symbols[len(self.symbols):]
         geo = self.features.group_indices(GEOMETRY_GROUPS)
-        f = _padded(self.distances, len(symbols))
+        f = padded(self.distances, len(symbols))
         bank = self.bank_on(GEOMETRY_GROUPS)
         for k, sym in enumerate(new):
             row = np.r_[bank.distances(sym.hmm.marginal(geo)),
@@ -231,7 +215,7 @@ class ProtoSymbolSpace(Associating, SpaceFile):
         if self.recognition_groups != GEOMETRY_GROUPS:
             w = self.recognition_weights
             rec = space.recognition_models()
-            m = _padded(self.recognition_matrix, len(symbols))
+            m = padded(self.recognition_matrix, len(symbols))
             known = self.recognition_bank()
             for k in range(len(new)):
                 row = np.r_[known.distances(rec[n + k]),
@@ -262,7 +246,7 @@ class ProtoSymbolSpace(Associating, SpaceFile):
         if feats is not None and stack is not None:
             from shared.pss.recognition import hmm_features
 
-            space._group_models[("symbol features",)] = appended(feats, hmm_features(*_stacked(stack, n)))
+            space._group_models[("symbol features",)] = appended(feats, hmm_features(*bank_parameters(stack, n)))
 
     def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None,
                 as_one: str | None = None) -> ProtoSymbolSpace:
@@ -270,11 +254,11 @@ class ProtoSymbolSpace(Associating, SpaceFile):
 
         ``as_one``: add the clips as the repetitions of one proto-symbol of that name (a
         learner's attempt of 5 repetitions, ch. 4) instead of one proto-symbol per clip."""
-        remove = set(remove or [])
-        unknown = remove - {s.name for s in self.symbols}
+        removed = set(remove or [])
+        unknown = removed - {s.name for s in self.symbols}
         if unknown:
             raise NotFound(f"no proto-symbol named {sorted(unknown)[0]!r} in space {self.name!r}")
-        symbols = [s for s in self.symbols if s.name not in remove]
+        symbols = [s for s in self.symbols if s.name not in removed]
         names = {s.name for s in symbols}
         if as_one is not None:
             if as_one in names:
@@ -477,7 +461,7 @@ class ProtoSymbolSpace(Associating, SpaceFile):
         if key not in self._group_models:
             from shared.pss.recognition import hmm_features
 
-            feats = hmm_features(*_stacked(self._recognition_stack()))
+            feats = hmm_features(*bank_parameters(self._recognition_stack()))
             self._group_models[key] = spare(feats.shape)  # spare rows: an added clip's row goes in place
             self._group_models[key][:] = feats
         return self._group_models[key]
@@ -561,6 +545,27 @@ class ProtoSymbolSpace(Associating, SpaceFile):
         c[self.symbol(target)] += 1.0 + alpha
         c[self.symbol(attempt)] -= alpha
         return c
+
+    # ------------------------------------------------------------------ association and the file
+    def associate(self, clip: Clip, missing: str = "sensor", *, method: str = "expected", seed: int = 0,
+                  weighting: str | None = None) -> Association:
+        """Eq. 2.8: the whole pattern from a partial one (missing sensor channels or missing
+        frames); :func:`shared.pss.association.associate` says how."""
+        return association.associate(self, clip, missing, method=method, seed=seed, weighting=weighting)
+
+    def save(self, path) -> Path:
+        """Write the space to one ``.npz`` file, atomically (:func:`shared.pss.spacefile.save`)."""
+        return spacefile.save(self, path)
+
+    def save_added(self, path, first: int) -> Path:
+        """Write proto-symbols ``first:`` as a journal entry of the saved file
+        (:func:`shared.pss.spacefile.save_added`)."""
+        return spacefile.save_added(self, path, first)
+
+    @classmethod
+    def load(cls, path, added=()) -> ProtoSymbolSpace:
+        """A saved space with its journal entries ``added`` applied (:func:`shared.pss.spacefile.load`)."""
+        return spacefile.load(cls, path, added)
 
     # ------------------------------------------------------------------ summary
     def info(self) -> dict:

@@ -6,11 +6,15 @@ states: :mod:`shared.pss.space` builds and uses spaces."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from shared.clip import Clip
 from shared.pss.hmm import LeftToRightHMM
+
+if TYPE_CHECKING:  # annotations only: recognition decides, this module holds its answer
+    from shared.pss.recognition import Decision
 
 FORMAT = "mirrorcoach.space/2"
 #: format 1 (mirrorcoach 0.1) has no position group: it loads, generates and associates as it
@@ -54,7 +58,7 @@ class Recognition:
     confidence: float = 1.0  # calibrated probability of nearest_label (of a rejected motion: at most its credibility)
     novelty: float = 0.0  # > 1: farther than the space's known motions (rejected)
     recognition_distances: np.ndarray | None = None  # eq. 2.4 on the recognition group
-    decision: object | None = None  # shared.pss.recognition.Decision: each open-set test's novelty
+    decision: Decision | None = None  # each open-set test's novelty
 
 
 @dataclass

@@ -28,6 +28,7 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -97,7 +98,7 @@ class Ch3:
     def score(self, name: str, params: dict, lang: Language, motions: dict, methods=METHODS) -> dict:
         """Eq. 3.9 error, match and distance per method and motion group; motions the other
         feels nothing of (g = 0: it cannot make them) are left out and counted."""
-        row = {}
+        row: dict[str, Any] = {}
         for k, ms in motions.items():
             truth = self.truth(name, params, ms, lang.joints)
             keep = [i for i, t in enumerate(truth) if lang.g(t) > 1e-9]

@@ -6,6 +6,7 @@ from them (:func:`verdict`, :func:`level`, :func:`trend`). ``ch``: the run's
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -19,9 +20,9 @@ G_MAX = 0.6  # the shared language's range for eq. 3.8 (three times the self's h
 G_MAX_RULES = 1.2  # f4 is a single joint's peak torque: its range is larger than eq. 3.8's mean
 METHODS = ("thesis", "space", "interval", "body")
 FIGURE = {"error": 6, "match": 7, "distance": 8}
-THESIS = {"known_error": 0.10, "unknown_error": 0.20, "match": {4: (0.8, 0.8), 6: (1.0, 0.7), 8: (1.0, 0.3)},
+THESIS: dict[str, Any] = {"known_error": 0.10, "unknown_error": 0.20, "match": {4: (0.8, 0.8), 6: (1.0, 0.7), 8: (1.0, 0.3)},
           "identification": 1.0, "wrong_rule_error": (0.45, 0.60), "right_rule_error": 0.10}
-GOALS = {"known": 0.05, "unknown": 0.10, "identification": 1.0, "identification_noisy": 0.95,
+GOALS: dict[str, Any] = {"known": 0.05, "unknown": 0.10, "identification": 1.0, "identification_noisy": 0.95,
          "match": {4: 0.8, 6: 0.7, 8: 0.3}}
 WORKERS = 4  # others conversing at a time (each waits on the services most of the time)
 THESIS_LEVEL = 0.05  # within 5 points of the thesis's figure is "at the thesis's level"

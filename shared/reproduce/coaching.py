@@ -36,7 +36,7 @@ from shared.reproduce.coaching_stats import (
     STRENGTH_SEED,
     TARGETS,
     int_keys,
-    r4,
+    r4_of,
     r_l,
     tidy_rows,
 )
@@ -178,7 +178,7 @@ def sensitivity(client, target, key: str, learners: int, family: str, echo=print
     out = {}
     for param, values in SENSITIVITY[family].items():
         for v in values:
-            out[f"{param}={v:g}"] = {f"{a:g}": r4(Experiment.d(ex.group(
+            out[f"{param}={v:g}"] = {f"{a:g}": r4_of(Experiment.d(ex.group(
                 f"{param[:4]}{v:g}-a{a:g}".replace(".", "_"), lambda i, a=a: {"kind": "fixed", "alpha": a, "adverb": None},
                 params={param: v}))).tolist() for a in SENSITIVITY_ALPHAS}
     echo(f"  sensitivity {family}: {ex.count} coaching trials")

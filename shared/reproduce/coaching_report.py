@@ -18,7 +18,7 @@ from shared.reproduce.coaching_stats import (
     THESIS,
     compare,
     int_keys,
-    r4,
+    r4_of,
     r_l,
     tidy_rows,
     tukey_markdown,
@@ -79,7 +79,7 @@ def case_tables(rows: list[dict], **where) -> list[str]:
             if not all(have[c].shape[0] >= 2 for c in cases):
                 lines += [f"{title} ({which}: cases {', '.join(map(str, cases))}): not enough units in every case.", ""]
                 continue
-            t = tukey_table({f"case {c}": r4(have[c]) for c in cases})
+            t = tukey_table({f"case {c}": r4_of(have[c]) for c in cases})
             lines += [f"**{title}**, {which} (cases {', '.join(map(str, cases))}):", "", *tukey_markdown(t), ""]
     return lines
 
@@ -100,13 +100,13 @@ FINDINGS = {
 
 def _finding(res: dict, key: str) -> dict | None:
     _, a, b = FINDINGS[key]
-    cases = {int(c): r4(d) for c, d in res["cases"].items()}
+    cases = {int(c): r4_of(d) for c, d in res["cases"].items()}
     effort = res.get("effort") or {}  # absent from runs before the experiment existed
     other = {"sub-goal": res["subgoal"]["d"], "body part": res["body_part"]["d"], "nb": res["nb"]["d"],
              "effort": effort.get("with"), "not asking": effort.get("without")}
 
     def r4(k):
-        return cases[k] if isinstance(k, int) else (None if other[k] is None else r4(other[k]))
+        return cases[k] if isinstance(k, int) else (None if other[k] is None else r4_of(other[k]))
 
     x = r4(a)
     if x is None:
@@ -134,13 +134,13 @@ def against_target(res: dict) -> list[dict]:
     """Every coaching condition of one family and target against the target alone (case 1,
     the same learners): its R_4 difference, paired p and Holm's p over the conditions; the word
     is computed from Holm's p as :func:`compare`'s is (**holds**: lower, adjusted p < .05)."""
-    base = r4(res["cases"][1])
+    base = r4_of(res["cases"][1])
     groups = {f"case {c}: {CASE_NAMES[int(c)]}": d for c, d in res["cases"].items() if int(c) != 1}
     groups.update({f"alpha {k.split('|')[0]}{'' if k.endswith('none') else ' + adverb'}": d
                    for k, d in res["sweep"].items() if k != "0|none"})
     groups.update({"sub-goal": res["subgoal"]["d"], "body part": res["body_part"]["d"], "naive Bayes": res["nb"]["d"],
                    "alpha 2 + adverb, feasibility checked": res["feasibility"]["d"]})
-    rows = [{"condition": name, **compare(r4(d), base)} for name, d in groups.items() if d is not None]
+    rows = [{"condition": name, **compare(r4_of(d), base)} for name, d in groups.items() if d is not None]
     for row, p in zip(rows, holm([r["p"] for r in rows])):
         row["p_holm"] = float(p)
         row["word"] = ("holds" if row["diff"] < 0 and p < 0.05 else "reversed" if row["diff"] > 0 and p < 0.05 else
@@ -168,7 +168,7 @@ def null_sentence(family: str, per_target: dict) -> str:
 
 def _best_alpha(res: dict, adverb: str = "none") -> float:
     xs = [0.0, *SWEEP]
-    return xs[int(np.argmin([r4(res["sweep"][f"{a:g}|{adverb}"]).mean() for a in xs]))]
+    return xs[int(np.argmin([r4_of(res["sweep"][f"{a:g}|{adverb}"]).mean() for a in xs]))]
 
 
 def _section(out: Path, family: str, key: str, res: dict) -> list[str]:
@@ -178,14 +178,14 @@ def _section(out: Path, family: str, key: str, res: dict) -> list[str]:
     xs = [0.0, *SWEEP]
     series = {}
     for adv, style in (("none", "o-"), ("table", "s--")):
-        r4 = [r4(res["sweep"][f"{a:g}|{adv}"]) for a in xs]
+        r4 = [r4_of(res["sweep"][f"{a:g}|{adv}"]) for a in xs]
         series[f"{'with' if adv == 'table' else 'without'} adverb"] = (xs, [x.mean() for x in r4], [_se(x) for x in r4], style)
     name = plot_figure(out / f"{tag}_fig4_7_5_7.png", f"{family}, {key}: R_4 against alpha (fig. 4.7, 5.7)", "alpha",
                 "R_4 (mean, s.e.)", series, xs)
-    norm = []  # fig. 6.5: d_4 per alpha, each learner's largest scaled to 200
+    per_alpha = []  # fig. 6.5: d_4 per alpha, each learner's largest scaled to 200
     for a in xs:
-        norm.append(np.array([np.asarray(res["sweep"][f"{a:g}|none"], float)[:, -1]]).ravel())
-    norm = np.array(norm)
+        per_alpha.append(np.array([np.asarray(res["sweep"][f"{a:g}|none"], float)[:, -1]]).ravel())
+    norm = np.array(per_alpha)
     norm = 200.0 * norm / norm.max(axis=0, keepdims=True)
     fig65 = plot_figure(out / f"{tag}_fig6_5.png", f"{family}, {key}: d_4 against alpha (fig. 6.5)", "alpha",
                  "d_4, each learner's largest = 200", {"without adverb": (xs, norm.mean(axis=1),
@@ -203,9 +203,9 @@ def _section(out: Path, family: str, key: str, res: dict) -> list[str]:
                     series, list(range(1, 5)))
         lines.append(f"![{fig}]({name})")
     for fig, cs, title in (("fig6_2", (1, 2, 5, 6), "fig. 6.2"), ("fig6_7", (3, 7, 8), "fig. 6.7")):
-        series = {f"case {c}": ([0], r4(cases[c]).mean(), _se(r4(cases[c])), "") for c in cs}
+        bars: dict[str, tuple] = {f"case {c}": ([0], r4_of(cases[c]).mean(), _se(r4_of(cases[c])), "") for c in cs}
         name = plot_figure(out / f"{tag}_{fig}.png", f"{family}, {key}: R_4 per case ({title})", "", "R_4 (mean, s.e.)",
-                    series, bars=True)
+                    bars, bars=True)
         lines.append(f"![{fig}]({name})")
     lines.append("")
     rows = tidy_rows({"families": {family: {key: res}}})
@@ -230,26 +230,26 @@ def _section(out: Path, family: str, key: str, res: dict) -> list[str]:
         f = _finding(res, "nb")
         lines += [f"Naive Bayes, trained on {len(nb['labels'])} states of population {NB_TRAIN_SEED} (labels: "
                   + ", ".join(f"{a} {nb['labels'].count(a)}" for a in ADVERBS) + f"), tested on this one: R_4 "
-                  f"{r4(nb['d']).mean():.3f}; the best fixed case, {f['against']}, "
-                  f"{r4(cases[int(f['against'].split()[-1])]).mean():.3f}; difference {f['diff']:+.3f} (p = {f['p']:.3f}, "
-                  f"{f['word']}). Every case: " + ", ".join(f"{c} {r4(cases[c]).mean():.3f}" for c in sorted(cases))
+                  f"{r4_of(nb['d']).mean():.3f}; the best fixed case, {f['against']}, "
+                  f"{r4_of(cases[int(f['against'].split()[-1])]).mean():.3f}; difference {f['diff']:+.3f} (p = {f['p']:.3f}, "
+                  f"{f['word']}). Every case: " + ", ".join(f"{c} {r4_of(cases[c]).mean():.3f}" for c in sorted(cases))
                   + ".", ""]
     fz = res["feasibility"]
     lines += [f"Feasibility check (alpha 2 + adverb): alpha lowered in {fz['lowered']} of {fz['trials']} trials; R_4 "
-              f"{r4(fz['d']).mean():.3f} with the check, {r4(cases[4]).mean():.3f} without.", ""]
+              f"{r4_of(fz['d']).mean():.3f} with the check, {r4_of(cases[4]).mean():.3f} without.", ""]
     if res.get("effort"):
         ef, f = res["effort"], _finding(res, "effort")
         lo, hi = min(ef["strength"]), max(ef["strength"])
         lines += [f"The estimator in the loop (6.5.1): learners whose bodies give {lo:.2f}-{hi:.2f} times the target's "
                   "effort, alpha 2 + adverb; the coach asks each learner how heavy the last demonstration felt "
                   f"(chapter 3's interval estimator) and lowers alpha where it predicts more than the learner's strength "
-                  f"(in {ef['lowered']} of {ef['trials']} trials). R_4 {r4(ef['with']).mean():.3f} asking, "
-                  f"{r4(ef['without']).mean():.3f} not asking: {_cell(f)}.", ""]
+                  f"(in {ef['lowered']} of {ef['trials']} trials). R_4 {r4_of(ef['with']).mean():.3f} asking, "
+                  f"{r4_of(ef['without']).mean():.3f} not asking: {_cell(f)}.", ""]
     parts = res["body_part"]["parts"]
     goals = res["subgoal"]["goals"]
     n_goals = [len(set(g)) for g in goals]
-    t = tukey_table({"whole body (case 3)": r4(cases[3]), "body part": r4(res["body_part"]["d"]),
-                     "sub-goals": r4(res["subgoal"]["d"])})
+    t = tukey_table({"whole body (case 3)": r4_of(cases[3]), "body part": r4_of(res["body_part"]["d"]),
+                     "sub-goals": r4_of(res["subgoal"]["d"])})
     lines += ["Whole-body, body-part and sub-goal emphasis (alpha 2, no adverb). Parts emphasised: "
               + ", ".join(f"{p} {parts.count(p)}" for p in ("arms", "legs", "trunk")) + f"; goals per sub-goal session: "
               f"{min(n_goals)}-{max(n_goals)}.", "", *tukey_markdown(t), ""]
@@ -357,7 +357,7 @@ def nb_transfer_lines(results: dict) -> list[str]:
             if row.get("d") is None or row.get("own_d") is None:
                 lines.append(f"| {fam} | {a} -> {b} | - | - | not run: {row.get('why') or 'the own-task classifier was not trained'} |")
                 continue
-            x, y = r4(row["d"]), r4(row["own_d"])
+            x, y = r4_of(row["d"]), r4_of(row["own_d"])
             f = compare(y, x)  # is the own task's classifier lower than the transferred one?
             lines.append(f"| {fam} | {a} -> {b} | {x.mean():.3f} | {y.mean():.3f} | {x.mean() - y.mean():+.3f} "
                          f"(own task lower: {f['word']}, p = {f['p']:.3f}) |")

@@ -122,7 +122,7 @@ def tidy_rows(results: dict) -> list[dict]:
     return rows
 
 
-def r4(d) -> np.ndarray:
+def r4_of(d) -> np.ndarray:
     return r_l(np.asarray(d, float))[:, -1]
 
 
