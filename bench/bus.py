@@ -1,6 +1,6 @@
 """``make bench`` (bus part): what the bus adds on top of the library (issue 3 targets).
 
-On a private cluster (free loopback port, temporary home) started with ``shared.cluster.up``:
+On a private cluster (free loopback port, temporary home) started with ``shared.bus.cluster.up``:
 
 * request overhead for a 100 KB payload, (a) raw Zenoh get/reply through the router and
   (b) the full service stack (msgpack codec, contract validation, worker pool, reply

@@ -30,8 +30,8 @@ def private_cluster(prefix: str):
     home = Path(tempfile.mkdtemp(prefix=f"mc-bench-{prefix}-"))
     os.environ.update({"MIRRORCOACH_ROUTER": f"tcp/127.0.0.1:{_free_port()}", "MIRRORCOACH_HOME": str(home),
                        "MIRRORCOACH_PREFIX": prefix})
+    from shared.bus.cluster import down, up
     from shared.bus.config import Settings
-    from shared.cluster import down, up
 
     s = Settings()
     previous = signal.signal(signal.SIGTERM, _stop)  # a benchmark stopped with kill stops its cluster too

@@ -61,7 +61,7 @@ DEEP = "__DEEP__"  # packed, then replaced by a list nested n deep (msgpack's pa
 
 def with_deep(payload: bytes, n: int) -> bytes:
     """``payload`` with the packed string ``DEEP`` replaced by a list nested ``n`` deep."""
-    from shared.codec import pack
+    from shared.bus.codec import pack
 
     return payload.replace(pack(DEEP), b"\x91" * n + b"\x90")
 
@@ -108,7 +108,7 @@ def set_path(msg: dict, path: tuple, value, delete: bool = False) -> dict:
 def refused(endpoint, payload: bytes) -> bool:
     """Whether the contract itself refuses ``payload`` (a mutation can happen to be valid: a value
     in range for a field without bounds; those are not sent)."""
-    from shared.codec import unpack
+    from shared.bus.codec import unpack
     from shared.errors import MirrorcoachError
 
     try:
@@ -120,7 +120,7 @@ def refused(endpoint, payload: bytes) -> bool:
 
 def mutations(endpoint):
     """Invalid requests for one verb (payload bytes), made from its contract and each refused by it."""
-    from shared.codec import pack
+    from shared.bus.codec import pack
 
     body = endpoint.request.body
     seed = example(body)

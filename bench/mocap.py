@@ -30,7 +30,7 @@ from bench.common import parse_args, write_results
 from shared.errors import MirrorcoachError
 from shared.io import find_clips, load_clip, save_clip
 from shared.io.conventions import FOOT_RE, HEAD_RE
-from shared.skeleton import Joint, Skeleton
+from shared.motion.skeleton import Joint, Skeleton
 
 
 def _check_file(path: Path) -> dict:

@@ -7,9 +7,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from bench.common import parse_args, write_results
-from shared.evaluation import evaluate
-from shared.evaluation_report import report_markdown, write_report
 from shared.io import find_clips, load_clip
+from shared.reports.evaluation import evaluate
+from shared.reports.evaluation_report import report_markdown, write_report
 
 
 def main(argv=None) -> int:

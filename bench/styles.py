@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from bench.common import parse_args, write_results
-from shared.evaluation import dtw_recognition, minirocket_recognition
 from shared.io import load_clip
 from shared.pss.space import ProtoSymbolSpace
+from shared.reports.evaluation import dtw_recognition, minirocket_recognition
 
 NAME = re.compile(r"dataset-1_(?P<content>[a-z-]+)_(?P<style>[a-z-]+)_(?P<id>\d+)\.bvh$")
 

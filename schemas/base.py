@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.codec import DEFAULT_MAX_PAYLOAD
+from shared.bus.codec import DEFAULT_MAX_PAYLOAD
 from shared.errors import BadInput
 
 NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}"  # no '/', no leading '.', so never a path

@@ -42,7 +42,7 @@ CLIP = Map(
                   "frames x channels, degrees for angles"),
         "sensor": F(List(Str(pattern=CHANNEL_PATTERN, max_len=64), max_len=MAX_CHANNELS),
                     "which channels are sensor channels (torques, centre of gravity)", required=False, default=list),
-        "skeleton": F(Str(max_len=2_000_000), "skeleton as JSON (shared.skeleton.Skeleton.to_json)", required=False),
+        "skeleton": F(Str(max_len=2_000_000), "skeleton as JSON (shared.motion.skeleton.Skeleton.to_json)", required=False),
     },
     checks=[_clip_columns],
     doc="a motion clip",
@@ -56,7 +56,7 @@ ERROR = Message("error", Map({
 
 
 def clip_to_wire(clip, with_skeleton: bool = True) -> dict:
-    """A :class:`shared.clip.Clip` as a CLIP map."""
+    """A :class:`shared.motion.clip.Clip` as a CLIP map."""
     d = {
         "name": clip.name or "clip",
         "fps": float(clip.fps),
@@ -73,8 +73,8 @@ def clip_to_wire(clip, with_skeleton: bool = True) -> dict:
 
 def clip_from_wire(d: dict, skeleton=None):
     """A validated CLIP map as a Clip; ``skeleton`` is used when the message has none."""
-    from shared.clip import Clip
-    from shared.skeleton import Skeleton
+    from shared.motion.clip import Clip
+    from shared.motion.skeleton import Skeleton
 
     sk = skeleton
     if d.get("skeleton"):

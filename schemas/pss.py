@@ -22,7 +22,7 @@ from schemas.base import (
     Str,
 )
 from schemas.common import CLIP, name
-from shared.clipfiles import FILE_PATTERN, READING_OPTIONS
+from shared.bus.wirefiles import FILE_PATTERN, READING_OPTIONS
 from shared.errors import BadInput
 
 SERVICE = "pss"

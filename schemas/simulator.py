@@ -9,7 +9,7 @@ from __future__ import annotations
 from schemas.base import AnyMap, Array, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
 from schemas.common import CLIP, name
 from shared.errors import BadInput
-from shared.symbols import COMPARISONS, RULES, WORDS
+from shared.estimation.symbols import COMPARISONS, RULES, WORDS
 
 SERVICE = "simulator"
 

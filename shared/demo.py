@@ -33,8 +33,8 @@ import numpy as np
 from schemas.common import clip_from_wire, clip_to_wire
 from shared.bodies.arm import arm_model, with_arm_torques
 from shared.bus.client import Client, Unavailable
+from shared.bus.cluster import down, running, up
 from shared.bus.config import Settings
-from shared.cluster import down, running, up
 from shared.io import find_clips, load_clip, save_clip
 
 BUNDLED = Path(__file__).resolve().parent.parent / "data" / "hdm05" / "amc"

@@ -76,7 +76,7 @@ def chain_skeleton(n: int) -> str:
     """A person-sized skeleton of ``n`` joints in one chain, as JSON."""
     import numpy as np
 
-    from shared.skeleton import Joint, Skeleton
+    from shared.motion.skeleton import Joint, Skeleton
 
     joints = [Joint("j0", -1, np.zeros(3), ["tx", "ty", "tz", "rx", "ry", "rz"])]
     joints += [Joint(f"j{i}", i - 1, np.array([0.0, 1.7 / n, 0.0]), ["rx", "ry", "rz"]) for i in range(1, n)]
@@ -185,7 +185,7 @@ def assert_refused(client, procs: Processes, cases) -> None:
     stays up."""
     from schemas.common import ERROR
     from shared.bus.client import RemoteError
-    from shared.codec import pack
+    from shared.bus.codec import pack
 
     for name, service, verb, msg, code in cases:
         with pytest.raises(RemoteError) as e:

@@ -7,9 +7,9 @@ import pytest
 
 from shared.agents.learner import FAMILIES, LearnerParams, SimulatedLearner, population, to_phase
 from shared.agents.other import OtherParams, SimulatedOther
-from shared.clip import Clip
 from shared.errors import BadInput
-from shared.symbols import WORDS, compare, f_conv, f_div, index_of, word
+from shared.estimation.symbols import WORDS, compare, f_conv, f_div, index_of, word
+from shared.motion.clip import Clip
 
 
 def _bump(n, centre, width, peak):
@@ -91,7 +91,7 @@ def test_answer_noise_is_one_bin_off_at_the_set_rate():
 def test_an_other_can_answer_like_a_person():
     """An other may answer like a person: its own word boundaries (gamma), drifting with the questions, and "I don't know",
     which the dialogue's parser understands as no word."""
-    from shared.symbols import DONT_KNOW, parse_answer
+    from shared.estimation.symbols import DONT_KNOW, parse_answer
 
     m = _arm_motion(45)
     plain = SimulatedOther("p", OtherParams(d=8, g_max=1.0))

@@ -9,8 +9,8 @@ import pytest
 from shared.bodies.body import perform, qpos_derivatives, qpos_trajectory
 from shared.bodies.human import human_body
 from shared.bodies.robot import robot, small_humanoid
-from shared.clip import Clip
 from shared.errors import BadInput, NotFound
+from shared.motion.clip import Clip
 
 
 def _robot_motion(n=61, fps=30.0):

@@ -212,7 +212,7 @@ def test_the_dashboard_opens_the_viewer_on_loopback_only(tmp_path):
 def test_study_aeu_fits_thresholds_from_a_coach_seat_and_a_study_uses_them(bundled, tmp_path):
     """A coach-seat log (as `study seat` appends it): `study aeu` fits the thresholds and names
     the coach left out; `study init --aeu1 FOLDER` plans case 7 with them, no scale needed."""
-    from shared.study import append, load, policy
+    from shared.reports.study import append, load, policy
 
     seat = tmp_path / "seat"
     seat.mkdir()
@@ -246,8 +246,8 @@ def test_a_reply_that_breaks_its_contract_is_an_error_not_a_traceback(tmp_path):
 
     import zenoh
 
+    from shared.bus.codec import pack
     from shared.bus.config import client_config
-    from shared.codec import pack
     from tests.conftest import REPO, cluster_env, running, settings_of
 
     env = cluster_env(tmp_path / "home")

@@ -7,9 +7,9 @@ import shutil
 import numpy as np
 import pytest
 
-from shared.clip import Clip
 from shared.errors import BadInput, ClipFormatError
 from shared.io import find_clips, find_skeleton, load_clip, read_asf, save_clip
+from shared.motion.clip import Clip
 
 SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
 PAST_360 = "amc/depositFloorR/HDM_bd_depositFloorR_002_120.amc"
@@ -164,7 +164,7 @@ def test_clip_rejects_inconsistent_shapes():
 def test_euler_matrix_matches_scipy(seq):
     from scipy.spatial.transform import Rotation
 
-    from shared.skeleton import euler_matrix
+    from shared.motion.skeleton import euler_matrix
 
     angles = np.random.default_rng(len(seq) + ord(seq[0])).uniform(-180, 180, size=3)
     np.testing.assert_allclose(euler_matrix(seq, angles), Rotation.from_euler(seq, angles, degrees=True).as_matrix(),

@@ -228,8 +228,8 @@ def test_simulator_cli_on_the_cluster(cluster, bundled, tmp_path):
 
     # a person in the other's seat: one CLI asks, another answers
     motion = tmp_path / "raise.npz"
-    from shared.clip import Clip
     from shared.io import save_clip
+    from shared.motion.clip import Clip
 
     t = np.linspace(0, 3, 90)
     save_clip(Clip(np.column_stack([60 * (1 - np.cos(t)), 10 * np.sin(t), -30 - 20 * np.sin(2 * t), 0 * t]),
@@ -402,7 +402,7 @@ def _wait_gone(env, timeout=60.0) -> list[int]:
 def test_the_supervisor_owns_its_children(tmp_path):
     """Kill -9 of the supervisor once orphaned all its children, `up` then started
     duplicates and said "cluster up", and two `up` at once ran 12 services."""
-    from shared.cluster import load_plan
+    from shared.bus.cluster import load_plan
 
     env = cluster_env(tmp_path / "home")
     n = 1 + len(load_plan())  # the supervisor, the router and every service of deploy/cluster.toml
@@ -946,7 +946,7 @@ def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_pa
         assert r.returncode == 0, r.stderr
         k += 1
     assert k == 14 * 2
-    from shared.study import SWEEP_CASES, load, read_log, trials_of
+    from shared.reports.study import SWEEP_CASES, load, read_log, trials_of
 
     events = read_log(sweep)
     done = trials_of(events)

@@ -11,8 +11,8 @@ import pytest
 from schemas import CONTRACTS
 from schemas.common import clip_from_wire, clip_to_wire
 from schemas.pss import BUILD, GENERATE, RECOGNIZE
+from shared.bus.codec import pack, unpack
 from shared.bus.config import Settings, check_loopback
-from shared.codec import pack, unpack
 from shared.errors import BadInput
 
 

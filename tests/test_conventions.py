@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from shared.errors import BadInput, ClipFormatError
 from shared.io import load_clip, save_clip
 from shared.io.conventions import UNITS
-from shared.skeleton import Joint, Skeleton
+from shared.motion.skeleton import Joint, Skeleton
 
 SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
 ROT_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # Y-up world -> Z-up world

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from shared.evaluation import open_set, verdicts
-from shared.evaluation_report import report_markdown, separation
 from shared.pss.space import performer
+from shared.reports.evaluation import open_set, verdicts
+from shared.reports.evaluation_report import report_markdown, separation
 
 
 @pytest.fixture(scope="module")
@@ -19,8 +19,8 @@ def bundled_clips(bundled):
 
 
 def test_open_set_counts_every_clip_for_every_method(bundled_clips):
-    from shared.evaluation import minirocket_recognition, peers_available
     from shared.pss.space import ProtoSymbolSpace
+    from shared.reports.evaluation import minirocket_recognition, peers_available
 
     train = [c for c in bundled_clips if performer(c) != "HDM_dg"]
     test = [c for c in bundled_clips if performer(c) == "HDM_dg"]

@@ -101,3 +101,26 @@ def test_no_import_circles_and_no_private_names_across_modules():
 def test_no_module_is_longer_than_a_reader_takes_in():
     long = {m: n for m, f in _modules().items() if (n := len(f.read_text().splitlines())) > MAX_LINES}
     assert long == {}, f"modules over {MAX_LINES} lines: {long}"
+
+
+#: the library's layers, lowest first (shared/__init__.py says what each owns); a package may
+#: import its own layer and the layers below it, never one above
+LAYERS = (("shared.errors", "shared.deadline", "shared.compiled"), ("shared.motion",), ("shared.io",),
+          ("shared.bodies",), ("shared.pss",), ("shared.estimation",), ("shared.coaching",), ("shared.agents",),
+          ("shared.capture", "shared.observe"), ("shared.bus", "schemas"), ("shared.reproduce",), ("shared.reports",),
+          ("shared.cli", "shared.demo", "services"))
+
+
+def _package(module: str) -> str:
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "shared" and len(parts) > 1 else parts[0]
+
+
+def test_every_package_imports_only_its_layer_and_those_below():
+    layer = {p: k for k, ps in enumerate(LAYERS) for p in ps}
+    edges, _ = _imports(_modules())
+    packages = {_package(m) for m in edges} - {"shared"}
+    assert packages <= set(layer), f"packages in no layer: {packages - set(layer)}"
+    upward = sorted({(a, b) for m, targets in edges.items() for t in targets
+                     if (a := _package(m)) != (b := _package(t)) and b != "shared" and layer[b] > layer[a]})
+    assert upward == [], f"imports of a higher layer: {upward}"

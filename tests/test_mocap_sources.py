@@ -177,7 +177,7 @@ def test_a_body_from_the_game_studios_skeleton_is_a_person_and_walks_with_human_
 def test_bodies_are_segmented_by_their_tree_and_proportions_when_no_bone_has_a_name(source, bundled, cmu, bandai):
     from shared.bodies.human import human_body
     from shared.bodies.segments import map_segments
-    from shared.skeleton import Joint, Skeleton
+    from shared.motion.skeleton import Joint, Skeleton
 
     path = {"hdm05": bundled / SQUAT, "cmu": cmu / "131_01.bvh", "game studio": bandai[0]}[source]
     sk = load_clip(path).skeleton
@@ -203,7 +203,7 @@ def test_bodies_are_segmented_by_their_tree_and_proportions_when_no_bone_has_a_n
 def test_bones_named_joint_are_read_by_their_word_and_their_place(bundled):
     from shared.bodies.human import human_body
     from shared.io import load_skeleton
-    from shared.skeleton import Joint, Skeleton
+    from shared.motion.skeleton import Joint, Skeleton
 
     sk = load_skeleton(bundled / "asf" / "HDM_bd.asf")
     names = {"lowerback": "LowerSpineJoint", "upperback": "MiddleSpineJoint", "thorax": "UpperSpineJoint",

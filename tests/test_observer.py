@@ -8,7 +8,7 @@ import re
 import time
 
 from schemas.common import clip_to_wire
-from shared.codec import pack
+from shared.bus.codec import pack
 from tests.conftest import cluster_env, running, settings_of
 
 

@@ -106,7 +106,7 @@ def test_association_estimates_torques_from_motion_alone(torque_space, capsys):
 def test_association_says_when_it_extrapolates(torque_space):
     """A motion like the space's own lies within its proto-symbols' spacing; the same motion
     played three times faster with its arms swung twice as far does not, and says so."""
-    from shared.evaluation import transformed
+    from shared.reports.evaluation import transformed
 
     space, _, test = torque_space
     near = [space.associate(c.with_data(c.select(c.group("motion")), channels=c.group("motion"),

@@ -392,7 +392,7 @@ def test_numpy_twins_of_the_hmm_kernels_match_numba(end_in_last):
 
 
 def test_numpy_twins_of_distance_placement_and_kinematics_match_numba(hdm05):
-    from shared import kinematics
+    from shared.motion import kinematics
     from shared.pss import distance, mds
 
     rng = np.random.default_rng(4)

@@ -18,7 +18,7 @@ import pytest
 from schemas import pss as contract
 from schemas.common import clip_to_wire
 from shared.bus.client import RemoteError
-from shared.codec import pack
+from shared.bus.codec import pack
 from tests.conftest import assert_refused, cycle_skeleton
 
 
@@ -81,7 +81,7 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
 
     # the same clips as files, unread (what `mirrorcoach space recognize` sends): read by the
     # service as the library reads them, so the same answer
-    from shared.clipfiles import wire_file
+    from shared.bus.wirefiles import wire_file
     from shared.io import save_clip
 
     for clip in test:  # NPZ carries the arm torques the space was built with
@@ -154,7 +154,7 @@ def _bad_cases(clip, other_clip, amc_file):
     # ~8.4 MB: over the service's 8 MB limit, under the 9 MB Zenoh message ceiling (the router
     # drops anything larger, see test_an_oversize_request_is_dropped_before_it_is_read_whole)
     big = {"space": "base", "clips": [dict(w, data=np.zeros((17_000, 62)))]}
-    from shared.clipfiles import wire_file
+    from shared.bus.wirefiles import wire_file
 
     f = wire_file(amc_file)
     return [

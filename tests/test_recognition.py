@@ -12,11 +12,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from shared.errors import BadInput
-from shared.evaluation import dtw_recognition, pss_recognition
 from shared.io import find_clips, load_clip, save_clip
+from shared.motion.skeleton import Skeleton
 from shared.pss.recognition import Calibration, calibrate, conformal_threshold, decide
 from shared.pss.space import FORMAT, ProtoSymbolSpace
-from shared.skeleton import Skeleton
+from shared.reports.evaluation import dtw_recognition, pss_recognition
 
 FORMAT1 = Path(__file__).parent / "data" / "space_format1.npz"  # written by mirrorcoach 0.1 (commit 8906865)
 
@@ -474,7 +474,7 @@ def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_the
 def test_the_robustness_changes_are_the_motion_moved_turned_sped_and_scaled(dev_split):
     from scipy.spatial.transform import Rotation
 
-    from shared.evaluation import transformed
+    from shared.reports.evaluation import transformed
 
     clip = dev_split[1][0].resample(30)
     p = clip.positions()
@@ -489,7 +489,7 @@ def test_the_robustness_changes_are_the_motion_moved_turned_sped_and_scaled(dev_
 
 
 def test_where_a_person_stands_and_faces_changes_no_label(dev_space, dev_split):
-    from shared.evaluation import robustness
+    from shared.reports.evaluation import robustness
 
     res = robustness(dev_space, dev_split[1][::6])
     assert res["pelvis moved 3 m sideways"]["changed"] == 0 and res["turned 90 degrees"]["changed"] == 0

@@ -11,7 +11,7 @@ import pytest
 from schemas import simulator as contract
 from schemas.common import clip_to_wire
 from shared.bus.client import RemoteError
-from shared.clip import Clip
+from shared.motion.clip import Clip
 from tests.conftest import assert_refused, chain_skeleton, cycle_skeleton
 
 

@@ -24,8 +24,8 @@ from shared.estimation.rules import (
     identification_motions,
     identify_bodies,
 )
+from shared.estimation.symbols import f_conv
 from shared.reproduce.ch3_report import level, population_summary, trend, verdict, write_report
-from shared.symbols import f_conv
 
 RULES = ("eq3.8", "f1", "f2", "f3", "f4")
 

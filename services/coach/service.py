@@ -21,7 +21,6 @@ from schemas.common import clip_from_wire, clip_to_wire
 from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
-from shared.clip import Clip
 from shared.coaching.effort import EffortEstimate, performed_effort
 from shared.coaching.policies import (
     SWEEP,
@@ -37,6 +36,7 @@ from shared.deadline import check_time, completed
 from shared.errors import BadInput, Conflict, NotFound
 from shared.io import load_clip, save_clip
 from shared.io.atomic import atomic_write
+from shared.motion.clip import Clip
 from shared.pss.store import check_name
 
 

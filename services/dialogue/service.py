@@ -1,7 +1,7 @@
 """The dialogue service: asks an other (through the simulator, whoever sits there) and turns
 answers into symbols (contract: ``schemas/dialogue.py``).
 
-Wording, parsing and the symbol tables are ``shared.symbols``; transcripts are JSON lines in
+Wording, parsing and the symbol tables are ``shared.estimation.symbols``; transcripts are JSON lines in
 ``$MIRRORCOACH_HOME/data/dialogue/<dialogue>.jsonl`` (a question with its answer appended all
 or nothing and fsynced; what a full disk cut short is removed), each line also published as an
 event.
@@ -18,8 +18,8 @@ from shared.bus.client import RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
 from shared.errors import BadInput, MirrorcoachError, NotFound
+from shared.estimation.symbols import DONT_KNOW, WORDS, index_of, parse_answer
 from shared.io.atomic import append_line, read_lines
-from shared.symbols import DONT_KNOW, WORDS, index_of, parse_answer
 
 #: the simulator's refusals: the question was never put to the other
 REFUSED = ("bad_request", "not_found", "conflict")

@@ -39,8 +39,8 @@ from shared.estimation.rules import (
     identify_thesis,
     weighted_candidates,
 )
+from shared.estimation.symbols import word
 from shared.pss.store import check_name
-from shared.symbols import word
 
 
 class Stopped(MirrorcoachError):

@@ -22,8 +22,8 @@ from collections import OrderedDict
 
 from schemas import CONTRACTS
 from schemas.common import clip_from_wire
+from shared.bus.codec import unpack
 from shared.bus.config import Settings, client_config
-from shared.codec import unpack
 from shared.errors import BadInput, MirrorcoachError
 from shared.observe.dashboard import MAX_KEPT, Dashboard
 

@@ -124,8 +124,7 @@ def make_service(settings: Settings | None = None) -> Service:
     def recognize(req):
         space = store.get(req["space"])
         if req["files"] is not None:
-            from shared.clipfiles import READING_OPTIONS
-            from shared.io.wire import read_wire_files
+            from shared.bus.wirefiles import READING_OPTIONS, read_wire_files
 
             clips = read_wire_files(req["files"], {k: req[k] for k in READING_OPTIONS})
         else:

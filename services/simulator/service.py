@@ -25,8 +25,8 @@ from shared.bodies.robot import ROBOTS, robot
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
 from shared.errors import BadInput, NotFound, Unavailable
-from shared.skeleton import Skeleton
-from shared.symbols import COMPARISONS, WORDS, parse_answer
+from shared.estimation.symbols import COMPARISONS, WORDS, parse_answer
+from shared.motion.skeleton import Skeleton
 
 
 class _Bodies:

@@ -80,17 +80,16 @@ Every learner is drawn from :func:`population` with a seed; its parameters are d
 
 from __future__ import annotations
 
-import re
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.coaching.effort import performed_effort, word
+from shared.coaching.parts import BODY_PARTS, N_PHASE, body_part, to_phase
 from shared.errors import BadInput
+from shared.motion.clip import Clip
 
-N_PHASE = 100
 REPETITIONS = 5
 #: the largest joint angle (degrees) or position a demonstration may hold
 MAX_VALUE = 1e5
@@ -109,22 +108,6 @@ FAMILIES = ("thesis", "error_based", "two_rate", "copy", "fixed_step")
 TWO_RATE = {"A_f": 0.59, "B_f": 0.21, "A_s": 0.992, "B_s": 0.02}
 ADVERB_FACTOR = {None: 1.0, "": 1.0, "a little more": 1.10, "more": 1.20, "much more": 1.35, "more like this": 1.20}
 ADVERBS = tuple(a for a in ADVERB_FACTOR if a)
-
-BODY_PARTS = {
-    "arms": r"(clavicle|humerus|radius|wrist|hand|fingers|thumb|shoulder|elbow|arm|collar)",
-    "legs": r"(hipjoint|femur|tibia|foot|toes|knee|leg|thigh|shin|ankle)",
-    "trunk": r"(root|lowerback|upperback|thorax|neck|head|spine|chest|hips|pelvis)",
-}
-
-
-def body_part(channel: str) -> str:
-    """Which body part a motion channel belongs to (arms, legs, trunk)."""
-    joint = channel.split(".")[0].lower()
-    for part, pat in BODY_PARTS.items():
-        if re.search(pat, joint):
-            return part
-    return "trunk"
-
 
 @dataclass
 class LearnerParams:
@@ -195,19 +178,6 @@ def population(n: int, seed: int = 0, family: str = "thesis", replicate: int = 0
         if replicate:
             out[-1].seed = int(np.random.default_rng([out[-1].seed, replicate]).integers(0, 2**31 - 1))
     return out
-
-
-def to_phase(clip: Clip, channels: list[str], n: int = N_PHASE) -> np.ndarray:
-    """The clip's ``channels`` resampled to ``n`` samples of normalised time (n x C)."""
-    missing = [c for c in channels if c not in clip.channels]
-    if missing:
-        raise BadInput(f"the demonstration lacks {len(missing)} of the target's channels, e.g. {missing[:3]}")
-    x = clip.select(channels)
-    if len(x) < 2:
-        raise BadInput("a demonstration needs at least 2 frames")
-    src = np.linspace(0, 1, len(x))
-    dst = np.linspace(0, 1, n)
-    return np.column_stack([np.interp(dst, src, x[:, c]) for c in range(x.shape[1])])
 
 
 class SimulatedLearner:

@@ -28,9 +28,9 @@ import numpy as np
 
 from shared.bodies.body import perform
 from shared.bodies.robot import JOINTS, BodySpec, small_humanoid
-from shared.clip import Clip
 from shared.errors import BadInput
-from shared.symbols import RULES, WORDS, compare, f_conv, f_div, word
+from shared.estimation.symbols import RULES, WORDS, compare, f_conv, f_div, word
+from shared.motion.clip import Clip
 
 ARM = ["shoulder_pitch", "shoulder_roll", "elbow"]
 BEHAVIOURS = ("honest", "nonsense", "contradict", "silent")

@@ -18,11 +18,11 @@ import numpy as np
 
 from shared.agents.learner import LearnerParams, SimulatedLearner
 from shared.agents.other import OtherParams, SimulatedOther
-from shared.clip import Clip
 from shared.errors import BadInput, Conflict, NotFound
+from shared.estimation.symbols import WORDS
 from shared.io.atomic import atomic_write
-from shared.skeleton import Skeleton
-from shared.symbols import WORDS
+from shared.motion.clip import Clip
+from shared.motion.skeleton import Skeleton
 
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 

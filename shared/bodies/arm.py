@@ -17,8 +17,8 @@ import mujoco
 import numpy as np
 from scipy.signal import savgol_filter
 
-from shared.clip import Clip
 from shared.errors import BadInput
+from shared.motion.clip import Clip
 
 JOINTS = ("shoulder_pitch", "shoulder_roll", "elbow")
 HUMAN_MAP = {"shoulder_pitch": "rhumerus.rx", "shoulder_roll": "rhumerus.rz", "elbow": "rradius.rx"}

@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from shared.clip import Clip
 from shared.errors import BadInput
-from shared.skeleton import Skeleton
+from shared.motion.clip import Clip
+from shared.motion.skeleton import Skeleton
 
 
 def _mujoco_warning(message: str) -> None:

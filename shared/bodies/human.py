@@ -1,6 +1,6 @@
 """Human bodies for MuJoCo, built from a mocap skeleton (ASF or BVH) with ``mujoco.MjSpec``.
 
-One MuJoCo body per bone. Frames follow :mod:`shared.skeleton` exactly, so MuJoCo's forward
+One MuJoCo body per bone. Frames follow :mod:`shared.motion.skeleton` exactly, so MuJoCo's forward
 kinematics equals ours: bone ``i``'s frame is ``F_i = G_parent C_i M_i`` (``C_i`` the bone's
 axis rotation, ``M_i`` its Euler rotation), its body quaternion relative to the parent's frame
 is ``C_parent^T C_i``, and its position is the bone offset expressed in the parent's frame
@@ -23,7 +23,7 @@ import numpy as np
 from shared.bodies.body import Body, DofMap, check_mass
 from shared.bodies.segments import SEGMENTS, map_segments, segment_masses, stature
 from shared.errors import BadInput
-from shared.skeleton import Skeleton
+from shared.motion.skeleton import Skeleton
 
 MIN_MASS = 0.01  # kg: a bone with joints but no segment of its own (MuJoCo needs mass to move)
 

@@ -15,7 +15,7 @@ import re
 import numpy as np
 
 from shared.io.conventions import HEAD_RE
-from shared.skeleton import Skeleton
+from shared.motion.skeleton import Skeleton
 
 # ---------------------------------------------------------------------------- naming schemes
 # Skeletons name bones after the bone (Mixamo ``LeftUpLeg``, ASF ``lfemur``, UE ``thigh_l``,

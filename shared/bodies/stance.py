@@ -32,8 +32,8 @@ import mujoco
 import numpy as np
 
 from shared.bodies.body import CONTACT_BAND, Body, foot_anchors, foot_points, qpos_trajectory
-from shared.clip import Clip
-from shared.skeleton import Skeleton
+from shared.motion.clip import Clip
+from shared.motion.skeleton import Skeleton
 
 #: damping of the least squares, per unit squared: a joint angle's change of 1 rad weighs like a
 #: foot 3 cm off its place, the root's height like one 1 cm off (the root moves first)

@@ -14,8 +14,8 @@ from __future__ import annotations
 import threading
 import time
 
+from shared.bus.codec import DEFAULT_MAX_PAYLOAD, pack, unpack
 from shared.bus.config import Settings, client_config
-from shared.codec import DEFAULT_MAX_PAYLOAD, pack, unpack
 from shared.errors import BadInput, Forbidden, MirrorcoachError, Unavailable
 
 __all__ = ["Client", "RemoteError", "Unavailable"]

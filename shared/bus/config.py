@@ -64,7 +64,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from shared.codec import DEFAULT_MAX_PAYLOAD
+from shared.bus.codec import DEFAULT_MAX_PAYLOAD
 from shared.errors import BadInput
 
 if TYPE_CHECKING:  # annotations only: deploy reads identities with this module's settings

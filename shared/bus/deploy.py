@@ -326,7 +326,7 @@ def init(out, routers: list[str], identities: list[str], prefix: str = "mc", day
     from cryptography import x509
     from cryptography.hazmat.primitives import serialization
 
-    from shared.codec import DEFAULT_MAX_PAYLOAD
+    from shared.bus.codec import DEFAULT_MAX_PAYLOAD
 
     out = Path(out)
     if not routers:

@@ -1,7 +1,7 @@
 """A cluster's processes as this host sees them in its pid files, without the supervisor:
 which process a pid file names (the pid and its start time), whether a supervisor holds a
 home's lock, and what state a process that does not answer is in. The bus's client reads
-:func:`local_state` to name why a service is silent; :mod:`shared.cluster` (the supervisor)
+:func:`local_state` to name why a service is silent; :mod:`shared.bus.cluster` (the supervisor)
 writes the files."""
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ A :class:`Service` answers the verbs of its contract (``schemas/<service>.py``) 
 
 1. the Zenoh callback only hands the query to a worker pool (callbacks run one at a time,
    DESIGN.md), so a long request never blocks the others;
-2. the worker checks the payload size, decodes msgpack (``shared.codec``), validates the
+2. the worker checks the payload size, decodes msgpack (``shared.bus.codec``), validates the
    request against the contract, calls the handler, validates the reply, and replies on the
    query's concrete key;
 3. any :class:`~shared.errors.MirrorcoachError` becomes ``reply_err`` with its stable code;
@@ -49,8 +49,8 @@ from typing import Any
 
 from schemas.base import Endpoint, Message
 from shared.bus.budget import MB, TRIM_ABOVE, MemoryBudget
+from shared.bus.codec import pack, unpack
 from shared.bus.config import Settings, client_config
-from shared.codec import pack, unpack
 from shared.deadline import time_limit
 from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
 from shared.io.atomic import DISK_FULL

@@ -53,10 +53,10 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from shared.clip import Clip
 from shared.compiled import kernel
 from shared.deadline import check_time
 from shared.errors import BadInput
+from shared.motion.clip import Clip
 
 FPS = 30.0  # both clips are compared at this rate
 SPEEDS = (0.5, 2.0)  # a repetition lasts this many times the target's duration (the steps' slopes)

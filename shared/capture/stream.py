@@ -32,8 +32,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from shared.clip import Clip
 from shared.errors import BadInput
+from shared.motion.clip import Clip
 
 GAP = 2.5  # a gap between frame lines longer than this many frame times counts as skipped frames
 MAX_LINE = 1 << 16  # bytes of one line

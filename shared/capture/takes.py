@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.errors import BadInput
+from shared.motion.clip import Clip
 
 REST = (1.0, 2.0)  # seconds of rest between repetitions (uniform)
 MOVE = 0.5  # seconds to move from one repetition's last pose to the next one's first

@@ -370,8 +370,8 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                                                        "sweep (ch4-6; 0 skips it).")):
     """Rerun the thesis's experiments on the cluster (simulated agents) and write reports with plots."""
     from shared.bus.client import Client
+    from shared.bus.cluster import down, running, up
     from shared.bus.config import Settings
-    from shared.cluster import down, running, up
 
     known = {"ch3", "ch4", "ch5", "ch6"}
     unknown = [c for c in chapters if c not in known]

@@ -163,9 +163,9 @@ def evaluate_recognition(data: Path = typer.Option(Path("../shared/data/hdm05"),
                                                        help="Hold every class out in turn (about a minute per split).")):
     """Recognition report: leave-one-performer-out accuracy, per-class confusions, confidence
     calibration, unknown motions and time per clip, side by side with MiniRocket and DTW."""
-    from shared.evaluation import evaluate
-    from shared.evaluation_report import write_report
     from shared.io import find_clips
+    from shared.reports.evaluation import evaluate
+    from shared.reports.evaluation_report import write_report
 
     folder = data / "amc" if (data / "amc").is_dir() else data
     if not folder.is_dir():

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import typer
 
+from shared.bus.wirefiles import wire_file, wire_name
 from shared.cli.common import (
     READING,
     SKELETON_HELP,
@@ -25,7 +26,6 @@ from shared.cli.common import (
     recognition_text,
     wire,
 )
-from shared.clipfiles import wire_file, wire_name
 
 space_app = typer.Typer(help="Proto-symbol spaces on the pss service (needs `make up`).", no_args_is_help=True)
 app.add_typer(space_app, name="space")
@@ -233,7 +233,7 @@ def space_delete(name: str = typer.Argument(..., help="Space name.")):
 def status(as_json: bool = typer.Option(False, "--json")):
     """Each process of the cluster: alive, FROZEN (stopped by SIGSTOP), RESTARTING or DOWN (exit 1
     if any is not alive)."""
-    from shared.cluster import status as cluster_status
+    from shared.bus.cluster import status as cluster_status
 
     rows = cluster_status()
     if as_json:
@@ -249,7 +249,7 @@ def status(as_json: bool = typer.Option(False, "--json")):
 @app.command("up")
 def up(wait: float = typer.Option(120.0, help="Seconds to wait for every service to be alive.")):
     """Start the local cluster (router + services of deploy/cluster.toml) in the background."""
-    from shared.cluster import up as cluster_up
+    from shared.bus.cluster import up as cluster_up
 
     raise typer.Exit(cluster_up(wait_s=wait, echo=typer.echo))
 
@@ -257,7 +257,7 @@ def up(wait: float = typer.Option(120.0, help="Seconds to wait for every service
 @app.command("down")
 def down():
     """Stop the local cluster."""
-    from shared.cluster import down as cluster_down
+    from shared.bus.cluster import down as cluster_down
 
     raise typer.Exit(cluster_down(echo=typer.echo))
 

@@ -118,7 +118,7 @@ def client(**kw):
 
 def wire(clip, with_skeleton=True) -> dict:
     from schemas.common import clip_to_wire
-    from shared.clipfiles import wire_name
+    from shared.bus.wirefiles import wire_name
 
     d = clip_to_wire(clip, with_skeleton=with_skeleton)
     d["name"] = wire_name(d["name"])

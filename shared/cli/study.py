@@ -1,6 +1,6 @@
 """CLI of studies with people (issue 14): ``study init | next | attempt | seat | export | report``.
 
-See :mod:`shared.study` for the folder, the counterbalanced plan and why no trial is lost."""
+See :mod:`shared.reports.study` for the folder, the counterbalanced plan and why no trial is lost."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ FOLDER = typer.Argument(..., help="The study's folder (made by `study init`).")
 
 
 def _study(folder: Path) -> tuple[dict, list[dict]]:
-    from shared.study import load, read_log
+    from shared.reports.study import load, read_log
 
     return load(folder), read_log(folder)
 
@@ -70,7 +70,7 @@ def study_init(folder: Path = FOLDER,
                aeu2: Path | None = typer.Option(None, help="Case 8 likewise (e.g. experienced coaches)."),
                skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Plan a study: counterbalanced, seeded case orders; the target kept in the folder."""
-    from shared.study import append, check_new, emu2_from_sweep, expand_cases, plan
+    from shared.reports.study import append, check_new, emu2_from_sweep, expand_cases, plan
 
     check_new(folder)
     case_list = expand_cases(cases)
@@ -110,7 +110,7 @@ def study_init(folder: Path = FOLDER,
 def _reconcile(c, folder: Path, p: dict, events: list[dict]) -> list[dict]:
     """Trials the coach kept but the log lost (a kill in between) go back into the log."""
     from shared.bus.client import RemoteError
-    from shared.study import append, missing_trials, read_log, session_name, trial_event
+    from shared.reports.study import append, missing_trials, read_log, session_name, trial_event
 
     for person, order in p["participants"].items():
         for case in order:
@@ -128,7 +128,7 @@ def _reconcile(c, folder: Path, p: dict, events: list[dict]) -> list[dict]:
 def _aeu_fit(source: Path, coaches: list[str] | None = None) -> dict:
     """AEU thresholds from a study folder's coach seat, or the JSON `study aeu --out` wrote."""
     from shared.coaching.policies import fit_aeu
-    from shared.study import seat_rows
+    from shared.reports.study import seat_rows
 
     if source.is_dir():
         rows = seat_rows(_study(source)[1])
@@ -173,7 +173,7 @@ def study_emu2(folder: Path = FOLDER, out: Path | None = typer.Option(None, help
                as_json: bool = typer.Option(False, "--json")):
     """EMU-Model 2 from a study's alpha sweep (figs. 5.7, 5.8): each participant's alpha whose
     session ended lowest, without and with the adverb, and R_4 at every alpha."""
-    from shared.study import SWEEP_CASES, emu2_from_sweep, trials_of
+    from shared.reports.study import SWEEP_CASES, emu2_from_sweep, trials_of
 
     p, events = _study(folder)
     if not set(SWEEP_CASES) & set(p["cases"]):
@@ -201,7 +201,7 @@ def study_emu2(folder: Path = FOLDER, out: Path | None = typer.Option(None, help
 def study_next(folder: Path = FOLDER, participant: str | None = typer.Option(None, help="This participant's next step."),
                as_json: bool = typer.Option(False, "--json")):
     """What to do next: who, which case and trial, what to show and say."""
-    from shared.study import next_step, trials_of
+    from shared.reports.study import next_step, trials_of
 
     p, events = _study(folder)
     with client() as c:
@@ -249,7 +249,7 @@ def study_attempt(folder: Path = FOLDER,
 def _start_session(c, folder: Path, p: dict, participant: str, case: int) -> None:
     """The coach's session of a participant's case (its first trial), started afresh."""
     from shared.io import load_clip
-    from shared.study import policy, session_name
+    from shared.reports.study import policy, session_name
 
     c.request("coach", "start", {"session": session_name(p["study"], participant, case),
                                  "target": wire(load_clip(folder / "target.npz")),
@@ -262,7 +262,7 @@ def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: boo
     logged; the next demonstration written to show/ and the adverb said beside it. ``started``:
     a first trial's session was started already (while the person performed)."""
     from schemas.common import clip_from_wire
-    from shared.study import append, next_step, session_name, trial_event
+    from shared.reports.study import append, next_step, session_name, trial_event
 
     p, events = _study(folder)
     with client() as c:
@@ -341,7 +341,7 @@ def study_run(folder: Path = FOLDER,
     from schemas.common import clip_from_wire
     from shared.cli.live import Controls, ready_line, save_take, take_and_cut, warm
     from shared.io import load_clip
-    from shared.study import next_step
+    from shared.reports.study import next_step
 
     target_clip = load_clip(folder / "target.npz")
     warm(target_clip)
@@ -415,7 +415,7 @@ def study_seat(folder: Path = FOLDER, coach: str = typer.Option(..., help="The h
     target is d_s and its point x_s (eq. 5.2, 5.8)."""
     from schemas.common import clip_from_wire
     from shared.io import load_clip
-    from shared.study import ADVERB_CHOICES, append, seat_rows
+    from shared.reports.study import ADVERB_CHOICES, append, seat_rows
 
     p, events = _study(folder)
     if not 1 <= count <= 500:
@@ -477,8 +477,8 @@ def study_export(folder: Path = FOLDER, out: Path = typer.Option(..., help="CSV 
     """Every trial as a tidy CSV (the columns of reproduce's tidy.csv) and the seat's answers beside it."""
     import csv
 
+    from shared.reports.study import seat_rows, tidy
     from shared.reproduce.tidy import write
-    from shared.study import seat_rows, tidy
 
     p, events = _study(folder)
     rows = tidy(events, p["target"])
@@ -496,8 +496,8 @@ def study_export(folder: Path = FOLDER, out: Path = typer.Option(..., help="CSV 
 def study_report(folder: Path = FOLDER, out: Path | None = typer.Option(None, help="Markdown file (default: "
                                                                                       "FOLDER/report.md).")):
     """The thesis's tables from the study's trials (read like the simulated runs') and the seat's Table 5.1."""
+    from shared.reports.study import SWEEP_CASES, seat_report, seat_rows, sweep_report, tidy
     from shared.reproduce.coaching_report import case_tables
-    from shared.study import SWEEP_CASES, seat_report, seat_rows, sweep_report, tidy
 
     p, events = _study(folder)
     rows = tidy(events, p["target"])

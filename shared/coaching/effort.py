@@ -29,10 +29,10 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.errors import BadInput
 from shared.estimation.conversation import Language, scale_interval, scale_of
-from shared.symbols import f_conv, f_div
+from shared.estimation.symbols import f_conv, f_div
+from shared.motion.clip import Clip
 
 #: the words of felt effort shared by coach and learner: 4 bins over [0, 1], the target at 1 on the coach's body
 LANGUAGE = Language(d=4, g_max=1.0, tau_max=1.0, joints=[], rule="eq3.8")

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shared.clip import Clip
+from shared.motion.clip import Clip
 
 MIN_KEPT = 0.5  # a repair that keeps less of the emphasis than this lowers alpha instead
 #: the speeds (shares of the target's) a demonstration may be shown at when only its dynamics fail:
@@ -119,7 +119,7 @@ def make_feasible(base: Clip, demo: Clip, report: dict, target_report: dict, tar
     if clamped:
         changes.append(f"{len(clamped)} joint angle(s) held at their limits ({', '.join(clamped[:4])}"
                        + (", ..." if len(clamped) > 4 else "") + ")")
-    from shared.agents.learner import BODY_PARTS, body_part
+    from shared.coaching.parts import BODY_PARTS, body_part
 
     planted: dict[int, tuple[Clip, dict]] = {}  # what planting changed, by the clip it made
 

@@ -9,8 +9,8 @@ import numpy as np
 from shared.bodies.body import perform
 from shared.bodies.human import human_body
 from shared.bodies.stance import plant_feet
-from shared.clip import Clip
 from shared.coaching.effort import performed_effort
+from shared.motion.clip import Clip
 from shared.pss.space import ProtoSymbolSpace
 
 

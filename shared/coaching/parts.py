@@ -10,10 +10,42 @@ other channel from the target.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
-from shared.agents.learner import BODY_PARTS, body_part, to_phase
-from shared.clip import Clip
+from shared.errors import BadInput
+from shared.motion.clip import Clip
+
+N_PHASE = 100  # samples of normalised time a motion is compared on (learners and body parts)
+
+BODY_PARTS = {
+    "arms": r"(clavicle|humerus|radius|wrist|hand|fingers|thumb|shoulder|elbow|arm|collar)",
+    "legs": r"(hipjoint|femur|tibia|foot|toes|knee|leg|thigh|shin|ankle)",
+    "trunk": r"(root|lowerback|upperback|thorax|neck|head|spine|chest|hips|pelvis)",
+}
+
+
+def body_part(channel: str) -> str:
+    """Which body part a motion channel belongs to (arms, legs, trunk)."""
+    joint = channel.split(".")[0].lower()
+    for part, pat in BODY_PARTS.items():
+        if re.search(pat, joint):
+            return part
+    return "trunk"
+
+
+def to_phase(clip: Clip, channels: list[str], n: int = N_PHASE) -> np.ndarray:
+    """The clip's ``channels`` resampled to ``n`` samples of normalised time (n x C)."""
+    missing = [c for c in channels if c not in clip.channels]
+    if missing:
+        raise BadInput(f"the demonstration lacks {len(missing)} of the target's channels, e.g. {missing[:3]}")
+    x = clip.select(channels)
+    if len(x) < 2:
+        raise BadInput("a demonstration needs at least 2 frames")
+    src = np.linspace(0, 1, len(x))
+    dst = np.linspace(0, 1, n)
+    return np.column_stack([np.interp(dst, src, x[:, c]) for c in range(x.shape[1])])
 
 
 def rotation_channels(clip: Clip) -> list[str]:

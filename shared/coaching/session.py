@@ -46,12 +46,12 @@ from typing import Protocol
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.coaching.effort import EffortEstimate
 from shared.coaching.feasibility import MIN_KEPT, emphasis_kept, make_feasible, worse_than_target
 from shared.coaching.parts import error_shares, partial_emphasis
 from shared.coaching.policies import Policy, table_adverb
 from shared.errors import BadInput
+from shared.motion.clip import Clip
 
 ALPHA_STEP = 0.25
 SUBGOAL_MIN_SHARE = 0.1  # a body part with less of the error gets no sub-goal of its own
@@ -213,8 +213,7 @@ def subgoal_motion(target: Clip, attempts: list[Clip], parts: list[str]) -> Clip
     """An intermediate motion: the attempts' mean (on the target's frames) with ``parts``' joint
     rotations taken from the target; everything else (the root's path, other parts) is the
     attempt's."""
-    from shared.agents.learner import body_part, to_phase
-    from shared.coaching.parts import rotation_channels
+    from shared.coaching.parts import body_part, rotation_channels, to_phase
 
     chans = list(target.group("motion") or target.channels)
     mean = np.mean([to_phase(a, chans, target.n_frames) for a in attempts], axis=0)

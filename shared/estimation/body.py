@@ -46,8 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
-from shared.clip import Clip
 from shared.errors import BadInput
+from shared.motion.clip import Clip
 
 LINKS = ("upper_arm", "forearm", "shin")
 POINTS = ("elbow", "hand")

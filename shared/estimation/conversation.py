@@ -53,9 +53,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.errors import BadInput
 from shared.estimation.language import Language, evaluate, scale_interval, scale_of
+from shared.motion.clip import Clip
 
 __all__ = ["OtherEstimate", "Ports", "LocalPorts", "SetRecord", "Language", "evaluate", "scale_interval", "scale_of",
            "hold", "with_torques", "METHODS", "SPACES", "TORQUE_PREFIX"]
@@ -528,7 +528,7 @@ class LocalPorts:
         return out.select([TORQUE_PREFIX + j for j in self.language.joints])
 
     def ask_open(self, motion: Clip) -> int | None:
-        from shared.symbols import DONT_KNOW, index_of, parse_answer
+        from shared.estimation.symbols import DONT_KNOW, index_of, parse_answer
 
         word = parse_answer(self.other.answer_open(motion), "open", self.language.d)
         return None if word == DONT_KNOW else index_of(word, self.language.d)

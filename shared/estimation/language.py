@@ -1,5 +1,5 @@
 """The words self and other share (thesis 3.3.2): a :class:`Language` (density ``d``, range,
-the conversion rule ``F_conv`` and division ``F_div`` of :mod:`shared.symbols`), the interval
+the conversion rule ``F_conv`` and division ``F_div`` of :mod:`shared.estimation.symbols`), the interval
 method's scale from answers (eq. 3.4), and the error measures of an estimate (eq. 3.9, 3.10).
 Nothing here asks a question: :mod:`shared.estimation.conversation` does."""
 
@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shared.symbols import f_conv, f_div
+from shared.estimation.symbols import f_conv, f_div
 
 
 @dataclass

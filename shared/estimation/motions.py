@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from shared.clip import Clip
+from shared.motion.clip import Clip
 
 ARM = ["shoulder_pitch", "shoulder_roll", "elbow"]
 ALL = ARM + ["knee"]

@@ -21,10 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
-from shared.clip import Clip
 from shared.errors import BadInput
 from shared.estimation.motions import ALL, FPS
-from shared.symbols import f_conv
+from shared.estimation.symbols import f_conv
+from shared.motion.clip import Clip
 
 THESIS_PEAKS = (3.0, 0.4, 0.4, 0.2)  # (alpha, beta, gamma, omega) / a, eq. 3.20
 M3_ORDER = ("knee", "shoulder_pitch", "shoulder_roll", "elbow")  # the thesis's m3: squat, pitch, roll, elbow
@@ -200,7 +200,7 @@ def g_bodies(c: Candidate, y: np.ndarray, bodies: np.ndarray, torques: np.ndarra
 
 
 def predicted_answers(g_first: np.ndarray, g_second: np.ndarray, jnd: float) -> np.ndarray:
-    """Index into ``ANSWERS`` of the comparison (eq. 3.11-3.12, :func:`shared.symbols.compare`)
+    """Index into ``ANSWERS`` of the comparison (eq. 3.11-3.12, :func:`shared.estimation.symbols.compare`)
     of two motions whose ``g`` are ``g_first`` and ``g_second`` (arrays: one per body)."""
     a, b = np.asarray(g_first, float), np.asarray(g_second, float)
     equal = np.abs(a - b) <= jnd * np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-12)

@@ -1,4 +1,5 @@
-"""Reading and writing clips: ASF/AMC, BVH and NPZ, chosen by file extension."""
+"""Reading and writing clips: ASF/AMC, BVH and NPZ, chosen by file extension, in any studio's
+conventions (units, up axis, root frame, position channels). Imports ``motion`` and ``errors``."""
 
 from __future__ import annotations
 
@@ -6,12 +7,12 @@ import threading
 from collections import OrderedDict
 from pathlib import Path
 
-from shared.clip import Clip
 from shared.errors import ClipFormatError
 from shared.io.asf_amc import find_skeleton, read_amc, read_asf, write_amc
 from shared.io.bvh import read_bvh, write_bvh
 from shared.io.conventions import check_reading
 from shared.io.npz import read_npz, write_npz
+from shared.motion.clip import Clip
 
 CLIP_SUFFIXES = (".amc", ".bvh", ".npz")
 #: a clip file is read whole: a larger one is refused before reading (a 2 GB file took 4 GB of memory)
@@ -24,7 +25,7 @@ _ASF_LOCK = threading.Lock()
 def load_skeleton(path, units: str | None = None):
     """:func:`read_asf`, once per file content and unit: a performer's clips share one skeleton
     (and its compiled kinematics). Keyed by content, not path, so an edited file is read again
-    and a service that receives skeletons as bytes (:mod:`shared.clipfiles`) reuses them;
+    and a service that receives skeletons as bytes (:mod:`shared.motion.clipfiles`) reuses them;
     bounded, so a long-running service does not grow. The key is the bytes themselves (a few KB
     each; hashlib's OpenSSL would cost every command's start 4 ms)."""
     try:

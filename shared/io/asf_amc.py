@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from shared.clip import Clip
-from shared.clipfiles import find_skeleton  # noqa: F401  (kept here: where readers look for it)
 from shared.errors import ClipFormatError
-from shared.skeleton import Joint, Skeleton, euler_matrix
+from shared.motion.clip import Clip
+from shared.motion.clipfiles import find_skeleton  # noqa: F401  (kept here: where readers look for it)
+from shared.motion.skeleton import Joint, Skeleton, euler_matrix
 
 INCH_M = 0.0254
 #: degrees per unit of the ASF ``:units angle`` words (gradians: 400 to the turn)
@@ -49,7 +49,7 @@ def _floats(path, lineno, parts, n=None) -> list[float]:
 
 
 def read_asf(path, units: str | None = None) -> Skeleton:
-    """Read an ASF skeleton (see :mod:`shared.skeleton` for the joint convention). Its
+    """Read an ASF skeleton (see :mod:`shared.motion.skeleton` for the joint convention). Its
     ``:units length`` is taken when it makes a human height, else the unit that does
     (:func:`shared.io.conventions.choose_unit`); ``units`` overrides both."""
     path = Path(path)

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.errors import ClipFormatError
-from shared.skeleton import MAX_JOINTS, Joint, Skeleton, continuous_euler
+from shared.motion.clip import Clip
+from shared.motion.skeleton import MAX_JOINTS, Joint, Skeleton, continuous_euler
 
 _BVH_TO_DOF = {
     "xposition": "tx", "yposition": "ty", "zposition": "tz",

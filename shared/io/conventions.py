@@ -31,7 +31,7 @@ bone along its local X axis, and their root is a static node on the floor.
   unit: for BVH its standing height over the take (head to lowest point, 90th percentile of the
   frames), for ASF its rest pose. A body of no human height in any unit is refused with a clear
   error (a 5 m "human" must not reach the simulator); ``units=`` overrides.
-* **Euler angles** are made continuous over the take (:func:`shared.skeleton.continuous_euler`:
+* **Euler angles** are made continuous over the take (:func:`shared.motion.skeleton.continuous_euler`:
   the same rotations, each frame on the branch nearest the frame before), so nothing
   downstream differentiates a jump of 360 degrees or a change of branch.
 
@@ -169,7 +169,7 @@ def fold_scene_root(sk, data: np.ndarray, channels: list[str]):
     """A file root with one child that never turns (a floor, scene or trajectory node), folded
     into the child (module docstring). Returns (skeleton, data, channels, the replace-offsets of translated joints,
     the names folded)."""
-    from shared.skeleton import Joint, Skeleton, continuous_euler
+    from shared.motion.skeleton import Joint, Skeleton, continuous_euler
 
     rest = {j.name: np.asarray(j.offset, float) for j in sk.joints}  # what "replace" channels stand in for
     folded: list[str] = []
@@ -265,7 +265,7 @@ def root_translation_mode(sk, data: np.ndarray, channels: list[str], rest: np.nd
 
 def turn_z_up_to_y_up(skeleton, data: np.ndarray, channels: list[str]):
     """The same motion on a Y-up skeleton (see module docstring); returns (skeleton, data)."""
-    from shared.skeleton import Joint, Skeleton
+    from shared.motion.skeleton import Joint, Skeleton
 
     data = np.array(data, dtype=float)
     col = {c: i for i, c in enumerate(channels)}

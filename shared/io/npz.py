@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.errors import ClipFormatError
-from shared.skeleton import Skeleton
+from shared.motion.clip import Clip
+from shared.motion.skeleton import Skeleton
 
 FORMAT = "mirrorcoach.clip/1"
 

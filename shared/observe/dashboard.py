@@ -39,7 +39,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from shared.clip import Clip
+from shared.motion.clip import Clip
 
 CURVE_CHANNELS = ("rfemur.rx", "rtibia.rx", "lowerback.rx", "rhumerus.rx", "shoulder_pitch", "elbow")
 MAX_CURVES = 3

@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.errors import BadInput
+from shared.motion.clip import Clip
 from shared.pss.distance import distance_matrix, distances_to
 from shared.pss.hmm import fit_hmm
 from shared.pss.symbol import Association

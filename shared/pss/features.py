@@ -51,7 +51,7 @@ says which outputs belong to which group.
 
 :meth:`MotionFeatures.decode` inverts the map: rotations by Gram-Schmidt on the two columns,
 then the skeleton's Euler angles on the branch nearest the frame before
-(:func:`shared.skeleton.continuous_euler`); angles by ``atan2`` then unwrapped over time;
+(:func:`shared.motion.skeleton.continuous_euler`); angles by ``atan2`` then unwrapped over time;
 heading and floor position integrated from the yaw rate and the velocity (starting at 0).
 """
 
@@ -63,9 +63,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from shared.bodies.segments import body_frame, stature
-from shared.clip import Clip
 from shared.errors import BadInput
-from shared.skeleton import Skeleton
+from shared.motion.clip import Clip
+from shared.motion.skeleton import Skeleton
 
 if TYPE_CHECKING:  # scipy's Rotation costs 0.4 s to import; only generation (decode) needs it
     from scipy.spatial.transform import Rotation
@@ -454,7 +454,7 @@ class MotionFeatures:
         gives ``M``, and ``M`` the skeleton's Euler angles on a continuous branch."""
         from scipy.spatial.transform import Rotation
 
-        from shared.skeleton import continuous_euler
+        from shared.motion.skeleton import continuous_euler
 
         cols = x.reshape(len(x), len(self.rot_joints), 2, 3)
         a, b = cols[:, :, 0], cols[:, :, 1]

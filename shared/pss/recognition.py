@@ -5,7 +5,7 @@ recognition report, ``reports/recognition/report.md``), the label is best decide
 2.4 distance between the motion's HMM and every proto-symbol *on the position channel group*
 (:mod:`shared.pss.features`), nearest proto-symbol first. The same report measures the
 alternatives this module does not use on the same distances (k-NN with k = 3 and 5, a
-logistic regression on per-class distances, :func:`shared.evaluation.pss_alternatives`) and
+logistic regression on per-class distances, :func:`shared.reports.evaluation.pss_alternatives`) and
 the nearest point of the 3-D space; none did better.
 
 The distance is eq. 2.4 with **channel weights** on the mean term (:func:`channel_weights`,

@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from shared.clip import Clip
 from shared.errors import BadInput, NotFound
+from shared.motion.clip import Clip
 from shared.pss import association, spacefile
 from shared.pss.distance import ModelBank, bank_parameters, distance_matrix, distances_to
 from shared.pss.features import MotionFeatures

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from shared.clip import Clip
+from shared.motion.clip import Clip
 from shared.pss.hmm import LeftToRightHMM
 
 if TYPE_CHECKING:  # annotations only: recognition decides, this module holds its answer

@@ -160,11 +160,11 @@ class Skeleton:
         know are ignored, missing ones are zero. A joint's translation channels (the root's,
         and any other joint's: BVH files that give every joint 6 channels) add to its offset
         in its parent's frame: ``p_j = p_parent + R_parent (offset_j + t_j)`` (readers bring
-        files that mean "replace the offset" to this form, :mod:`shared.io.bvh`). Compiled (numba, :mod:`shared.kinematics`);
+        files that mean "replace the offset" to this form, :mod:`shared.io.bvh`). Compiled (numba, :mod:`shared.motion.kinematics`);
         :meth:`forward_kinematics_reference` is the same map through scipy's ``Rotation``
         and is what this one is tested against.
         """
-        from shared.kinematics import fk_positions
+        from shared.motion.kinematics import fk_positions
 
         data = np.asarray(data, dtype=float)
         n = data.shape[0]
@@ -179,7 +179,7 @@ class Skeleton:
         """Every joint's (or the ``joints`` slice's) local rotation ``L_j = C_j M_j C_j^T``
         (T, J, 3, 3): the rotation in the world-aligned rest frame, whatever Euler order or
         axis convention the file used."""
-        from shared.kinematics import local_rotations
+        from shared.motion.kinematics import local_rotations
 
         data = np.asarray(data, dtype=float)
         k = self._fk_arrays(tuple(channels), False)
@@ -189,7 +189,7 @@ class Skeleton:
                                np.ascontiguousarray(k["pre"][joints]))
 
     def _fk_arrays(self, channels: tuple[str, ...], ends: bool) -> dict:
-        """The skeleton packed for :func:`shared.kinematics.fk_positions`, cached per channel
+        """The skeleton packed for :func:`shared.motion.kinematics.fk_positions`, cached per channel
         layout (a skeleton is not changed once read; :meth:`from_json` makes a new one)."""
         cache = self.__dict__.setdefault("_fk_cache", {})
         key = (channels, ends)
@@ -317,7 +317,7 @@ def continuous_euler(angles_deg, seq: str, start=None) -> np.ndarray:
         return a.copy()
     s = np.zeros(a.shape[1]) if start is None else np.asarray(start, dtype=float)
     if a.shape[1] == 3 and len(set(seq.lower())) == 3:
-        from shared.kinematics import continuous_tait_bryan
+        from shared.motion.kinematics import continuous_tait_bryan
 
         return continuous_tait_bryan(np.ascontiguousarray(a), np.ascontiguousarray(s))
     first = s + (a[0] - s + 180.0) % 360.0 - 180.0

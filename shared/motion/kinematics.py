@@ -1,8 +1,8 @@
 """Forward kinematics compiled with numba: the hot path of the position channel group.
 
-:meth:`shared.skeleton.Skeleton.forward_kinematics` packs a skeleton into arrays and calls
+:meth:`shared.motion.skeleton.Skeleton.forward_kinematics` packs a skeleton into arrays and calls
 :func:`fk_positions`; the numpy/scipy path (:meth:`Skeleton.forward_kinematics_reference`)
-is the reference it is tested against. Kept out of :mod:`shared.skeleton` so that reading a
+is the reference it is tested against. Kept out of :mod:`shared.motion.skeleton` so that reading a
 clip does not import numba.
 """
 
@@ -130,7 +130,7 @@ def continuous_tait_bryan(ang, start):
     previous frame: each frame takes whichever of ``(a, b, c)`` and its twin
     ``(a + 180, 180 - b, c + 180)`` (the same rotation), each angle moved by whole turns, lies
     nearest the frame before; the first frame is compared with ``start``. The rotations are
-    unchanged; only their Euler triple is chosen (see :func:`shared.skeleton.continuous_euler`)."""
+    unchanged; only their Euler triple is chosen (see :func:`shared.motion.skeleton.continuous_euler`)."""
     n = ang.shape[0]
     out = np.empty((n, 3))
     prev = start.copy()

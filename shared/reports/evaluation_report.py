@@ -1,5 +1,5 @@
 """The recognition report (``reports/recognition/report.md``): the results of
-:func:`shared.evaluation.evaluate` as Markdown tables, with the goals' verdicts, the open set,
+:func:`shared.reports.evaluation.evaluate` as Markdown tables, with the goals' verdicts, the open set,
 calibration and robustness, written by ``mirrorcoach evaluate recognition`` and ``make bench``."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.evaluation import (
+from shared.reports.evaluation import (
     GOAL_ACCURACY,
     GOAL_MS,
     GOAL_OPEN_IN,

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from shared.errors import BadInput
-from shared.skeleton import Skeleton
+from shared.motion.skeleton import Skeleton
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """The local cluster: ``mirrorcoach up``, ``down`` and ``status`` (``make up|down|status``).
 
-``up`` starts a detached supervisor (``python -m shared.cluster supervise``) that runs the
+``up`` starts a detached supervisor (``python -m shared.bus.cluster supervise``) that runs the
 router and every service of ``deploy/cluster.toml`` as child processes, each logging to
 ``$MIRRORCOACH_HOME/logs/<name>.log``, and restarts any that exits (back-off 0.5 s doubling to
 10 s, reset after 30 s of good running). ``up`` returns once every service's liveliness token
@@ -47,7 +47,7 @@ from shared.bus.pidfiles import (
 )
 from shared.errors import MirrorcoachError
 
-PLAN = Path(__file__).resolve().parent.parent / "deploy" / "cluster.toml"
+PLAN = Path(__file__).resolve().parents[2] / "deploy" / "cluster.toml"
 log = logging.getLogger("mirrorcoach.supervisor")
 
 
@@ -279,7 +279,7 @@ def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> in
             return 1
         with open(s.log_dir / "supervisor.log", "ab", opener=lambda f, flags: os.open(f, flags, 0o600)) as out:
             os.chmod(out.fileno(), 0o600)
-            proc = subprocess.Popen([sys.executable, "-m", "shared.cluster", "supervise"], stdout=out,
+            proc = subprocess.Popen([sys.executable, "-m", "shared.bus.cluster", "supervise"], stdout=out,
                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
                                     env=os.environ.copy())
         echo(f"starting the cluster on {s.router} (supervisor pid {proc.pid})")
@@ -349,7 +349,7 @@ def down(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> 
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m shared.cluster", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m shared.bus.cluster", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("command", choices=["supervise", "up", "down", "status"])
     args = ap.parse_args(argv)

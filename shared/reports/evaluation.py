@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.clip import Clip
+from shared.motion.clip import Clip
 from shared.pss.space import ProtoSymbolSpace, performer
 
 PEER_FRAMES = 64
@@ -267,7 +267,7 @@ def transformed(clip: Clip, how: str) -> Clip:
     """The clip as :data:`ROBUSTNESS` names it (the same motion a person would call the same)."""
     from scipy.spatial.transform import Rotation
 
-    from shared.skeleton import Joint, Skeleton
+    from shared.motion.skeleton import Joint, Skeleton
 
     sk = clip.skeleton
     root = sk.root
