@@ -52,7 +52,8 @@ test: lint
 	    espeak-ng mesa-vulkan-drivers libvulkan1) >/dev/null 2>&1 || echo "warning: not installed; those tests will be skipped"; fi
 	$(BIN)/python -m pytest -q -p no:cacheprovider
 
-# the tests without the slowest (marked slow: whole studies, reproductions, the real viewer, failover)
+# unit, real-data and contract tests: those marked slow (end-to-end clusters, studies, reproductions, the
+# real viewer, several hosts, fault injection, benchmarks, anything past ~5 s) are left out
 test-quick: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider -m "not slow"
 

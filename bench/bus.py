@@ -1,4 +1,4 @@
-"""``make bench`` (bus part): what the bus adds on top of the library (issue 3 targets).
+"""``make bench`` (bus part): what the bus adds on top of the library (with their targets).
 
 On a private cluster (free loopback port, temporary home) started with ``shared.bus.cluster.up``:
 
@@ -7,7 +7,7 @@ On a private cluster (free loopback port, temporary home) started with ``shared.
   validation) on the ``echo`` service of ``bench/echo.py`` (target <= 1 ms median);
 * recognition through the CLI end to end (``mirrorcoach space recognize``, the installed
   command, a subprocess per call): the wall time of one call including start-up (target <= 150
-  ms, issue 11); the command's own time (``MIRRORCOACH_TIMING=1``: reading the file's bytes,
+  ms); the command's own time (``MIRRORCOACH_TIMING=1``: reading the file's bytes,
   opening the session, the request with the service's reading of the file, the reply) and the
   library's time reported by the service; the rest is start-up and exit (interpreter,
   imports, typer's argument parsing);

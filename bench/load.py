@@ -1,4 +1,4 @@
-"""``make bench``: the cluster under load (issue 16, "Limits under load").
+"""``make bench``: the cluster under load ("Limits under load").
 
 A deployed cluster on loopback (TLS with mutual authentication and access control, the way it
 runs across hosts; ``--plain`` for the loopback default), each service its own process:
@@ -236,7 +236,7 @@ def main(argv=None) -> int:
         print(_line(res["saturation"]), flush=True)
     growth = res["memory"]["growth"]
     met = all(g < 0.10 for g in growth.values())
-    md = ["# The cluster under load (issue 16)", "",
+    md = ["# The cluster under load", "",
           f"`python -m bench.load` ({mode}; {os.cpu_count()} cores). Each client is its own Zenoh session; every "
           f"request has a timeout; a saturated service answers `unavailable` at once (bounded queue).", "",
           "| load | clients | seconds | answered | throughput | p50 | p95 | p99 | errors |",

@@ -1,4 +1,4 @@
-"""``make bench``: memory of the cluster under bursts of clients (issue 17, row 10).
+"""``make bench``: memory of the cluster under bursts of clients.
 
 Two bursts of 200 concurrent clients, each its own Zenoh session sending one recognition of
 a real clip (a request above Zenoh's 3 KB shared-memory threshold), on a private cluster.
@@ -100,7 +100,7 @@ def main(argv=None) -> int:
     res["kb_per_session_after_burst_1"] = slope
     shm_ok = second["shm_mb"] <= max(1.1 * first["shm_mb"], 1.0)
     rss_ok = all(g <= 0.10 for g in growth.values())
-    md = ["# Memory under bursts of clients (issue 17, row 10)", "",
+    md = ["# Memory under bursts of clients", "",
           f"`python -m bench.memory`: {len(res['bursts'])} bursts of {args.clients} concurrent clients, each its own Zenoh session and one "
           f"recognition; Zenoh shared memory: {res['shared_memory']}.", "",
           "| after burst | answered | /dev/shm added | " + " | ".join(first["rss_mb"]) + " |",

@@ -1,4 +1,4 @@
-"""``make bench``: the recognition report (issue 11) with its peers, MiniRocket and DTW, in one
+"""``make bench``: the recognition report with its peers, MiniRocket and DTW, in one
 run. Writes ``reports/recognition/`` (report and results) and ``bench/results/recognition.*``.
 """
 

@@ -1,8 +1,8 @@
-"""``make bench``: speed of the PSS core on this machine (issue 2 targets).
+"""``make bench``: speed of the PSS core on this machine (with its targets).
 
 * one trial = 5 repetitions of a ~200-frame clip with all HDM05 angle channels: HMM training
   (target <= 50 ms), banded trainer and hmmlearn reference;
-* recognition of a clip against a 200-clip space (issue 11: <= 5 ms in the library), stage by
+* recognition of a clip against a 200-clip space (<= 5 ms in the library), stage by
   stage, with BLAS limited to one thread as in the services;
 * building a 200-clip space (target <= 30 s);
 * how recognition and training grow with the number of clips, frames and channels.
@@ -87,7 +87,7 @@ def main(argv=None) -> int:
     feats = space1.features
     kicks = sorted((c for c in clips if c.label == "kickLFront1Reps"), key=lambda c: abs(c.n_frames - 200))[:5]
     reps = [feats.encode(c, ("motion",)) for c in kicks]  # at 120 fps: ~200 frames each, the angle channels
-    full = [feats.encode(c) for c in kicks]  # with the position group a space models since issue 11
+    full = [feats.encode(c) for c in kicks]  # with the position group a space models for recognition
     trial = {"frames": [len(r) for r in reps], "features": reps[0].shape[1], "states": 15,
              "features_with_positions": full[0].shape[1]}
     for backend in ("banded", "hmmlearn"):

@@ -1,4 +1,4 @@
-"""``make bench`` (simulator part, issue 4 targets to report):
+"""``make bench`` (simulator part, the targets to report):
 
 * ``perform`` on a 300-frame human clip (the first 300 frames of an HDM05 clip at 120 fps, 62 channels, a 70 kg body
   from its actor's skeleton): the library alone, and through the bus (simulator service);

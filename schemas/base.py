@@ -320,7 +320,7 @@ class Endpoint:
     """One verb of a service: its request, its reply and what it does. ``waits``: the verb
     may wait for a person (an answer to a question); the service runs it on its pool of
     waiting requests, so that people thinking never hold the workers every other request
-    needs (issue 17, row 3). ``time_limit_s``: the request stops at a safe point past this
+    needs. ``time_limit_s``: the request stops at a safe point past this
     (``unavailable``, cause ``time_limit``; ``shared.deadline``); verbs that wait for a person are
     bounded by their own ``timeout`` instead."""
 

@@ -134,7 +134,7 @@ STATE = Endpoint("state", Message("coach.state", Map({"session": SESSION})), Mes
                  "A session and its trials.")
 
 #: EMU-1 without observed data: the demonstrations of a simulated coach (policies.simulated_coach_demonstrations);
-#: n is bounded (issue 17, row 1: n = 10**9 grew the coach to 2.6 GB)
+#: n is bounded (n = 10**9 grew the coach to 2.6 GB)
 SIMULATED_COACH = Map({
     "n": F(Int(3, 10_000), "how many demonstrations", required=False, default=40),
     "alpha": F(Float(0.0, 5.0), "the coach's emphasis", required=False, default=1.8),

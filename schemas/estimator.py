@@ -27,7 +27,7 @@ INFO = Map({
                    default=0),
     "last_set": F(AnyMap(), "k_other, k_self and ratio per shared motion of the last set", required=False),
     "notes": F(List(Str(max_len=1000), max_len=10_000), "rule identification, stops"),
-    "body": F(AnyMap(), "the body estimate (issue 13): columns of the self's regressor, theta, the proportional "
+    "body": F(AnyMap(), "the body estimate: columns of the self's regressor, theta, the proportional "
                         "scale it is nearest to, answers fitted", required=False),
 })
 
@@ -94,7 +94,7 @@ IDENTIFY = Endpoint(
         "candidates": F(Str(choices=("thesis", "weighted")), "f1-f4, or f1-f4 with joint weights (12)",
                         required=False, default="thesis"),
         "method": F(Str(choices=("auto", "thesis")), "auto: pairs chosen on the estimated body, answers weighed "
-                    "against noise (issue 13); thesis: its m1/m2, m3/m4", required=False, default="auto"),
+                    "against noise; thesis: its m1/m2, m3/m4", required=False, default="auto"),
         "noise": F(Float(0.0, 0.5), "auto: the share of comparisons the self allows to be wrong (default: weighed "
                    "over levels from 5 % to answering at random)", required=False),
         "confidence": F(Float(0.5, 0.9999), "auto: stop when one rule holds this share of the posterior",

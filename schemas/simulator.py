@@ -92,7 +92,7 @@ REGRESSOR = Endpoint(
         "names": F(List(Str(max_len=64), max_len=64), "the columns: physical components of a body like the self's"),
         "y": F(Array((None, None, None)), "Y (frames x joints x columns): tau = Y theta, theta_self = links 1"),
     })),
-    "The self's body regressor of a motion (issue 13, shared.estimation.body): torques linear in the body's parameters.",
+    "The self's body regressor of a motion (shared.estimation.body): torques linear in the body's parameters.",
 )
 
 OTHER_PARAMS = Map({

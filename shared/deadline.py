@@ -1,4 +1,4 @@
-"""Time limits of requests (issue 17): every verb declares one in its contract
+"""Time limits of requests: every verb declares one in its contract
 (``Endpoint.time_limit_s``); the service runtime opens :func:`time_limit` around the handler and
 the library's long loops call :func:`check_time` at safe points (before an HMM is trained, between
 a session's trials, between conversation sets). Past the limit the request stops there with

@@ -18,7 +18,7 @@ Starts the local cluster if it is not running (``mirrorcoach up``: router + serv
    trial on the coach, the next demonstration written and its adverb said into a .wav;
 
 says what it did, and stops the cluster again if it started it (``--keep-running`` leaves it up).
-With ``MIRRORCOACH_DEPLOY`` set (a cluster across hosts, issue 16) it runs the same steps on that
+With ``MIRRORCOACH_DEPLOY`` set (a cluster across hosts) it runs the same steps on that
 cluster as that identity and starts or stops nothing.
 """
 

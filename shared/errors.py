@@ -42,7 +42,7 @@ class Unavailable(MirrorcoachError):
 
 
 class Forbidden(MirrorcoachError):
-    """The cluster's access control does not let this identity's role do that (issue 16)."""
+    """The cluster's access control does not let this identity's role do that."""
 
     code = "forbidden"
 

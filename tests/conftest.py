@@ -71,7 +71,7 @@ def bundled() -> Path:
     return BUNDLED_HDM05
 
 
-# ---------------------------------------------------------------------------- bad skeletons (issue 17)
+# ---------------------------------------------------------------------------- bad skeletons
 def chain_skeleton(n: int) -> str:
     """A person-sized skeleton of ``n`` joints in one chain, as JSON."""
     import numpy as np

@@ -142,6 +142,7 @@ def _rms(x, mask):
     return float(np.sqrt(np.mean(x[:, mask.astype(bool)] ** 2)))
 
 
+@pytest.mark.slow
 def test_the_thesis_family_follows_its_documented_rule(squat):
     """One trial moves the memory by min(gain a (1 + o_s x), 1) P(D - m) (module docstring): the
     model as written, not whether emphasis helps."""

@@ -78,6 +78,7 @@ def test_mujoco_kinematics_of_a_human_body_match_the_skeleton(bundled):
     assert worst < 0.01, f"{worst:.4f} m"  # the positions are smoothed (~0.1 s window) before differentiation
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("actor", ["bd", "bk", "dg"])
 def test_a_human_body_per_hdm05_actor_performs_every_dev_clip(hdm05, dev_clips, actor):
     from shared.io import read_asf

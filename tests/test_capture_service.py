@@ -30,6 +30,7 @@ def _wait_done(c, take: str, timeout: float = 60.0) -> dict:
     raise AssertionError(f"take {take} still recording after {timeout} s")
 
 
+@pytest.mark.slow
 def test_a_replayed_take_is_recorded_published_and_cut(capture_service, client_of, squats):
     """Three squats joined with rests, replayed through a loopback TCP port by the service: every
     frame arrives on the bus in order, the take is kept, and its three repetitions are found where
@@ -61,6 +62,7 @@ def test_a_replayed_take_is_recorded_published_and_cut(capture_service, client_o
     assert "t1" in [t["take"] for t in c.request("capture", "list", {})["takes"]]
 
 
+@pytest.mark.slow
 def test_a_live_source_the_service_connects_to_and_a_take_stopped_on_request(capture_service, client_of, squats):
     """A source outside the service (as a capture suit is), streaming without end: the take ends
     when asked, its frames kept; a take ends by itself once the expected repetitions are seen."""
@@ -118,6 +120,7 @@ def test_refusals_are_coded_errors(capture_service, client_of, squats, tmp_path)
     _wait_done(c, "once")
 
 
+@pytest.mark.slow
 def test_the_cli_records_a_take_on_the_service_and_cuts_it_into_files(capture_service, squats, tmp_path):
     """`capture take --replay` and `capture cut --out` as a user runs them: the take and each
     repetition written as files `study attempt` takes; a bad option pair is a message, not a

@@ -107,6 +107,7 @@ def test_bad_sources_are_refused_clearly(tmp_path):
         record(f"tcp://127.0.0.1:{port}", tmp_path / "none.bvh")
 
 
+@pytest.mark.slow
 def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp_path):
     """`capture serve` plays a take as a live source on a loopback port, `capture record` records
     it, `capture segment` cuts it into rep files that `study attempt` takes: no file cut by hand."""

@@ -75,7 +75,7 @@ def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services,
     assert c.request("estimator", "info", {"estimate": "r4"})["language"]["rule"] == "f3"
     assert _ok(est.DELETE, c.request("estimator", "delete", {"estimate": "r4"}))["deleted"]
 
-    # an uneven other (issue 13): no shoulder roll, a payload in the hand; the self holds its roll still
+    # an uneven other: no shoulder roll, a payload in the hand; the self holds its roll still
     body = {"missing": ["shoulder_roll"], "payload": 0.2}
     c.request("simulator", "other_create", {"other": "u", "params": {"mass": 3.0, "d": 6, "g_max": 0.6, "body": body,
                                                                     "joints": ["shoulder_pitch", "elbow"]}, "replace": True})
@@ -112,7 +112,7 @@ def test_bad_requests_get_clear_errors(chapter3_services, client_of):
         ("estimator", "estimate", {"estimate": "ok", "clip": human_like}, "bad_request"),
         ("estimator", "identify_rule", {"estimate": "ok", "candidates": "weighted", "method": "thesis"}, "bad_request"),
         ("estimator", "info", {"estimate": "a/b"}, "bad_request"),
-        # issue 17, row 5: refused, and nothing written (a transcript, a saved estimate, its space)
+        # refused, and nothing written (a transcript, a saved estimate, its space)
         ("estimator", "start", {"estimate": "ghost", "other": "nobody", "d": 6}, "not_found"),
         ("dialogue", "ask_open", {"dialogue": "nanclip", "other": "ok", "clip": nan_clip}, "bad_request"),
         ("dialogue", "ask_compare", {"dialogue": "nobodys", "other": "nobody", "clips": [m, m]}, "not_found"),
@@ -174,6 +174,7 @@ def test_contradiction_alone_never_stops_a_conversation_and_the_reply_says_how_s
             assert m["repeat_disagreement"] == 0.0 and m["agreement"] == 1.0 and not m["outside"], m
 
 
+@pytest.mark.slow
 def test_killing_the_estimator_between_sets_loses_no_completed_set(chapter3_services, client_of):
     env, procs = chapter3_services
     c = client_of(env)

@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from shared.io import load_clip
 
@@ -122,6 +123,7 @@ def test_the_command_runs_with_the_collector_on_and_its_imports_frozen(bundled):
         (gc.enable if before else gc.disable)()
 
 
+@pytest.mark.slow
 def test_space_build_recognize_generate(bundled, tmp_path):
     space = tmp_path / "s.npz"
     r = run("offline", "build", space, bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps")

@@ -96,12 +96,12 @@ def test_bad_attempts_get_clear_errors_and_leave_the_session_unchanged(coach_ser
          "bad_request"),
         ("session name with /", "state", {"session": "a/b"}, "bad_request"),
         ("a NaN target with a new learner", "start", {"session": "nanl", "target": nan, "learner": "fresh"}, "bad_request"),
-        # issue 17, row 1: unbounded work (the coach grew to 2.6 GB)
+        # unbounded work (the coach grew to 2.6 GB)
         ("a simulated coach of 10**9 demonstrations", "policy_fit", {"kind": "emu1", "simulated_coach": {"n": 10**9}},
          "bad_request"),
         ("a simulated coach with an unknown field", "policy_fit", {"kind": "emu1", "simulated_coach": {"m": 3}},
          "bad_request"),
-        # issue 17, row 4: accepted input that broke a session for good
+        # accepted input that broke a session for good
         ("a per-learner alpha that is text", "start",
          {"session": "pl", "target": w, "policy": {"kind": "emu2", "per_learner": {"l2": "x"}}}, "bad_request"),
         ("naive Bayes parameters of the wrong shape", "start",
@@ -115,7 +115,7 @@ def test_bad_attempts_get_clear_errors_and_leave_the_session_unchanged(coach_ser
     files = state_files(env)
     assert_refused(c, procs, [(name, "coach", verb, msg, code) for name, verb, msg, code in cases])
     assert c.request("coach", "state", {"session": "p"}) == before
-    # issue 17, row 5: a refused request leaves every state file byte-identical (the session's
+    # a refused request leaves every state file byte-identical (the session's
     # space: no proto-symbol of a NaN attempt) and creates no learner
     assert state_files(env) == files
     assert "fresh" not in {x["learner"] for x in c.request("simulator", "list", {})["learners"]}

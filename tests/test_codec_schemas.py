@@ -136,7 +136,7 @@ def test_the_default_router_is_a_socket_in_the_home_or_a_short_one_of_the_user(t
 
 def test_every_request_with_bytes_field_names_is_bad_input_not_internal():
     """msgpack keeps bytes keys as bytes; a map mixing them with text must be refused as bad
-    input by every endpoint's contract (issue 17, row 14), not crash while listing the fields."""
+    input by every endpoint's contract, not crash while listing the fields."""
     msg = unpack(msgpack.packb({b"a": 1, "b": 2}))
     checked = 0
     for contract in CONTRACTS.values():

@@ -1,4 +1,4 @@
-"""Motion files in other tools' conventions (issue 12): units, up axis, position channels on
+"""Motion files in other tools' conventions: units, up axis, position channels on
 every joint, ROOT OFFSET with position channels. Each test writes small files in one
 convention from a real HDM05 clip and checks that mirrorcoach reads back the same body and
 motion (positions in metres), or refuses with an error naming the file."""

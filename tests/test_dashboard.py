@@ -14,6 +14,8 @@ import pytest
 
 from tests.conftest import REPO, cluster_env, settings_of
 
+pytestmark = pytest.mark.slow  # end-to-end: real clusters and processes (make test-quick leaves them out)
+
 HEAD, FOOT = (60, 230, 60), (255, 60, 255)  # shared.observe.dashboard.JOINT_COLOURS
 
 

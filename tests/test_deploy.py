@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # end-to-end: real clusters and processes (make test-quick leaves them out)
+
 REPO = Path(__file__).resolve().parent.parent
 SERVICES = ("pss", "simulator", "coach", "dialogue", "estimator")
 

@@ -18,6 +18,7 @@ def bundled_clips(bundled):
     return [load_clip(f) for f in find_clips([bundled / "amc"])]
 
 
+@pytest.mark.slow
 def test_open_set_counts_every_clip_for_every_method(bundled_clips):
     from shared.pss.space import ProtoSymbolSpace
     from shared.reports.evaluation import minirocket_recognition, peers_available

@@ -203,6 +203,7 @@ def test_library_code_is_limited_only_inside_a_request():
     assert e.value.message.endswith("nothing was changed")
 
 
+@pytest.mark.slow
 def test_a_coaching_run_past_its_time_limit_keeps_the_trials_it_completed(tmp_path, bundled, client_of):
     """The coach's limit (only the coach's) stops a 50-trial run between trials: the reply says
     how many were completed and kept, the session holds exactly those, and it goes on. The limit

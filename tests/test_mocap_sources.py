@@ -341,6 +341,7 @@ def _author_game_studio(blender: str, clip, tmp_path: Path) -> Path:
     return tmp_path / "authored.bvh"
 
 
+@pytest.mark.slow
 def test_a_studios_root_frame_changes_neither_the_recognition_features_nor_the_label(bundled, tmp_path, blender):
     """The same squat with its skeleton re-rested along X by Blender (the root's frame turned):
     the body frame puts the heading where the body faces, so the recognition features and the

@@ -1,4 +1,4 @@
-"""The observer as a real process (issue 17, row 16): its recording rotates past
+"""The observer as a real process: its recording rotates past
 ``MIRRORCOACH_RECORDING_MB``, keeps the newest ``MIRRORCOACH_RECORDINGS`` files, and every new
 file starts with what is still true (the sessions' targets, the spaces)."""
 
@@ -7,9 +7,13 @@ from __future__ import annotations
 import re
 import time
 
+import pytest
+
 from schemas.common import clip_to_wire
 from shared.bus.codec import pack
 from tests.conftest import cluster_env, running, settings_of
+
+pytestmark = pytest.mark.slow  # end-to-end: real clusters and processes (make test-quick leaves them out)
 
 
 def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of):

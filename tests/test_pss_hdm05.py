@@ -211,6 +211,7 @@ def test_space_refuses_bad_clips(dev_space, dev_split):
         ProtoSymbolSpace.build([])
 
 
+@pytest.mark.slow
 def test_the_scale_benchmark_runs_and_reports_every_column(hdm05, tmp_path):
     """``python -m bench.scale`` at two small sizes (a fresh process each, the game studio's
     clips): every row has its build, decision, add and peak, and the report is written."""

@@ -191,10 +191,10 @@ def test_bad_simulator_input_gets_clear_errors_and_the_service_stays_up(simulato
         ("bad learner gain", "learner_create", {"learner": "x", "target": human, "params": {"gain": 7.0}}, "bad_request"),
         ("name with /", "other_reveal", {"other": "a/b"}, "bad_request"),
         ("delete nothing", "delete", {}, "bad_request"),
-        # issue 17, row 1: a 10,000-joint skeleton held a worker 39 s
+        # a 10,000-joint skeleton held a worker 39 s
         ("a skeleton of 1,500 joints", "perform", {"skeleton": chain_skeleton(1500), "clip": human}, "bad_request"),
         ("a simulated person of 300 joints", "perform", {"skeleton": chain_skeleton(300), "clip": human}, "bad_request"),
-        # issue 17, row 4: accepted input that broke an object for good
+        # accepted input that broke an object for good
         ("a skeleton with a parent cycle", "perform", {"skeleton": cycle_skeleton(squat.skeleton), "clip": human}, "bad_request"),
         ("a NaN deviation", "learner_create",
          {"learner": "x", "target": human, "params": {"deviation": {"legs": {"scale": float("nan"), "offset": 0.0}}}},

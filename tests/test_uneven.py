@@ -169,6 +169,7 @@ def test_others_outside_the_estimators_model_are_what_they_say():
     assert abs(_tau(spring, held, ["elbow"])[:, 0].mean() - 0.5 * np.radians(30.0)) < 1e-3
 
 
+@pytest.mark.slow
 def test_the_model_check_tells_an_inconsistent_other_from_one_outside_the_model():
     """The model check: an other of a body like the self's answering with 20 % noise is inconsistent, not
     outside the model; a consistent other with a lossy gear whose answers no body the self can
@@ -203,6 +204,7 @@ def _error(est, ports, other, lang, motions, method="body"):
     return evaluate(lang, [truth[i] for i in keep], [est.estimate(motions[i], ports, method) for i in keep])["error"]
 
 
+@pytest.mark.slow
 def test_the_body_estimator_follows_a_body_no_single_scale_fits(tmp_path):
     """A heavy other with a payload in the hand: most shared motions feel "very heavy" (the
     top, open bin), so the probes must find motions light enough to tell; after 6 sets the body
@@ -258,6 +260,7 @@ def test_the_fast_fit_matches_scipys_least_squares():
     assert fast <= 1.05 * slow + 1e-9
 
 
+@pytest.mark.slow
 def test_a_wrong_rule_makes_the_body_estimator_fail_as_documented():
     """The answers are read with the self's rule; an other converting with f4 (a peak) is not
     described by eq. 3.8, and the same conversation read with the wrong rule estimates far

@@ -162,7 +162,7 @@ def make_service(settings: Settings | None = None) -> Service:
             return None
 
     def check_owned(s: Session, replacing: bool) -> None:
-        """A session never takes what is another's (issue 17, row 6): its learner must not be
+        """A session never takes what is another's: its learner must not be
         learning in another session, and a new session's space ``coach-<session>`` and learner
         must not already exist (a user's own space or learner would be replaced)."""
         if s.learner:

@@ -38,7 +38,7 @@ def make_service(settings: Settings | None = None) -> Service:
 
     def write(*lines: dict) -> None:
         """Append a question and its answer (or note) together, all or nothing: a full disk leaves
-        neither half a line nor a question without its answer (issue 17, row 9)."""
+        neither half a line nor a question without its answer."""
         lines = [{"t": time.time(), **x} for x in lines]  # a line that carries its own time keeps it
         for x in lines:
             contract.EVENTS["transcript"].validate(x)

@@ -179,7 +179,7 @@ def _design(ports: BusPorts) -> dict:
 
 
 def _identify_on_bodies(est: OtherEstimate, cands, ports: BusPorts, design: dict, req: dict) -> dict:
-    """Rule identification with answers predicted from the estimated body (issue 13): per
+    """Rule identification with answers predicted from the estimated body: per
     candidate, the bodies the estimate's open answers allow under that rule (only when the
     estimate feels all four joints the candidates weigh; otherwise the bodies the self thinks
     possible)."""
@@ -229,7 +229,7 @@ def make_service(settings: Settings | None = None) -> Service:
         if path(name).exists() and not req["replace"]:
             raise Conflict(f"estimate {name!r} exists; delete it or start with replace", estimate=name)
         others = {o["other"] for o in bus().request("simulator", "list", {}, timeout=30)["others"]}
-        if req["other"] not in others:  # checked before anything is built or saved (issue 17, row 5)
+        if req["other"] not in others:  # checked before anything is built or saved
             raise NotFound(f"no other named {req['other']!r} (create it with `mirrorcoach other create`)",
                            other=req["other"])
         joints = req["joints"] or [j for j in ARM if j not in req["missing"]]

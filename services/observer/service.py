@@ -62,7 +62,7 @@ class Observer:
 
     def recording_path(self):
         """A new recording file; ``latest.rrd`` points to it and only the newest
-        ``MIRRORCOACH_RECORDINGS`` are kept (issue 17, row 16)."""
+        ``MIRRORCOACH_RECORDINGS`` are kept."""
         d = self.s.home / "recordings"
         d.mkdir(parents=True, exist_ok=True)
         stamp = time.strftime("%Y%m%d-%H%M%S")

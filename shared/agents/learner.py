@@ -97,7 +97,7 @@ MAX_VALUE = 1e5
 
 def _bounded(phase: np.ndarray, what: str) -> np.ndarray:
     """``phase`` if every value is within ``MAX_VALUE``: a 1e300 demonstration turned a
-    learner's memory to infinities for good (issue 17, row 4)."""
+    learner's memory to infinities for good."""
     if not np.all(np.abs(phase) <= MAX_VALUE):
         raise BadInput(f"the {what} has values beyond {MAX_VALUE:g} (degrees or centimetres): not a motion a person "
                        "makes", field=what)

@@ -51,7 +51,7 @@ class OtherParams:
     jnd: float = 0.05
     seed: int = 0
     behaviour: str = "honest"  # fault injection for robustness tests: honest | nonsense | contradict | silent
-    body: dict | None = None  # how its body differs unevenly (BodySpec fields but mass; issue 13), None: even
+    body: dict | None = None  # how its body differs unevenly (BodySpec fields but mass), None: even
     kind: str = ""  # the population kind it was drawn from (shared.agents.population), for reports
     # how its torques become what it feels, beyond a rigid body (None: the torques themselves):
     # gear {joint: ratio}, efficiency (0-1], coupling {"src>dst": c}, stribeck {joint: [F_c, F_s, v_s]}, fatigue,

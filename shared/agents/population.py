@@ -1,4 +1,4 @@
-"""A population of simulated others whose bodies differ as real bodies do (issue 13).
+"""A population of simulated others whose bodies differ as real bodies do.
 
 The thesis's other is the self scaled in mass (thesis 3.3.3), so every torque is exactly a
 multiple of the self's; it says so itself (3.3.5, 3.4.4) and leaves uneven bodies open (7.2).

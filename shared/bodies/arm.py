@@ -1,5 +1,5 @@
 """A small robot arm in MuJoCo: a torque channel for the PSS until the simulator service
-(issue 4) brings whole bodies.
+brings whole bodies.
 
 The arm is the right arm of a small humanoid like the thesis's (ch. 3.3.3): shoulder pitch,
 shoulder roll and elbow, two capsule links, total arm mass settable (the thesis's robots

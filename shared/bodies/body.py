@@ -80,7 +80,7 @@ class Body:
     up_axis: int = 2
     unmapped: list[str] = field(default_factory=list)  # unusual bones: a limb no person has (human bodies)
     missing_segments: list[str] = field(default_factory=list)  # de Leva segments the skeleton lacks
-    friction: dict[str, float] = field(default_factory=dict)  # channel -> Coulomb friction, N m (robots, issue 13)
+    friction: dict[str, float] = field(default_factory=dict)  # channel -> Coulomb friction, N m (robots)
 
     @property
     def channels(self) -> list[str]:

@@ -34,7 +34,7 @@ def _hinge_order(seq: str, dofs: list[str]) -> list[str]:
 
 
 #: the most joints a simulated person may have: mocap skeletons have 20-70 (150 with every finger
-#: joint); a 200-joint chain compiles in 0.2 s, a 1,000-joint one in 25 s (issue 17, row 1)
+#: joint); a 200-joint chain compiles in 0.2 s, a 1,000-joint one in 25 s
 MAX_BODY_JOINTS = 200
 
 

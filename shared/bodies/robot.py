@@ -6,7 +6,7 @@ uses the knee as its fourth joint). The torso is fixed to the world; by default 
 mass is a fixed share of the robot's mass (``LINK_SHARE``), so every torque, gravity and
 inertial alike, scales exactly with the mass. Motion channels are the joint names, in degrees.
 
-Real bodies differ unevenly (issue 13; thesis 3.3.5 and 7.2), so a :class:`BodySpec` can also
+Real bodies differ unevenly (thesis 3.3.5 and 7.2), so a :class:`BodySpec` can also
 change the link lengths, the links' shares of the mass, add a payload held in the right hand
 (a point mass at the end of the forearm), viscous damping (MuJoCo joint damping, in the
 torques ``mj_inverse`` reports), joint springs with a rest angle and rotor inertia (MuJoCo

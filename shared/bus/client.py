@@ -220,7 +220,7 @@ class Client:
             return False
 
     def _no_answer(self, service: str, verb: str, timeout: float, waited: float, size: int = 0) -> Unavailable:
-        """Why nothing answered, named (issue 17, row 12): the router is gone, the service is
+        """Why nothing answered, named: the router is gone, the service is
         frozen, restarting, not running, or alive but slower than the timeout."""
         from shared.bus.pidfiles import local_state
 

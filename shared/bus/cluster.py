@@ -1,13 +1,13 @@
 """The local cluster: ``mirrorcoach up``, ``down`` and ``status`` (``make up|down|status``).
 
 ``up`` starts a detached supervisor (``python -m shared.bus.cluster supervise``) that runs the
-router and every service of ``deploy/cluster.toml`` as child processes, each logging to
+router and every service of ``shared/bus/cluster.toml`` as child processes, each logging to
 ``$MIRRORCOACH_HOME/logs/<name>.log``, and restarts any that exits (back-off 0.5 s doubling to
 10 s, reset after 30 s of good running). ``up`` returns once every service's liveliness token
 is seen (or says which one is not up and where its log is). ``down`` sends SIGTERM to the
 supervisor, which stops the services, then the router, and waits for them.
 
-The supervisor owns its children (issue 17, rows 7 and 8):
+The supervisor owns its children:
 
 * one supervisor per home: it holds an exclusive ``flock`` on ``run/supervisor.lock`` for its
   whole life (the kernel drops it when the process dies, even by SIGKILL); a second one started
@@ -47,7 +47,7 @@ from shared.bus.pidfiles import (
 )
 from shared.errors import MirrorcoachError
 
-PLAN = Path(__file__).resolve().parents[2] / "deploy" / "cluster.toml"
+PLAN = Path(__file__).resolve().with_name("cluster.toml")  # package data: the plan travels with the wheel
 log = logging.getLogger("mirrorcoach.supervisor")
 
 
@@ -61,18 +61,36 @@ class Proc:
     restart_at: float | None = None
 
 
-def load_plan(path: Path = PLAN) -> list[Proc]:
-    """Router first, then the services, from ``deploy/cluster.toml``."""
+def _read_plan(path: Path) -> dict:
     try:
         d = tomllib.loads(path.read_text())
     except (OSError, tomllib.TOMLDecodeError) as e:
         raise MirrorcoachError(f"cannot read the cluster plan {path}: {e}") from None
-    procs = [Proc("router", d.get("router", {}).get("module", "shared.bus.router"))]
     for s in d.get("service", []):
         if not {"name", "module"} <= set(s):
             raise MirrorcoachError(f"{path}: every [[service]] needs a name and a module")
-        procs.append(Proc(str(s["name"]), str(s["module"])))
+    return d
+
+
+def _installed(module: str | None) -> bool:
+    import importlib.util
+
+    return module is None or importlib.util.find_spec(module) is not None
+
+
+def load_plan(path: Path = PLAN) -> list[Proc]:
+    """Router first, then the services of ``shared/bus/cluster.toml`` whose optional dependency
+    (``needs``) is installed (:func:`left_out` names the others)."""
+    d = _read_plan(path)
+    procs = [Proc("router", d.get("router", {}).get("module", "shared.bus.router"))]
+    procs += [Proc(str(s["name"]), str(s["module"])) for s in d.get("service", []) if _installed(s.get("needs"))]
     return procs
+
+
+def left_out(path: Path = PLAN) -> list[str]:
+    """Why services of the plan are not started: their optional dependency is not installed."""
+    return [f"{s['name']} is not started: it needs {s['needs']} (pip install 'mirrorcoach[{s.get('extra', s['needs'])}]')"
+            for s in _read_plan(path).get("service", []) if not _installed(s.get("needs"))]
 
 
 def reap_orphans(s: Settings, plan: list[Proc], echo=print, grace_s: float = 15.0) -> None:
@@ -267,14 +285,16 @@ def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> in
              f"(deploy/README.md: systemd units or compose); `up` starts the loopback cluster only")
         return 2
     plan = load_plan()
+    for why in left_out():
+        echo(f"note: {why}")
     private_home(s)
     proc = None
     if supervisor_running(s):
         echo(f"the cluster's supervisor is already running (pid {read_pid(s.run_dir / 'supervisor.pid') or '?'})")
     else:
-        reap_orphans(s, plan, echo=echo)  # children of a supervisor killed by SIGKILL (issue 17, row 7)
+        reap_orphans(s, plan, echo=echo)  # children of a supervisor killed by SIGKILL
         taken = router_port_taken(s.router)
-        if taken:  # fail fast and say why (issue 17, row 15: it waited 120 s, then blamed the services)
+        if taken:  # fail fast and say why (it waited 120 s, then blamed the services)
             echo(f"error: {taken}")
             return 1
         with open(s.log_dir / "supervisor.log", "ab", opener=lambda f, flags: os.open(f, flags, 0o600)) as out:

@@ -38,7 +38,7 @@ variable                          default                     meaning
 ``MIRRORCOACH_RECORDINGS``        ``10``                      recordings kept (the oldest are deleted)
 ``MIRRORCOACH_OBSERVER_QUEUE_MB`` ``256``                     events waiting for the observer; more are
                                                               dropped (counted in its log)
-``MIRRORCOACH_DEPLOY``            (unset)                     a deployed cluster across hosts (issue 16): this
+``MIRRORCOACH_DEPLOY``            (unset)                     a deployed cluster across hosts: this
                                                               process's identity folder from `mirrorcoach
                                                               deploy init` (TLS, access control, routers);
                                                               see shared/bus/deploy.py
@@ -234,8 +234,8 @@ class Settings:
 def max_message_size(s: Settings) -> int:
     """The largest Zenoh message any session of the cluster reassembles: the largest request a
     service accepts plus room for the key and attachments. Zenoh's default is 1 GiB, so a 600 MiB
-    request was reassembled whole by the router and the service before the 64 MiB check
-    (issue 17, row 11); now the router drops it after 64 MiB of fragments."""
+    request was reassembled whole by the router and the service before the 64 MiB check;
+    now the router drops it after 64 MiB of fragments."""
     return s.max_payload + (1 << 20)
 
 
@@ -249,7 +249,7 @@ def _base(mode: str, s: Settings):
     c.insert_json5("adminspace/enabled", "false")
     # Zenoh's shared memory is on by default: every session that sent a message above 3 KB kept
     # a 16 MiB pool in /dev/shm, freed only when the process ended (7.4 GB after two bursts of
-    # 200 clients, issue 17, row 10). Messages between processes on one host are small next to
+    # 200 clients). Messages between processes on one host are small next to
     # the work they ask for (bench/results/bus.md), so the copy through TCP costs little.
     c.insert_json5("transport/shared_memory/enabled", "false")
     c.insert_json5("transport/link/rx/max_message_size", str(max_message_size(s)))

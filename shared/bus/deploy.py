@@ -1,4 +1,4 @@
-"""A cluster across several hosts, secured (issue 16): certificates, access control, Zenoh configs.
+"""A cluster across several hosts, secured: certificates, access control, Zenoh configs.
 
 ``mirrorcoach deploy init OUT`` writes, for a cluster whose router(s) live at given addresses:
 

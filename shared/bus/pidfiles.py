@@ -83,7 +83,7 @@ def local_state(s: Settings, name: str) -> tuple[str, str]:
     """What this host knows of a process of the cluster from its pid files: ``("frozen",
     detail)`` (stopped by SIGSTOP or a debugger), ``("running", detail)``, ``("restarting",
     detail)`` (its supervisor runs, the process does not), or ``("down", "")``. Used to name
-    the cause when a service does not answer (issue 17, row 12)."""
+    the cause when a service does not answer."""
     pid = read_pid(s.run_dir / f"{name}.pid")
     if pid is not None:
         st = proc_stat(pid)

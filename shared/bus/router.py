@@ -1,7 +1,7 @@
 """``python -m shared.bus.router``: the embedded Zenoh router (a router-mode session on the
 loopback endpoint; no zenohd binary is needed). Runs until SIGTERM or SIGINT.
 
-Deployed (``MIRRORCOACH_DEPLOY`` names a router identity, issue 16) it listens with TLS and
+Deployed (``MIRRORCOACH_DEPLOY`` names a router identity) it listens with TLS and
 mutual authentication and enforces the cluster's access control; every refusal is logged, one
 line each (:class:`RefusalLog`): a message the access control denied (who, what, on which key)
 and a TLS handshake that failed (no certificate, another CA, a wrong name).

@@ -11,14 +11,14 @@ A :class:`Service` answers the verbs of its contract (``schemas/<service>.py``) 
 3. any :class:`~shared.errors.MirrorcoachError` becomes ``reply_err`` with its stable code;
    a request arriving when ``workers + MIRRORCOACH_QUEUE`` requests are in progress or waiting,
    or when the waiting ones hold ``MIRRORCOACH_QUEUE_MB``, gets ``unavailable`` (cause
-   ``saturated``) at once instead of queueing without bound (issue 17, row 1); verbs that may
+   ``saturated``) at once instead of queueing without bound; verbs that may
    wait for a person (``Endpoint.waits``) run on a pool of their own (``MIRRORCOACH_WAITING``),
-   so questions nobody has answered yet never hold the workers (issue 17, row 3); a full disk
+   so questions nobody has answered yet never hold the workers; a full disk
    (``ENOSPC``) becomes ``unavailable`` (cause ``disk_full``); anything else becomes
    ``internal`` (logged with its traceback, never shown to the caller);
 4. the query is always finalised (``with query``), so a caller never waits for a timeout.
 
-Deployed across hosts (``MIRRORCOACH_DEPLOY``, issue 16), several instances of a service may run
+Deployed across hosts (``MIRRORCOACH_DEPLOY``), several instances of a service may run
 on different hosts: exactly one **leads** (declares the queryable and the tokens
 ``<prefix>/alive/<service>`` and ``<prefix>/leader/<service>/<identity>``), the others stand by
 and take over when no leader token is left, which the router drops when the leader's process
@@ -346,7 +346,7 @@ class Service:
                     code = e.code
                     query.reply_err(error_payload(e.code, e.message, e.details))
                 except Exception as e:
-                    if isinstance(e, OSError) and e.errno in DISK_FULL:  # not a bug, not the caller's (issue 17, row 9)
+                    if isinstance(e, OSError) and e.errno in DISK_FULL:  # not a bug, not the caller's
                         code = "unavailable"
                         log.error("%s/%s: the disk is full: %s", self.name, verb, e)
                         query.reply_err(error_payload(

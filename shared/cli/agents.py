@@ -11,7 +11,7 @@ from typing import Any
 
 import typer
 
-from shared.cli.common import READING, SKELETON_HELP, app, client, fail, jsonable, read_clip, wire
+from shared.cli.common import READING, SKELETON_HELP, app, client, fail, jsonable, need, read_clip, wire
 
 sim_app = typer.Typer(help="MuJoCo bodies on the simulator service (needs `make up`).", no_args_is_help=True)
 other_app = typer.Typer(help="Others of chapter 3: simulated agents, or a person answering here.", no_args_is_help=True)
@@ -82,7 +82,7 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                  d: int = typer.Option(4, help="Density of words: 2, 4, 5, 6, 7 or 8 (5 and 7 are ours; Table 3.1 has 2, 4, 6, 8)."),
                  noise: float = typer.Option(0.0, help="Probability an answer is one bin off."),
                  seed: int = typer.Option(0, help="Seed of the answer noise."),
-                 kind: str | None = typer.Option(None, help="Draw an uneven body from the population (issue 13): "
+                 kind: str | None = typer.Option(None, help="Draw an uneven body from the population: "
                                                     "mass, links, payload, shares, damping, friction, joints, legs, mixed "
                                                     "(its mass replaces --mass; see `other reveal`)."),
                  index: int = typer.Option(0, help="Which of the kind's population (0-999)."),
@@ -313,7 +313,7 @@ def estimator_converse(name: str = typer.Argument(...), sets: int = typer.Option
 
 @estimator_app.command("estimate")
 def estimator_estimate(name: str = typer.Argument(...), clip: Path = typer.Argument(..., help="A motion of the robot's joints."),
-                       method: str = typer.Option("body", help="body (the estimated body, issue 13), interval (one "
+                       method: str = typer.Option("body", help="body (the estimated body), interval (one "
                                                   "torque scale) or thesis (eq. 3.5)."),
                        out: Path | None = typer.Option(None, help="Write the motion with the estimated torques (.npz).")):
     """How heavy the other would feel a motion, and its estimated torques."""
@@ -355,7 +355,7 @@ def estimator_info(name: str = typer.Argument(...), as_json: bool = typer.Option
 def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch3 (more arrive with the coach)."),
               out: Path = typer.Option(Path("reports"), help="Folder for the reports and plots (one sub-folder per chapter)."),
               sets: int = typer.Option(6, help="Conversation sets per curve (ch3)."),
-              others: int = typer.Option(10, help="Simulated others per kind of body (ch3; issue 13)."),
+              others: int = typer.Option(10, help="Simulated others per kind of body (ch3)."),
               kinds: str = typer.Option("all", help="Kinds of body for ch3, comma-separated: mass, links, payload, "
                                         "shares, damping, friction, joints, legs, mixed (default all)."),
               outside: bool = typer.Option(True, "--outside/--no-outside", help="Also others outside the estimators' "
@@ -370,6 +370,8 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                                                        "sweep (ch4-6; 0 skips it).")):
     """Rerun the thesis's experiments on the cluster (simulated agents) and write reports with plots."""
     from shared.bus.client import Client
+
+    need("matplotlib", "reports", "reproduce (its plots)")
     from shared.bus.cluster import down, running, up
     from shared.bus.config import Settings
 

@@ -20,6 +20,7 @@ from shared.cli.common import (
     fail,
     jsonable,
     load_clips,
+    need,
     parse_mix,
     parse_point,
     read_clip,
@@ -248,7 +249,7 @@ def status(as_json: bool = typer.Option(False, "--json")):
 
 @app.command("up")
 def up(wait: float = typer.Option(120.0, help="Seconds to wait for every service to be alive.")):
-    """Start the local cluster (router + services of deploy/cluster.toml) in the background."""
+    """Start the local cluster (router + services of shared/bus/cluster.toml) in the background."""
     from shared.bus.cluster import up as cluster_up
 
     raise typer.Exit(cluster_up(wait_s=wait, echo=typer.echo))
@@ -304,6 +305,7 @@ def dashboard(recording: Path | None = typer.Argument(None, help="A .rrd file (d
 
     from shared.bus.config import Settings
 
+    need("rerun", "dashboard", "the dashboard")
     path = recording or (Settings().home / "recordings" / "latest.rrd")
     if not path.exists():
         fail(f"no recording at {path}: run `make demo` (or `make up` and use the cluster) first")

@@ -46,6 +46,14 @@ def read_clip(path, skeleton=None, label: str | None = None):
     return load_clip(path, skeleton=skeleton, label=label, **READING)
 
 
+def need(module: str, extra: str, what: str) -> None:
+    """Fail with one line when an optional dependency is not installed (the extras of pyproject.toml)."""
+    import importlib.util
+
+    if importlib.util.find_spec(module) is None:
+        fail(f"{what} needs {module}, which is not installed: pip install 'mirrorcoach[{extra}]'")
+
+
 def fail(msg: str) -> None:
     typer.echo(f"error: {msg}", err=True)
     raise typer.Exit(2)

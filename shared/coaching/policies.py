@@ -52,7 +52,7 @@ class Calibration:
     """Our distance (eq. 2.4 between HMMs of our features) -> the thesis's units: ``thesis =
     scale * ours``. Two fits:
 
-    * :meth:`separating` (issue 14, the default of ``reproduce``): the scale under which AEU-Model
+    * :meth:`separating` (the default of ``reproduce``): the scale under which AEU-Model
       1's and 2's thresholds best separate the population's trials, the largest mean entropy of
       the two models' three-adverb splits of every trial's ``d_p`` (a calibration that makes a
       model say one adverb almost always tests nothing);

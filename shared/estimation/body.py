@@ -1,4 +1,4 @@
-"""Estimating an uneven other's body from its answers (issue 13; beyond thesis 3.3).
+"""Estimating an uneven other's body from its answers (beyond thesis 3.3).
 
 **The regressor.** A rigid body's joint torques are linear in its inertial parameters (the
 classical robot-identification regressor, Atkeson, An & Hollerbach 1986): ``tau = Y(q, qd, qdd)

@@ -36,7 +36,7 @@ Three estimators are kept side by side:
   each other), and any motion's torques are ``s * perform_self(motion)``. Each set also asks
   about one *probe*: a shared motion at an amplitude chosen so that its answer bisects the
   interval of ``s``. The error is no longer limited by a bin's width.
-* **body** (issue 13, :mod:`shared.estimation.body`): the other's body need not be the self's
+* **body** (:mod:`shared.estimation.body`): the other's body need not be the self's
   scaled; its torques are ``Y(motion) theta`` with the self's body regressor ``Y`` and the
   other's unknown parameters ``theta`` (link masses and lengths, a payload, damping, friction),
   every answer a constraint on ``theta``. Each set then asks ``probes`` probe motions (shared
@@ -344,7 +344,7 @@ class OtherEstimate:
         est.answers = [(float(g), int(k)) for g, k in h["answers"]]
         est.sets = [SetRecord(**r) for r in h["sets"]]
         est.probes_asked = [(str(n), int(k)) for n, k in h["probes_asked"]]
-        # estimates saved before issue 13 have no body answers: the body estimate starts from the self's
+        # estimates saved before the body estimator have no body answers: the body estimate starts from the self's
         est.body_answers = [(str(n), int(k)) for n, k in h.get("body_answers", [])]
         est._saved_body = h.get("body")
         est.dont_know = int(h.get("dont_know", 0))

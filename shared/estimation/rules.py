@@ -7,7 +7,7 @@
 * :func:`identify_thesis` asks them in the thesis's order (fig. 3.11). Its answers are
   predicted from the self's own torques, right only when the other's body is the self's scaled
   in mass (thesis 3.4.4).
-* :func:`identify_bodies` goes beyond the thesis (issue 13): for any set of candidate rules it
+* :func:`identify_bodies` goes beyond the thesis: for any set of candidate rules it
   predicts every answer from bodies the other may have (:func:`candidate_bodies`), keeps a
   posterior over rule and body together, and asks the pair of :func:`identification_motions`
   that tells most, until one rule is sure.
@@ -143,7 +143,7 @@ def identify_thesis(pairs: dict, ask_compare: Callable[[Clip, Clip], str]) -> di
             "reason": "identified" if rule else f"unexpected answer {second!r}"}
 
 
-# ---------------------------------------------------------------------------- uneven bodies (issue 13)
+# ---------------------------------------------------------------------------- uneven bodies
 #: the comparison noise the self allows for when it weighs answers (an answer other than the
 #: predicted one, either of the two others equally likely)
 ANSWER_NOISE = 0.1
@@ -211,7 +211,7 @@ def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors
                     bodies: dict[str, np.ndarray], ask_compare: Callable[[Clip, Clip], str], jnd: float = 0.05,
                     noise: float | None = None, confidence: float = CONFIDENCE, max_questions: int = MAX_QUESTIONS,
                     repeats: int = REPEATS) -> dict:
-    """Identify the other's rule when its body is not the self's (issue 13).
+    """Identify the other's rule when its body is not the self's.
 
     Each candidate's answer about a pair of motions is predicted from the **estimated body**,
     not the self's: ``bodies[c.name]`` are bodies the open answers allow under that rule

@@ -38,7 +38,7 @@ def append_line(path, line: str) -> None:
 
     A write the disk cannot take (``ENOSPC``) may have written part of the line; the file is cut
     back to its length before the call, so a full disk never leaves half a line behind
-    (issue 17, row 9). The error is raised after the cut.
+   . The error is raised after the cut.
     """
     data = (line.rstrip("\n") + "\n").encode()
     fd = os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o600)

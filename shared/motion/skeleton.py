@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
 ROT_DOFS = ("rx", "ry", "rz")
 TRANS_DOFS = ("tx", "ty", "tz")
-#: no body has more; a bound on the work a skeleton from outside can ask for (issue 17, row 1:
+#: no body has more; a bound on the work a skeleton from outside can ask for (row 1:
 #: a 10,000-joint skeleton held a simulator worker 39 s)
 MAX_JOINTS = 1000
 
@@ -104,7 +104,7 @@ class Skeleton:
         """A tree a reader could have made, or :class:`BadInput` naming the first fault: 1 to
         ``MAX_JOINTS`` joints with unique names, one root first and every joint after its
         parent (so no cycle), known degrees of freedom, an Euler order of x, y, z, finite
-        offsets and pre-rotations, a positive unit and an up axis 0-2 (issue 17, row 4: a
+        offsets and pre-rotations, a positive unit and an up axis 0-2 (a
         space whose skeleton had a parent cycle was broken for good)."""
         from shared.errors import BadInput
 

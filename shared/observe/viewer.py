@@ -32,7 +32,7 @@ def viewer_binary() -> Path:
 
 
 def viewer_command(viewer: str, path) -> list[str]:
-    """``make dashboard``'s viewer: on loopback only (it listens on 0.0.0.0 by default, issue 15)
+    """``make dashboard``'s viewer: on loopback only (it listens on 0.0.0.0 by default)
     and on a free port (on a taken port, ``rerun FILE`` sends the recording to whoever holds it)."""
     return [viewer, "--bind", "127.0.0.1", "--port", "auto", str(path)]
 

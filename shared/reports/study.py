@@ -1,4 +1,4 @@
-"""Studies with people (issue 14): the protocol of thesis fig. 4.3 / Table 4.2 with real
+"""Studies with people: the protocol of thesis fig. 4.3 / Table 4.2 with real
 participants, and a coach seat for chapter 5. Bus-free: the CLI (``mirrorcoach study``) wires
 it to the coach service.
 

@@ -4,7 +4,7 @@ cluster with a seeded population of **simulated learners** (not people) and real
 throw). Every session runs through the coach service (pss for spaces and generation, the
 simulator for learners and feasibility).
 
-Every experiment runs once per learner family (``shared/agents/learner.py``, issue 14): the
+Every experiment runs once per learner family (``shared/agents/learner.py``): the
 alpha sweep with and without adverbs (fig. 4.7, 5.7, 6.5), cases 1-4 (table 4.2, fig. 4.8/4.9,
 table 4.3), EMU-Model 2 per learner (fig. 5.8) and cases 5, 6 as new sessions with fresh noise
 (table 6.2, fig. 6.1, 6.2), cases 7 and 8 with AEU-Model 1 and 2 calibrated to separate the

@@ -1,4 +1,4 @@
-"""Coaching trials as one tidy table (issue 14): one row per trial, the same columns for
+"""Coaching trials as one tidy table: one row per trial, the same columns for
 simulated runs (``reproduce ch4 ch5 ch6`` writes ``tidy.csv``) and for studies with people
 (``mirrorcoach study export``), so the report's statistics read both the same way
 (:func:`matrix`, :func:`shared.reproduce.coaching_report.case_tables`).
