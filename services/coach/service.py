@@ -100,27 +100,28 @@ def trial_reply(session: Session, rec: Trial, demo: Clip) -> dict:
             "seconds": rec.seconds}
 
 
-def make_service(settings: Settings | None = None) -> Service:
-    settings = settings or Settings()
-    root = settings.data_dir("coach")
-    root.mkdir(parents=True, exist_ok=True)
-    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
-    bus = svc.client
-    writing = OneWriter("session")
+class CoachHandlers:
+    """The coach service's verbs, one method each: :func:`make_service` registers :meth:`handlers`
+    on a :class:`~shared.bus.runtime.Service`; without one (tests), give it a folder, a bus client
+    factory and a publisher."""
 
-    def paths(name: str) -> tuple[Path, Path]:
+    def __init__(self, root: Path, bus, publish) -> None:
+        self.root, self.bus, self.publish = root, bus, publish
+        self.writing = OneWriter("session")  # one request at a time changes a session
+
+    def paths(self, name: str) -> tuple[Path, Path]:
         check_name(name)
-        return root / f"{name}.json", root / f"{name}.target.npz"
+        return self.root / f"{name}.json", self.root / f"{name}.target.npz"
 
-    def save(s: Session) -> None:
-        meta, target = paths(s.name)
+    def save(self, s: Session) -> None:
+        meta, target = self.paths(s.name)
         if not target.exists():
             save_clip(s.target, target)
         text = json.dumps(session_to_dict(s)).encode()
         atomic_write(meta, lambda f: f.write(text))
 
-    def load(name: str) -> Session:
-        meta, target = paths(name)
+    def load(self, name: str) -> Session:
+        meta, target = self.paths(name)
         if not meta.exists():
             raise NotFound(f"no coaching session {name!r}", session=name)
         d = json.loads(meta.read_text())
@@ -131,22 +132,22 @@ def make_service(settings: Settings | None = None) -> Service:
                        target_cog=None if cog is None else np.asarray(cog), subgoals=d.get("subgoals"),
                        effort=EffortEstimate.from_dict(d.get("effort")))
 
-    def info(s: Session) -> dict:
+    def info(self, s: Session) -> dict:
         d = s.d()
         return {"session": s.name, "target": s.target.name, "learner": s.learner, "mode": s.mode, "check": s.check,
                 "policy": s.policy.to_dict(),
                 "trials": [asdict(t) for t in s.trials], "R": [x / d[0] for x in d] if d and d[0] > 0 else []}
 
-    def ports_of(s: Session) -> BusCoachPorts:
-        return BusCoachPorts(bus(), None if s.target.skeleton is None else s.target.skeleton.to_json())
+    def ports_of(self, s: Session) -> BusCoachPorts:
+        return BusCoachPorts(self.bus(), None if s.target.skeleton is None else s.target.skeleton.to_json())
 
-    def run_trial(s: Session, attempts: list[Clip], felt: int | None = None) -> tuple[Trial, Clip]:
-        ports = ports_of(s)
+    def run_trial(self, s: Session, attempts: list[Clip], felt: int | None = None) -> tuple[Trial, Clip]:
+        ports = self.ports_of(s)
         # a fresh proto-symbol name per try: a trial cut short by a crash is simply sent again
         rec, demo = trial(s, attempts, _Renamed(ports, f"-{uuid.uuid4().hex[:6]}"), felt)
-        save_clip(demo, root / f"{s.name}.last.npz")  # what to show next, for run to continue from
-        save(s)
-        svc.publish("trial", {"session": s.name, "trial": rec.number, "d_p": rec.d_p, "alpha": rec.alpha_shown,
+        save_clip(demo, self.root / f"{s.name}.last.npz")  # what to show next, for run to continue from
+        self.save(s)
+        self.publish("trial", {"session": s.name, "trial": rec.number, "d_p": rec.d_p, "alpha": rec.alpha_shown,
                               "adverb": rec.adverb, "x_t": rec.x_t, "x_p": rec.x_p, "x_s": rec.x_s,
                               "learner": s.learner, "attempt": clip_to_wire(attempts[0], False),
                               "emphatic": clip_to_wire(demo, False), "alpha_chosen": rec.alpha,
@@ -155,35 +156,34 @@ def make_service(settings: Settings | None = None) -> Service:
                               **({} if rec.d_cop is None else {"d_cop": rec.d_cop})})
         return rec, demo
 
-    def learner_of(session_file: Path) -> str | None:
+    def learner_of(self, session_file: Path) -> str | None:
         try:
             return json.loads(session_file.read_text()).get("learner")
         except (OSError, ValueError, AttributeError):  # unreadable: it owns nothing we can name
             return None
 
-    def check_owned(s: Session, replacing: bool) -> None:
+    def check_owned(self, s: Session, replacing: bool) -> None:
         """A session never takes what is another's: its learner must not be
         learning in another session, and a new session's space ``coach-<session>`` and learner
         must not already exist (a user's own space or learner would be replaced)."""
         if s.learner:
-            owner = next((p.stem for p in sorted(root.glob("*.json"))
-                          if p.stem != s.name and learner_of(p) == s.learner), None)
+            owner = next((p.stem for p in sorted(self.root.glob("*.json"))
+                          if p.stem != s.name and self.learner_of(p) == s.learner), None)
             if owner is not None:
                 raise Conflict(f"learner {s.learner!r} is learning in session {owner!r}; give this session another "
                                f"learner name, or delete session {owner!r} first", learner=s.learner, session=owner)
         if replacing:
             return
-        if s.space in {x["space"] for x in bus().request("pss", "list", {}, timeout=30)["spaces"]}:
+        if s.space in {x["space"] for x in self.bus().request("pss", "list", {}, timeout=30)["spaces"]}:
             raise Conflict(f"a space named {s.space!r} exists and is not this coach's; session {s.name!r} would "
                            f"replace it: choose another session name, or delete that space", space=s.space)
-        if s.learner and s.learner in {x["learner"] for x in bus().request("simulator", "list", {}, timeout=30)["learners"]}:
+        if s.learner and s.learner in {x["learner"] for x in self.bus().request("simulator", "list", {}, timeout=30)["learners"]}:
             raise Conflict(f"a learner named {s.learner!r} exists in the simulator and belongs to no session; "
                            f"choose another learner name, or delete it (`mirrorcoach learner delete`)", learner=s.learner)
 
-    @svc.handler("start")
-    def start_session(req):
+    def start_session(self, req):
         name = req["session"]
-        meta, _ = paths(name)
+        meta, _ = self.paths(name)
         if meta.exists() and not req["replace"]:
             raise Conflict(f"session {name!r} exists; delete it or start with replace", session=name)
         if (req["target"] is None) == (req["target_space"] is None):
@@ -193,7 +193,7 @@ def make_service(settings: Settings | None = None) -> Service:
         else:
             if not req["target_label"]:
                 raise BadInput("target_space needs target_label", field="target_label")
-            r = bus().request("pss", "generate", {"space": req["target_space"], "mix": {req["target_label"]: 1.0},
+            r = self.bus().request("pss", "generate", {"space": req["target_space"], "mix": {req["target_label"]: 1.0},
                                                   "name": "target"})
             target = clip_from_wire(r["clip"])
         target = target.resample(30.0) if target.fps != 30.0 else target
@@ -205,13 +205,13 @@ def make_service(settings: Settings | None = None) -> Service:
             raise BadInput("the effort policy asks the learner how heavy each motion felt; a simulated learner needs a "
                            "strength for that (learner_params.strength, `--strength` in the CLI)", field="policy")
         s = Session(name, target, policy, req["learner"], mode=req["mode"], check=req["check"])
-        check_owned(s, replacing=meta.exists())
-        with writing(name):
-            for p in (meta, paths(name)[1], root / f"{name}.last.npz"):
+        self.check_owned(s, replacing=meta.exists())
+        with self.writing(name):
+            for p in (meta, self.paths(name)[1], self.root / f"{name}.last.npz"):
                 p.unlink(missing_ok=True)
             if s.learner:
                 try:
-                    bus().request("simulator", "learner_create", {"learner": s.learner, "target": clip_to_wire(target),
+                    self.bus().request("simulator", "learner_create", {"learner": s.learner, "target": clip_to_wire(target),
                                                                   "population_seed": req["population_seed"],
                                                                   "index": req["index"], "family": req["family"],
                                                                   "replicate": req["replicate"], "replace": True,
@@ -219,47 +219,43 @@ def make_service(settings: Settings | None = None) -> Service:
                                                                      if req["learner_params"] else {})})
                 except RemoteError as e:
                     raise BadInput(f"cannot create learner {s.learner!r}: {e.message}") from None
-            start(s, ports_of(s))
-            save(s)
-        svc.publish("session", {"session": name, "learner": s.learner, "target": clip_to_wire(target)})
-        return info(s)
+            start(s, self.ports_of(s))
+            self.save(s)
+        self.publish("session", {"session": name, "learner": s.learner, "target": clip_to_wire(target)})
+        return self.info(s)
 
-    @svc.handler("attempt")
-    def attempt(req):
-        with writing(req["session"]):
-            s = load(req["session"])
-            rec, demo = run_trial(s, [clip_from_wire(c, s.target.skeleton) for c in req["clips"]], req["felt"])
+    def attempt(self, req):
+        with self.writing(req["session"]):
+            s = self.load(req["session"])
+            rec, demo = self.run_trial(s, [clip_from_wire(c, s.target.skeleton) for c in req["clips"]], req["felt"])
         return trial_reply(s, rec, demo)
 
-    @svc.handler("run")
-    def run(req):
-        with writing(req["session"]):
-            s = load(req["session"])
+    def run(self, req):
+        with self.writing(req["session"]):
+            s = self.load(req["session"])
             if not s.learner:
                 raise BadInput(f"session {s.name!r} coaches a person: send attempts with `coach attempt`")
             demo, adverb = s.target, None
-            last = root / f"{s.name}.last.npz"
+            last = self.root / f"{s.name}.last.npz"
             if s.trials and last.exists():  # continue: show what the last trial chose
                 demo, adverb = load_clip(last), s.trials[-1].adverb
             for i in range(req["trials"]):
                 completed(f"{i} of {req['trials']} trial(s) completed and kept")
                 check_time()
-                r = bus().request("simulator", "learner_imitate", {"learner": s.learner, "demonstration": clip_to_wire(demo),
+                r = self.bus().request("simulator", "learner_imitate", {"learner": s.learner, "demonstration": clip_to_wire(demo),
                                                                    **({"adverb": adverb} if adverb else {})})
                 attempts = [clip_from_wire(a, s.target.skeleton) for a in r["attempts"]]
                 if s.effort is not None and r.get("felt") is None:
                     raise BadInput(f"session {s.name!r} asks for felt effort, and learner {s.learner!r} has no strength "
                                    "to feel it with (create it with learner_params.strength)", field="policy")
-                rec, demo = run_trial(s, attempts, r.get("felt") if s.effort is not None else None)
+                rec, demo = self.run_trial(s, attempts, r.get("felt") if s.effort is not None else None)
                 adverb = rec.adverb
-        return info(s)
+        return self.info(s)
 
-    @svc.handler("state")
-    def state(req):
-        return info(load(req["session"]))
+    def state(self, req):
+        return self.info(self.load(req["session"]))
 
-    @svc.handler("policy_fit")
-    def policy_fit(req):
+    def policy_fit(self, req):
         kind = req["kind"]
         if kind in ("aeu1", "aeu2"):
             if req["trial_dp"]:
@@ -305,34 +301,46 @@ def make_service(settings: Settings | None = None) -> Service:
         return {"policy": Policy("nb", alpha=req["alpha"], adverb=None, nb=nb).to_dict(),
                 "fit": {"classes": nb["classes"], "n": len(req["labels"])}}
 
-    @svc.handler("list")
-    def list_sessions(req):
+    def list_sessions(self, req):
         rows = []
-        for p in sorted(root.glob("*.json")):
+        for p in sorted(self.root.glob("*.json")):
             d = json.loads(p.read_text())
             rows.append({"session": p.stem, "trials": len(d["trials"]), "learner": d.get("learner")})
         return {"sessions": rows}
 
-    @svc.handler("delete")
-    def delete(req):
+    def delete(self, req):
         name = req["session"]
-        with writing(name):
-            meta, target = paths(name)
+        with self.writing(name):
+            meta, target = self.paths(name)
             if not meta.exists():
                 raise NotFound(f"no coaching session {name!r}", session=name)
-            learner = learner_of(meta)
+            learner = self.learner_of(meta)
             meta.unlink()
             target.unlink(missing_ok=True)
-            (root / f"{name}.last.npz").unlink(missing_ok=True)
+            (self.root / f"{name}.last.npz").unlink(missing_ok=True)
         for service, what in (("pss", {"space": f"coach-{name}"}), ("simulator", {"learner": learner})):
             if None in what.values():
                 continue
             try:  # the session's space and learner are its own: they go with it
-                bus().request(service, "delete", what, timeout=30)
+                self.bus().request(service, "delete", what, timeout=30)
             except RemoteError:
                 pass
         return {"session": name, "deleted": True}
 
+
+    def handlers(self) -> dict:
+        """The verbs of the contract and the methods that answer them."""
+        return {"start": self.start_session, "attempt": self.attempt, "run": self.run, "state": self.state,
+                "policy_fit": self.policy_fit, "list": self.list_sessions, "delete": self.delete}
+
+
+def make_service(settings: Settings | None = None) -> Service:
+    settings = settings or Settings()
+    root = settings.data_dir("coach")
+    root.mkdir(parents=True, exist_ok=True)
+    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
+    for verb, handler in CoachHandlers(root, svc.client, svc.publish).handlers().items():
+        svc.handler(verb)(handler)
     return svc
 
 
@@ -372,3 +380,4 @@ class _Renamed:
 
     def effort(self, clip):
         return self.p.effort(clip)
+

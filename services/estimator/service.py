@@ -18,6 +18,7 @@ from __future__ import annotations
 import copy
 import threading
 from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 
@@ -194,41 +195,40 @@ def _identify_on_bodies(est: OtherEstimate, cands, ports: BusPorts, design: dict
                            confidence=req["confidence"])
 
 
-def make_service(settings: Settings | None = None) -> Service:
-    settings = settings or Settings()
-    root = settings.data_dir("estimator")
-    root.mkdir(parents=True, exist_ok=True)
-    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
-    bus = svc.client
-    writing = OneWriter("estimate")
+class EstimatorHandlers:
+    """The estimator service's verbs, one method each: :func:`make_service` registers :meth:`handlers`
+    on a :class:`~shared.bus.runtime.Service`; without one (tests), give it a folder, a bus client
+    factory and a publisher."""
 
-    def path(name: str):
-        return root / f"{check_name(name)}.npz"
+    def __init__(self, root: Path, bus, publish) -> None:
+        self.root, self.bus, self.publish = root, bus, publish
+        self.writing = OneWriter("estimate")  # one request at a time changes an estimate
+        self.building: dict = {}  # name -> lock: a fresh estimate's space is built by one request
+        self.building_lock = threading.Lock()
+        self.loaded: dict = {}  # name -> (file stamp, estimate): estimate requests reuse the last load and its body fit
 
-    building: dict = {}  # name -> lock: a fresh estimate's space is built by one request
-    building_lock = threading.Lock()
-    loaded: dict = {}  # name -> (file stamp, estimate): estimate requests reuse the last load and its body fit
+    def path(self, name: str):
+        return self.root / f"{check_name(name)}.npz"
 
-    def load(name: str) -> OtherEstimate:
-        if not path(name).exists():
+    def load(self, name: str) -> OtherEstimate:
+        if not self.path(name).exists():
             raise NotFound(f"no estimate named {name!r}", estimate=name)
-        st = path(name).stat()
+        st = self.path(name).stat()
         stamp = (st.st_mtime_ns, st.st_size, st.st_ino)
-        hit = loaded.get(name)
+        hit = self.loaded.get(name)
         if hit is not None and hit[0] == stamp:
             return copy.deepcopy(hit[1])  # a copy: a handler may change it and then fail before saving
-        est = OtherEstimate.load(path(name))
-        loaded[name] = (stamp, est)
-        while len(loaded) > 64:
-            loaded.pop(next(iter(loaded)))
+        est = OtherEstimate.load(self.path(name))
+        self.loaded[name] = (stamp, est)
+        while len(self.loaded) > 64:
+            self.loaded.pop(next(iter(self.loaded)))
         return copy.deepcopy(est)
 
-    @svc.handler("start")
-    def start(req):
+    def start(self, req):
         name = req["estimate"]
-        if path(name).exists() and not req["replace"]:
+        if self.path(name).exists() and not req["replace"]:
             raise Conflict(f"estimate {name!r} exists; delete it or start with replace", estimate=name)
-        others = {o["other"] for o in bus().request("simulator", "list", {}, timeout=30)["others"]}
+        others = {o["other"] for o in self.bus().request("simulator", "list", {}, timeout=30)["others"]}
         if req["other"] not in others:  # checked before anything is built or saved
             raise NotFound(f"no other named {req['other']!r} (create it with `mirrorcoach other create`)",
                            other=req["other"])
@@ -242,26 +242,25 @@ def make_service(settings: Settings | None = None) -> Service:
         shared = basic_motions(ALL if "knee" in joints else ARM)
         est = OtherEstimate(lang, [hold(m, lang.missing) for m in shared], probes=req["probes"])
         est.other = req["other"]
-        with writing(name):
+        with self.writing(name):
             # P_other_hat is built when first needed (converse rebuilds it anyway; estimate builds a missing one),
             # so a space left by an earlier estimate of this name must go: its answers are not this one's
-            ports = BusPorts(bus(), name, req["other"], lang)
+            ports = BusPorts(self.bus(), name, req["other"], lang)
             for space in SPACES:
                 try:
-                    bus().request("pss", "delete", {"space": ports.space_of(space)}, timeout=30)
+                    self.bus().request("pss", "delete", {"space": ports.space_of(space)}, timeout=30)
                 except RemoteError as e:
                     if e.code != "not_found":
                         raise
             est.start(ports, build=False)
-            est.save(path(name))
+            est.save(self.path(name))
         return info_of(name, est)
 
-    @svc.handler("converse")
-    def converse(req):
+    def converse(self, req):
         name = req["estimate"]
-        with writing(name):
-            est = load(name)
-            ports = BusPorts(bus(), name, est.other, est.language, req["timeout"])
+        with self.writing(name):
+            est = self.load(name)
+            ports = BusPorts(self.bus(), name, est.other, est.language, req["timeout"])
             for space in SPACES:  # the spaces match the saved state, whatever happened before
                 ports.build(est.database(space), space)
             done, stopped = 0, None
@@ -280,14 +279,14 @@ def make_service(settings: Settings | None = None) -> Service:
                 # what the self can model. The body is fitted to every answer (the last probe's too)
                 # before the set is saved.
                 est.body(ports)
-                est.save(path(name))
+                est.save(self.path(name))
                 done += 1
-                svc.publish("progress", {"estimate": name, "set": len(est.sets), "scale": float(est.scale()),
+                self.publish("progress", {"estimate": name, "set": len(est.sets), "scale": float(est.scale()),
                                          "consistent": bool(est.consistent()), "k_other": rec.k_other,
                                          "k_self": rec.k_self})
             if stopped:
                 est.notes.append(f"stopped after {len(est.sets)} set(s): {stopped}")
-                est.save(path(name))
+                est.save(self.path(name))
                 for space in SPACES:
                     ports.build(est.database(space), space)
         check = est.model_check(ports)  # the body fitted to every answer before the info reads it
@@ -296,12 +295,11 @@ def make_service(settings: Settings | None = None) -> Service:
             out["stopped"] = stopped
         return out
 
-    @svc.handler("estimate")
-    def estimate(req):
+    def estimate(self, req):
         name = req["estimate"]
-        est = load(name)
+        est = self.load(name)
         motion = clip_from_wire(req["clip"])
-        ports = BusPorts(bus(), name, est.other, est.language)
+        ports = BusPorts(self.bus(), name, est.other, est.language)
         missing = [j for j in est.language.joints if j not in motion.channels]
         if missing:
             raise BadInput(f"the motion lacks the joints {missing} this estimate is about", field="clip")
@@ -311,10 +309,10 @@ def make_service(settings: Settings | None = None) -> Service:
         except RemoteError as e:  # the space of a fresh estimate (or one pss lost): build it from the saved database
             if e.code != "not_found" or req["method"] not in ("thesis", "space"):
                 raise
-            with building_lock:
-                lock = building.setdefault(name, threading.Lock())
-                while len(building) > 256:  # bounded: the oldest estimates' locks go (a later build takes a new one)
-                    building.pop(next(iter(building)))
+            with self.building_lock:
+                lock = self.building.setdefault(name, threading.Lock())
+                while len(self.building) > 256:  # bounded: the oldest estimates' locks go (a later build takes a new one)
+                    self.building.pop(next(iter(self.building)))
             with lock:  # one request builds; the others wait for it, then find the space
                 try:
                     tau = est.estimate(motion, ports, req["method"])
@@ -332,13 +330,12 @@ def make_service(settings: Settings | None = None) -> Service:
         return {"estimate": name, "method": req["method"], "clip": clip_to_wire(out), "g": float(g), "k": int(k),
                 "word": word(k, est.language.d)}
 
-    @svc.handler("identify_rule")
-    def identify_rule(req):
+    def identify_rule(self, req):
         name = req["estimate"]
-        with writing(name):
-            est = load(name)
+        with self.writing(name):
+            est = self.load(name)
             lang4 = Language(**{**asdict(est.language), "joints": list(ALL)})
-            ports = BusPorts(bus(), name, est.other, lang4, req["timeout"])
+            ports = BusPorts(self.bus(), name, est.other, lang4, req["timeout"])
             design = _design(ports)
             try:
                 if req["method"] == "thesis":
@@ -360,7 +357,7 @@ def make_service(settings: Settings | None = None) -> Service:
                     est.answers = []  # bounds were computed with the old rule: the interval starts again
                     est.forget_body()  # and the body is fitted again under the identified rule
                     est.notes.append(f"identified rule {rule.name} in {len(r['questions'])} question(s); now used")
-                est.save(path(name))
+                est.save(self.path(name))
         out = {"estimate": name, "questions": [{"pair": q["pair"], "answer": q["answer"]} for q in r["questions"]],
                "reason": r["reason"], "design": design["report"]}
         if rule is not None:
@@ -369,31 +366,43 @@ def make_service(settings: Settings | None = None) -> Service:
             out["posterior"] = r["posterior"]
         return out
 
-    @svc.handler("info")
-    def info(req):
-        return info_of(req["estimate"], load(req["estimate"]))
+    def info(self, req):
+        return info_of(req["estimate"], self.load(req["estimate"]))
 
-    @svc.handler("list")
-    def list_estimates(req):
+    def list_estimates(self, req):
         rows = []
-        for p in sorted(root.glob("*.npz")):
+        for p in sorted(self.root.glob("*.npz")):
             est = OtherEstimate.load(p)
             rows.append({"estimate": p.stem, "other": est.other, "sets_done": len(est.sets)})
         return {"estimates": rows}
 
-    @svc.handler("delete")
-    def delete(req):
+    def delete(self, req):
         name = req["estimate"]
-        with writing(name):
-            if not path(name).exists():
+        with self.writing(name):
+            if not self.path(name).exists():
                 raise NotFound(f"no estimate named {name!r}", estimate=name)
-            path(name).unlink()
+            self.path(name).unlink()
         for space in SPACES:
             try:
-                bus().request("pss", "delete", {"space": BusPorts(bus(), name, "", Language()).space_of(space)},
+                self.bus().request("pss", "delete", {"space": BusPorts(self.bus(), name, "", Language()).space_of(space)},
                               timeout=30)
             except MirrorcoachError:
                 pass  # the space may never have been built
         return {"estimate": name, "deleted": True}
 
+    def handlers(self) -> dict:
+        """The verbs of the contract and the methods that answer them."""
+        return {"start": self.start, "converse": self.converse, "estimate": self.estimate,
+                "identify_rule": self.identify_rule, "info": self.info, "list": self.list_estimates,
+                "delete": self.delete}
+
+
+def make_service(settings: Settings | None = None) -> Service:
+    settings = settings or Settings()
+    root = settings.data_dir("estimator")
+    root.mkdir(parents=True, exist_ok=True)
+    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
+    for verb, handler in EstimatorHandlers(root, svc.client, svc.publish).handlers().items():
+        svc.handler(verb)(handler)
     return svc
+

@@ -64,173 +64,182 @@ class _Bodies:
 INVERSE_DYNAMICS_BYTES = 14
 
 
-def make_service(settings: Settings | None = None) -> Service:
-    settings = settings or Settings()
-    store = AgentStore(settings.data_dir("simulator"))
-    bodies = _Bodies()
-    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
-    locks: dict[str, threading.Lock] = {}
-    locks_guard = threading.Lock()
-    pending: dict[str, dict] = {}
-    pending_guard = threading.Lock()
+class SimulatorHandlers:
+    """The simulator service's verbs, one method each: :func:`make_service` registers :meth:`handlers`
+    on a :class:`~shared.bus.runtime.Service`; without one (tests), give it an agent store and a publisher."""
 
-    def lock_of(key: str) -> threading.Lock:
-        with locks_guard:
-            return locks.setdefault(key, threading.Lock())
+    def __init__(self, store: AgentStore, publish) -> None:
+        self.store, self.publish = store, publish
+        self.bodies = _Bodies()
+        self.locks: dict[str, threading.Lock] = {}
+        self.locks_guard = threading.Lock()
+        self.pending: dict[str, dict] = {}
+        self.pending_guard = threading.Lock()
 
-    @svc.handler("bodies")
-    def list_bodies(req):
-        return {"robots": [bodies.get(n, None, None).describe() for n in ROBOTS]}
+    def lock_of(self, key: str) -> threading.Lock:
+        with self.locks_guard:
+            return self.locks.setdefault(key, threading.Lock())
 
-    @svc.cost("perform")
-    def perform_cost(req):
+    def list_bodies(self, req):
+        return {"robots": [self.bodies.get(n, None, None).describe() for n in ROBOTS]}
+
+    def perform_cost(self, req):
         return INVERSE_DYNAMICS_BYTES * req["clip"]["data"].nbytes
 
-    @svc.cost("other_ask")
-    def ask_cost(req):
+    def ask_cost(self, req):
         """An other performs the motions one after another: the largest one's inverse dynamics."""
         return INVERSE_DYNAMICS_BYTES * max(c["data"].nbytes for c in req["clips"])
 
-    @svc.handler("perform")
-    def do_perform(req):
-        b = bodies.get(req["body"], req["skeleton"], req["mass"])
+    def do_perform(self, req):
+        b = self.bodies.get(req["body"], req["skeleton"], req["mass"])
         clip = clip_from_wire(req["clip"], getattr(b, "skeleton", None))
         out, report = perform(b, clip)
-        svc.publish("performed", {"body": b.name, "frames": out.n_frames, "feasible": report["feasible"] is True,
+        self.publish("performed", {"body": b.name, "frames": out.n_frames, "feasible": report["feasible"] is True,
                                   "checked": report["feasible"] is not None})
         return {"clip": clip_to_wire(out, with_skeleton=False), "report": report, "body": b.describe()}
 
-    @svc.cost("plant")
-    def plant_cost(req):
+    def plant_cost(self, req):
         return INVERSE_DYNAMICS_BYTES * (req["clip"]["data"].nbytes + req["reference"]["data"].nbytes)
 
-    @svc.handler("plant")
-    def do_plant(req):
+    def do_plant(self, req):
         from shared.bodies.stance import plant_feet
 
-        b = bodies.get(None, req["skeleton"], req["mass"])
+        b = self.bodies.get(None, req["skeleton"], req["mass"])
         clip = clip_from_wire(req["clip"], b.skeleton)
         out, changes = plant_feet(b, clip_from_wire(req["reference"], b.skeleton), clip)
         return {"clip": clip_to_wire(out, with_skeleton=False), "changes": changes}
 
-    @svc.handler("regressor")
-    def do_regressor(req):
+    def do_regressor(self, req):
         from shared.estimation.body import column_names, self_regressor
 
         y = self_regressor(clip_from_wire(req["clip"]), req["joints"], req["missing"])
         return {"names": column_names(req["joints"]), "y": y}
 
     # ------------------------------------------------------------------ others
-    @svc.handler("other_create")
-    def other_create(req):
-        kind, _ = store.add_other(req["other"], req["kind"], req["params"] or {}, req["replace"])
+    def other_create(self, req):
+        kind, _ = self.store.add_other(req["other"], req["kind"], req["params"] or {}, req["replace"])
         return {"other": req["other"], "kind": kind}
 
-    @svc.handler("other_ask")
-    def other_ask(req):
-        kind, other = store.other(req["other"])
+    def other_ask(self, req):
+        kind, other = self.store.other(req["other"])
         clips = [clip_from_wire(c) for c in req["clips"]]
         want = 1 if req["kind"] == "open" else 2
         if len(clips) != want:
             raise BadInput(f"an {req['kind']} question needs {want} motion(s), got {len(clips)}", field="clips")
         if kind == "person":
-            answer = ask_person(req, other)
+            answer = self.ask_person(req, other)
         elif other.params.behaviour == "silent":  # fault injection: a bounded wait, then no answer
             threading.Event().wait(min(req["timeout"], 600.0))
             raise Unavailable(f"{req['other']} did not answer within {req['timeout']:g} s", other=req["other"])
         else:
-            with lock_of(f"other:{req['other']}"):
+            with self.lock_of(f"other:{req['other']}"):
                 answer = other.answer_open(clips[0]) if want == 1 else other.answer_compare(*clips)
-                store.save_other(req["other"])
-        svc.publish("answered", {"other": req["other"], "kind": req["kind"], "answer": answer})
+                self.store.save_other(req["other"])
+        self.publish("answered", {"other": req["other"], "kind": req["kind"], "answer": answer})
         return {"other": req["other"], "answer": answer}
 
-    def ask_person(req, other: PersonOther) -> str:
+    def ask_person(self, req, other: PersonOther) -> str:
         qid = uuid.uuid4().hex[:12]
         accepted = list(COMPARISONS) if req["kind"] == "compare" else list(WORDS[other.d])
         entry = {"question": qid, "other": req["other"], "kind": req["kind"], "text": req["text"],
                  "clips": req["clips"], "accepted": accepted, "event": threading.Event(), "answer": None}
-        with pending_guard:
-            pending[qid] = entry
+        with self.pending_guard:
+            self.pending[qid] = entry
         try:
             if not entry["event"].wait(req["timeout"]):
                 raise Unavailable(f"{req['other']} (a person) did not answer within {req['timeout']:g} s "
                                   "(answer with `mirrorcoach other answer`)", other=req["other"])
         finally:
-            with pending_guard:
-                pending.pop(qid, None)
+            with self.pending_guard:
+                self.pending.pop(qid, None)
         other.asked += 1
-        store.save_other(req["other"])
+        self.store.save_other(req["other"])
         return entry["answer"]
 
-    @svc.handler("other_pending")
-    def other_pending(req):
-        with pending_guard:
-            rows = [e for e in pending.values() if req["other"] in (None, e["other"]) and e["answer"] is None]
+    def other_pending(self, req):
+        with self.pending_guard:
+            rows = [e for e in self.pending.values() if req["other"] in (None, e["other"]) and e["answer"] is None]
             return {"questions": [{k: e[k] for k in ("question", "other", "kind", "text", "clips", "accepted")}
                                   for e in rows]}
 
-    @svc.handler("other_answer")
-    def other_answer(req):
-        with pending_guard:
-            e = pending.get(req["question"])
+    def other_answer(self, req):
+        with self.pending_guard:
+            e = self.pending.get(req["question"])
             if e is None or e["answer"] is not None:
-                raise NotFound(f"no pending question {req['question']!r} (answered, timed out or never asked)",
+                raise NotFound(f"no self.pending question {req['question']!r} (answered, timed out or never asked)",
                                question=req["question"])
-            _, other = store.other(e["other"])
+            _, other = self.store.other(e["other"])
             d = getattr(other, "d", 4)
             e["answer"] = parse_answer(req["answer"], e["kind"], d)
             e["event"].set()
             return {"question": req["question"], "answer": e["answer"]}
 
-    @svc.handler("other_reveal")
-    def other_reveal(req):
-        kind, other = store.other(req["other"])
+    def other_reveal(self, req):
+        kind, other = self.store.other(req["other"])
         r = other.reveal()
         return {"other": req["other"], "kind": kind, "asked": int(r.pop("asked")),
                 "params": {k: v for k, v in r.items() if k != "name"}}
 
     # ------------------------------------------------------------------ learners
-    @svc.handler("learner_create")
-    def learner_create(req):
+    def learner_create(self, req):
         target = clip_from_wire(req["target"])
         params = population(req["index"] + 1, req["population_seed"], req["family"], req["replicate"])[req["index"]]
         if req["params"]:
             merged = {**asdict(params), **{k: v for k, v in req["params"].items() if v is not None}}
             params = LearnerParams(**merged)
         learner = SimulatedLearner(req["learner"], target, params)
-        store.add_learner(req["learner"], learner, req["replace"])
+        self.store.add_learner(req["learner"], learner, req["replace"])
         return {"learner": req["learner"], "channels": learner.channels}
 
-    @svc.handler("learner_imitate")
-    def learner_imitate(req):
-        learner = store.learner(req["learner"])
+    def learner_imitate(self, req):
+        learner = self.store.learner(req["learner"])
         demo = clip_from_wire(req["demonstration"], learner.target.skeleton)
-        with lock_of(f"learner:{req['learner']}"):
+        with self.lock_of(f"learner:{req['learner']}"):
             attempts = learner.imitate(demo, req["adverb"])
-            store.save_learner(req["learner"])
+            self.store.save_learner(req["learner"])
             trial, felt = learner.trials, learner.felt
-        svc.publish("imitated", {"learner": req["learner"], "trial": trial})
+        self.publish("imitated", {"learner": req["learner"], "trial": trial})
         return {"learner": req["learner"], "trial": trial,
                 "attempts": [clip_to_wire(a, with_skeleton=False) for a in attempts],
                 **({"felt": felt} if felt is not None else {})}
 
-    @svc.handler("learner_reveal")
-    def learner_reveal(req):
-        r = store.learner(req["learner"]).reveal()
+    def learner_reveal(self, req):
+        r = self.store.learner(req["learner"]).reveal()
         return {"learner": req["learner"], "trials": int(r.pop("trials")), "error_deg": float(r.pop("error_deg")),
                 "params": {k: v for k, v in r.items() if k != "name"}}
 
-    @svc.handler("list")
-    def list_all(req):
-        with store.lock:
-            return {"others": [{"other": n, "kind": k} for n, (k, _) in sorted(store.others.items())],
-                    "learners": [{"learner": n, "trials": lr.trials} for n, lr in sorted(store.learners.items())]}
+    def list_all(self, req):
+        with self.store.lock:
+            return {"others": [{"other": n, "kind": k} for n, (k, _) in sorted(self.store.others.items())],
+                    "learners": [{"learner": n, "trials": lr.trials} for n, lr in sorted(self.store.learners.items())]}
 
-    @svc.handler("delete")
-    def delete(req):
-        return {"deleted": store.delete(req["other"], req["learner"])}
+    def delete(self, req):
+        return {"deleted": self.store.delete(req["other"], req["learner"])}
 
+
+    def handlers(self) -> dict:
+        """The verbs of the contract and the methods that answer them."""
+        return {"bodies": self.list_bodies, "perform": self.do_perform, "plant": self.do_plant,
+                "regressor": self.do_regressor, "other_create": self.other_create, "other_ask": self.other_ask,
+                "other_pending": self.other_pending, "other_answer": self.other_answer,
+                "other_reveal": self.other_reveal, "learner_create": self.learner_create,
+                "learner_imitate": self.learner_imitate, "learner_reveal": self.learner_reveal,
+                "list": self.list_all, "delete": self.delete}
+
+    def costs(self) -> dict:
+        """The verbs whose memory cost is estimated before they run, and their estimates."""
+        return {"perform": self.perform_cost, "other_ask": self.ask_cost, "plant": self.plant_cost}
+
+
+def make_service(settings: Settings | None = None) -> Service:
+    settings = settings or Settings()
+    store = AgentStore(settings.data_dir("simulator"))
+    svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
+    handlers = SimulatorHandlers(store, svc.publish)
+    for verb, handler in handlers.handlers().items():
+        svc.handler(verb)(handler)
+    for verb, cost in handlers.costs().items():
+        svc.cost(verb)(cost)
     svc.store = store
     svc.on_promote.append(store.reload)
     return svc

@@ -1,0 +1,80 @@
+"""Each service's verbs, one by one, without a service or a bus: the handler classes take a
+folder (or a store), a bus client factory and a publisher. Requests and replies go through the
+verbs' contracts, as the runtime sends them. Verbs that call other services are tested with
+real clusters in the contract and end-to-end tests; here the ones that answer on their own."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from schemas import coach as coach_contract
+from schemas import estimator as estimator_contract
+from schemas import simulator as simulator_contract
+from services.coach.service import CoachHandlers
+from services.estimator.service import EstimatorHandlers
+from services.simulator.service import SimulatorHandlers
+from shared.agents.store import AgentStore
+from shared.errors import BadInput, NotFound
+
+
+def _no_bus():
+    raise AssertionError("this verb must answer without asking another service")
+
+
+def _call(contract, handlers, verb: str, request: dict) -> dict:
+    endpoint = contract.ENDPOINTS[verb]
+    reply = handlers.handlers()[verb](endpoint.request.validate(request))
+    return endpoint.reply.validate(reply)
+
+
+def test_the_coach_fits_policies_and_keeps_sessions_without_a_bus(tmp_path):
+    published: list = []
+    coach = CoachHandlers(tmp_path, _no_bus, lambda *event: published.append(event))
+    assert set(coach.handlers()) == set(coach_contract.ENDPOINTS)
+    emu2 = _call(coach_contract, coach, "policy_fit", {"kind": "emu2", "sweep": {"l1": {"0": 9.0, "1": 4.0, "2": 6.0}}})
+    assert emu2["fit"]["per_learner"] == {"l1": 1.0} and emu2["policy"]["kind"] == "emu2"
+    dp = [float(x) for x in np.linspace(20, 200, 40)]
+    aeu = _call(coach_contract, coach, "policy_fit", {"kind": "aeu1", "trial_dp": dp})
+    assert aeu["policy"]["calibration"] == pytest.approx(aeu["fit"]["scale"]) and aeu["fit"]["scale"] > 0
+    with pytest.raises(BadInput, match="sweep"):
+        _call(coach_contract, coach, "policy_fit", {"kind": "emu2"})
+    assert _call(coach_contract, coach, "list", {})["sessions"] == []
+    with pytest.raises(NotFound, match="no coaching session 'nobody'"):
+        _call(coach_contract, coach, "state", {"session": "nobody"})
+    with pytest.raises(NotFound):
+        _call(coach_contract, coach, "delete", {"session": "nobody"})
+    with pytest.raises(BadInput, match="exactly one of target"):  # refused before the bus is asked
+        _call(coach_contract, coach, "start", {"session": "s1"})
+    assert published == [] and list(tmp_path.iterdir()) == []
+
+
+def test_the_estimator_answers_for_missing_estimates_without_a_bus(tmp_path):
+    est = EstimatorHandlers(tmp_path, _no_bus, lambda *event: None)
+    assert set(est.handlers()) == set(estimator_contract.ENDPOINTS)
+    assert _call(estimator_contract, est, "list", {})["estimates"] == []
+    for verb in ("info", "delete"):
+        with pytest.raises(NotFound, match="no estimate named 'nobody'"):
+            _call(estimator_contract, est, verb, {"estimate": "nobody"})
+
+
+def test_the_simulator_creates_asks_and_reveals_an_other_on_its_own(tmp_path):
+    published: list = []
+    sim = SimulatorHandlers(AgentStore(tmp_path), lambda *event: published.append(event))
+    assert set(sim.handlers()) == set(simulator_contract.ENDPOINTS)
+    assert set(sim.costs()) <= set(simulator_contract.ENDPOINTS)
+    assert _call(simulator_contract, sim, "bodies", {})["robots"]
+    _call(simulator_contract, sim, "other_create", {"other": "o1", "kind": "simulated", "params": {"mass": 4.8, "d": 4}})
+    assert _call(simulator_contract, sim, "list", {})["others"] == [{"other": "o1", "kind": "simulated"}]
+    from schemas.common import clip_to_wire
+    from shared.estimation.motions import basic_motions
+    from shared.estimation.symbols import WORDS
+
+    motion = basic_motions()[0]
+    answer = _call(simulator_contract, sim, "other_ask", {"other": "o1", "kind": "open", "clips": [clip_to_wire(motion)]})
+    assert answer["answer"] in WORDS[4]
+    assert published and published[-1][0] == "answered"
+    revealed = _call(simulator_contract, sim, "other_reveal", {"other": "o1"})
+    assert revealed["params"]["mass"] == 4.8
+    assert _call(simulator_contract, sim, "delete", {"other": "o1"})["deleted"] == "o1"
+    assert _call(simulator_contract, sim, "list", {})["others"] == []
