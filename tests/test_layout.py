@@ -124,3 +124,23 @@ def test_every_package_imports_only_its_layer_and_those_below():
     upward = sorted({(a, b) for m, targets in edges.items() for t in targets
                      if (a := _package(m)) != (b := _package(t)) and b != "shared" and layer[b] > layer[a]})
     assert upward == [], f"imports of a higher layer: {upward}"
+
+
+def test_the_pss_core_s_public_api_is_documented_and_costs_nothing_to_import():
+    """``shared.pss.__all__``: every name resolves; every function's docstring has numpydoc
+    Parameters and Returns; importing the package imports none of its modules."""
+    import inspect
+    import subprocess
+    import sys
+
+    import shared.pss as pss
+
+    for name in pss.__all__:
+        obj = getattr(pss, name)
+        assert obj.__doc__, name
+        if inspect.isfunction(obj):
+            assert "Parameters\n    ----------" in obj.__doc__ and "Returns\n    -------" in obj.__doc__, name
+    loaded = subprocess.run([sys.executable, "-c", "import sys, shared.pss; "
+                             "print(sorted(m for m in sys.modules if m.startswith('shared.pss.')))"],
+                            capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert loaded.returncode == 0 and loaded.stdout.strip() == "[]", loaded.stdout + loaded.stderr

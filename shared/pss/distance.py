@@ -68,7 +68,26 @@ def _check(a: LeftToRightHMM, b: LeftToRightHMM):
 
 
 def hmm_distance(a: LeftToRightHMM, b: LeftToRightHMM, weights=None) -> float:
-    """Eq. 2.4: ``sum_i sqrt(BD(b_1i, b_2i))`` (with channel ``weights``, see :func:`bhattacharyya`)."""
+    """Eq. 2.4: ``sum_i sqrt(BD(b_1i, b_2i))`` (with channel ``weights``, see :func:`bhattacharyya`).
+
+    Parameters
+    ----------
+    a, b : LeftToRightHMM
+        Two proto-symbols with as many states and features.
+    weights : array (n_features,), optional
+        Weights of the channels on the mean term of the Bhattacharyya distance.
+
+    Returns
+    -------
+    float
+        The sum over states of the square roots of the states' Bhattacharyya distances.
+
+    References
+    ----------
+    A. Bhattacharyya, "On a measure of divergence between two statistical populations defined by
+    their probability distributions", Bull. Calcutta Math. Soc. 35, 1943. T. Inamura, I. Toshima,
+    H. Tanie, Y. Nakamura, "Embodied symbol emergence based on mimesis theory", IJRR 23(4), 2004.
+    """
     _check(a, b)
     return float(np.sum(np.sqrt(bhattacharyya(a.means, a.covars, b.means, b.covars, weights))))
 
@@ -215,7 +234,17 @@ def distances_to(model: LeftToRightHMM, models: list[LeftToRightHMM] | ModelBank
 
 def distance_matrix(models: list[LeftToRightHMM] | ModelBank, weights=None) -> np.ndarray:
     """Symmetric matrix of eq. 2.4 distances (with channel ``weights``) with a zero diagonal,
-    between ``models`` or a bank's (with its own weights unless ``weights`` are given)."""
+    between ``models`` or a bank's (with its own weights unless ``weights`` are given).
+
+    Parameters
+    ----------
+    models : list of LeftToRightHMM or ModelBank
+    weights : array (n_features,), optional
+
+    Returns
+    -------
+    array (n, n)
+    """
     if isinstance(models, ModelBank):
         bank = models if weights is None else models.weighted(weights)
     else:

@@ -176,6 +176,21 @@ def fit_hmm(
     tol : float
         Convergence when the log-likelihood gain per frame is below ``tol``.
     backend : {"banded", "hmmlearn"}
+        Our banded Baum-Welch (numba), or hmmlearn's trainer with the same start, floor and
+        topology (the reference it is tested against).
+    end_in_last : bool
+        Whether every repetition must end in the last state.
+
+    Returns
+    -------
+    LeftToRightHMM
+        Means, covariances and staying probabilities, with the iterations, whether they
+        converged and the final log-likelihood.
+
+    References
+    ----------
+    L. R. Rabiner, "A tutorial on hidden Markov models and selected applications in speech
+    recognition", Proc. IEEE 77(2), 1989.
     """
     if covariance_type not in ("diag", "full"):
         raise ModelError(f"covariance_type must be 'diag' or 'full', got {covariance_type!r}")

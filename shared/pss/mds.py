@@ -79,7 +79,30 @@ def _valid_distances(f: np.ndarray) -> bool:
 
 
 def smacof(f: np.ndarray, dim: int, *, init: np.ndarray | None = None, max_iter: int = 3000, eps: float = 1e-9) -> Embedding:
-    """Metric MDS minimising ``sum (f_ij - d_ij)^2`` (the criterion of ch. 2.5)."""
+    """Metric MDS minimising ``sum (f_ij - d_ij)^2`` (the criterion of ch. 2.5).
+
+    Parameters
+    ----------
+    f : array (n, n)
+        Symmetric, non-negative distances with a zero diagonal (eq. 2.4 between proto-symbols).
+    dim : int
+        Dimension of the space.
+    init : array (n, dim), optional
+        The start (default: classical MDS).
+    max_iter, eps : int, float
+        Guttman iterations at most, and the relative decrease of stress that ends them.
+
+    Returns
+    -------
+    Embedding
+        The points, the raw stress, Kruskal's stress-1, the iterations and whether they converged.
+
+    References
+    ----------
+    J. de Leeuw, "Applications of convex analysis to multidimensional scaling", in Recent
+    Developments in Statistics, 1977 (SMACOF); I. Borg, P. Groenen, Modern Multidimensional
+    Scaling, 2nd ed., Springer, 2005.
+    """
     f = np.asarray(f, dtype=float)
     n = len(f)
     if f.shape != (n, n):
@@ -204,6 +227,19 @@ def place_point(points: np.ndarray, f: np.ndarray, *, max_iter: int = 50, eps: f
 
     Guttman majorisation for one free point, from several starts (the nearest proto-symbol,
     the inverse-distance centroid and their mirror images); returns the best point and its stress.
+
+    Parameters
+    ----------
+    points : array (n, dim)
+        The space's points, fixed.
+    f : array (n,)
+        The new motion's eq. 2.4 distances to each of them.
+
+    Returns
+    -------
+    point : array (dim,)
+    stress : float
+        ``sum_i (f_i - |x - x_i|)^2`` at the point.
     """
     points = np.asarray(points, float)
     f = np.asarray(f, float)

@@ -299,7 +299,25 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
     these" when any test says so: the eq. 2.4 distance in its class's spread; whether it is
     clearly nearer to one class than to the next (by the :class:`DiscriminantRatio` given the
     motion's :func:`hmm_features`, else by the eq. 2.4 ratio: spaces written before it and the
-    DTW peer); and, given a :class:`NoveltyModel` and the features, the model's margin."""
+    DTW peer); and, given a :class:`NoveltyModel` and the features, the model's margin.
+
+    Parameters
+    ----------
+    distances : array (n_proto_symbols,)
+        The motion's eq. 2.4 distances on the recognition group.
+    labels : list of str
+        The proto-symbols' classes.
+    cal : Calibration
+        The space's calibration across performers (:func:`calibrate`).
+    novelty_model, features, discriminant : optional
+        The fitted open-set tests and the motion's :func:`hmm_features` they read.
+
+    Returns
+    -------
+    Decision
+        ``label`` (``None``: "none of these"), ``nearest_label``, ``confidence``, ``novelty``
+        and each test's own novelty.
+    """
     dc = class_distances(np.asarray(distances, float), np.asarray(labels), cal.classes)
     p = softmax_confidence(dc, cal.temperature)
     order = np.argsort(dc)

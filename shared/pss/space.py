@@ -28,12 +28,12 @@ import numpy as np
 
 from shared.errors import BadInput, NotFound
 from shared.motion.clip import Clip
-from shared.pss import association, spacefile
-from shared.pss.distance import ModelBank, bank_parameters, distance_matrix, distances_to
+from shared.pss import association, growth, spacefile
+from shared.pss.distance import ModelBank, bank_parameters, distance_matrix
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
-from shared.pss.mds import Embedding, pair_squares, place_point, smacof
-from shared.pss.rows import appended, padded, spare
+from shared.pss.mds import Embedding, place_point, smacof
+from shared.pss.rows import spare
 from shared.pss.symbol import (  # the space's parts, named here too (its public API, __all__)
     FORMAT,
     GEOMETRY_GROUPS,
@@ -173,80 +173,7 @@ class ProtoSymbolSpace:
         space's channel weights as they are). Recognition's calibration, discriminant ratio and
         novelty model are fitted again, lazily, from the extended distances and HMMs.
         :meth:`rebuilt` re-embeds every point instead (eq. 2.5 from scratch)."""
-        if not clips:
-            raise BadInput("no clips to add")
-        names = {s.name for s in self.symbols}
-        symbols = list(self.symbols)
-        for c in clips:
-            c = c.resample(self.params.fps)
-            if c.name in names:
-                raise BadInput(f"space {self.name!r} already has a proto-symbol named {c.name!r}")
-            symbols.append(ProtoSymbol(c.name, c.label or c.name, self.abstract([c]), [c.name], [c.n_frames],
-                                       [performer(c)]))
-            names.add(c.name)
-        n, new = len(self.symbols), symbols[len(self.symbols):]
-        geo = self.features.group_indices(GEOMETRY_GROUPS)
-        f = padded(self.distances, len(symbols))
-        bank = self.bank_on(GEOMETRY_GROUPS)
-        for k, sym in enumerate(new):
-            row = np.r_[bank.distances(sym.hmm.marginal(geo)),
-                        [distances_to(sym.hmm.marginal(geo), [o.hmm.marginal(geo)])[0] for o in new[:k]]]
-            f[n + k, :n + k] = f[:n + k, n + k] = row
-        points = np.empty((len(symbols), self.points.shape[1]))
-        points[:n] = self.points
-        # the stress and sum f_ij^2 of the pairs (i < j) grow by the new points' pairs alone: the
-        # other points do not move (the old sum f_ij^2 is the old stress over its stress-1 squared)
-        stress = float(self.embedding.stress)
-        total = stress / self.embedding.stress1 ** 2 if self.embedding.stress1 > 0 else pair_squares(self.distances)
-        for k in range(len(new)):
-            row = f[n + k, :n + k]
-            points[n + k], _ = place_point(points[:n + k], row)
-            stress += float(np.sum((row - np.linalg.norm(points[:n + k] - points[n + k], axis=1)) ** 2))
-            total += float(np.sum(row * row))
-        emb = Embedding(points, stress, float(np.sqrt(stress / max(total, 1e-300))),
-                        self.embedding.n_iter, self.embedding.converged)
-        space = ProtoSymbolSpace(self.params, self.features, symbols, f, emb, name=self.name)
-        space.format, space.generation = self.format, self.generation  # a journal entry names its saved base
-        space.base_count = self.base_count
-        if self.recognition_groups != GEOMETRY_GROUPS:
-            space._recognition_weights = self.recognition_weights
-            self.recognition_bank()  # built here once, then carried (and extended) to every space added to this one
-        self._carry_caches(space, n)
-        if self.recognition_groups != GEOMETRY_GROUPS:
-            w = self.recognition_weights
-            rec = space.recognition_models()
-            m = padded(self.recognition_matrix, len(symbols))
-            known = self.recognition_bank()
-            for k in range(len(new)):
-                row = np.r_[known.distances(rec[n + k]),
-                            ModelBank(rec[n:n + k], w).distances(rec[n + k]) if k else []]
-                m[n + k, :n + k] = m[:n + k, n + k] = row
-            space._recognition_matrix = m
-        return space
-
-    def _carry_caches(self, space: ProtoSymbolSpace, n: int) -> None:
-        """Give ``space`` (this space with proto-symbols added after the first ``n``) this
-        space's per-group models, banks and symbol features, extended by the new proto-symbols
-        only: recomputing them for every proto-symbol cost an add to a 3,000-clip space 0.7 s."""
-        new = space.symbols[n:]
-        for key, value in self._group_models.items():
-            if not isinstance(value, ModelBank) or key[0] == "weighted bank":
-                continue
-            idx = self.features.group_indices(key[1:])
-            more = [m.hmm if len(idx) == self.features.n_features else m.hmm.marginal(idx) for m in new]
-            if key[0] == "recognition":
-                more = [space.as_recognised(m) for m in more]
-            space._group_models[key] = value.extended(more)
-        rg = tuple(self.recognition_groups)
-        stack = space._group_models.get(("recognition",) + rg)
-        weighted = self._group_models.get(("weighted bank",) + rg)
-        if stack is not None and weighted is not None:  # the same arrays as the stack, as in this space
-            space._group_models[("weighted bank",) + rg] = stack.weighted(weighted.weights)
-        feats = self._group_models.get(("symbol features",))
-        if feats is not None and stack is not None:
-            from shared.pss.recognition import hmm_features
-
-            space._group_models[("symbol features",)] = appended(feats, hmm_features(*bank_parameters(stack, n)))
+        return growth.added(self, clips)
 
     def rebuilt(self, add: list[Clip] | None = None, remove: list[str] | None = None,
                 as_one: str | None = None) -> ProtoSymbolSpace:
@@ -471,7 +398,21 @@ class ProtoSymbolSpace:
         trial) into an HMM, measure eq. 2.4 to every proto-symbol, decide its label (nearest
         proto-symbol on the recognition group, calibrated confidence, "none of these" when it
         is farther than the space's known motions; :mod:`shared.pss.recognition`) and place it
-        without moving the space's points."""
+        without moving the space's points.
+
+        Parameters
+        ----------
+        clip_or_clips : Clip or list of Clip
+            One motion, or the repetitions of one trial (abstracted into one HMM together).
+        top : int
+            How many nearest proto-symbols the result lists.
+
+        Returns
+        -------
+        Recognition
+            ``label`` (``None``: "none of these"), ``confidence``, ``novelty``, the ``point`` in
+            the space and its ``stress``, the ``nearest`` proto-symbols and the decision's tests.
+        """
         t0 = time.perf_counter()
         hmm = self.abstract(clip_or_clips)
         geo = self.features.group_indices(GEOMETRY_GROUPS)
@@ -529,7 +470,27 @@ class ProtoSymbolSpace:
 
     def generate(self, point=None, *, weights=None, method: str = "expected", n_frames: int | None = None,
                  seed: int = 0, name: str = "generated") -> Clip:
-        """``M = F_gen(x)`` (eq. 2.7 / 4.1) from a point or from explicit proto-symbol weights."""
+        """``M = F_gen(x)`` (eq. 2.7 / 4.1) from a point or from explicit proto-symbol weights.
+
+        Parameters
+        ----------
+        point : array (dim,), optional
+            A point of the space; its proto-symbol weights come from :meth:`weights`.
+        weights : array (n_proto_symbols,), optional
+            The weights of eq. 4.2 themselves (summing to 1; they may be negative: emphasis).
+            Exactly one of ``point`` and ``weights``.
+        method : {"expected", "monte_carlo"}
+            The expected output trajectory (deterministic) or the mean of sampled paths.
+        n_frames : int, optional
+            Frames of the result (default: the synthesised HMM's expected duration).
+        seed : int
+            The seed of the Monte Carlo paths.
+
+        Returns
+        -------
+        Clip
+            The motion decoded at the space's frame rate, on the space's skeleton.
+        """
         if (point is None) == (weights is None):
             raise BadInput("give either a point or weights")
         c = self.weights(point) if weights is None else np.asarray(weights, float)
@@ -540,7 +501,20 @@ class ProtoSymbolSpace:
         return self.features.decode(x, self.params.fps, name=name)
 
     def emphatic_weights(self, target: str, attempt: str, alpha: float) -> np.ndarray:
-        """Weights of the emphatic point ``x_s = x_t + alpha (x_t - x_p)`` (eq. 4.3)."""
+        """Weights of the emphatic point ``x_s = x_t + alpha (x_t - x_p)`` (eq. 4.3).
+
+        Parameters
+        ----------
+        target, attempt : str
+            Names (or labels) of the target's and the learner's attempt's proto-symbols.
+        alpha : float
+            The emphasis: 0 shows the target, larger pushes it further from the attempt.
+
+        Returns
+        -------
+        array (n_proto_symbols,)
+            ``1 + alpha`` on the target, ``-alpha`` on the attempt, 0 elsewhere (for :meth:`generate`).
+        """
         c = np.zeros(len(self.symbols))
         c[self.symbol(target)] += 1.0 + alpha
         c[self.symbol(attempt)] -= alpha

@@ -36,7 +36,28 @@ from shared.pss.hmm import LeftToRightHMM
 
 def point_weights(points: np.ndarray, x: np.ndarray, *, method: str = "affine", k: int | None = None,
                   reg: float = 1.0) -> np.ndarray:
-    """Weights ``c`` (summing to 1) with ``sum_i c_i x_i ~ x`` (eq. 4.2's ``beta x_i + gamma x_j``)."""
+    """Weights ``c`` (summing to 1) with ``sum_i c_i x_i ~ x`` (eq. 4.2's ``beta x_i + gamma x_j``).
+
+    Parameters
+    ----------
+    points : array (n, dim)
+        The proto-symbols' points.
+    x : array (dim,)
+        The point to reproduce.
+    method : {"affine", "inverse_distance"}
+        Exact reproduction with the locality-weighted smallest norm (weights may be negative:
+        extrapolation), or convex weights ``(d_min / d_i)^4`` (the point stays among the known
+        patterns).
+    k : int, optional
+        Only the ``k`` nearest proto-symbols take part (affine).
+    reg : float
+        Ridge on the affine system, relative to its trace.
+
+    Returns
+    -------
+    array (n,)
+        The weights; all on one proto-symbol when ``x`` is on its point.
+    """
     points = np.asarray(points, float)
     x = np.asarray(x, float).ravel()
     n, dim = points.shape
@@ -81,7 +102,25 @@ def _spd_exp(c: np.ndarray) -> np.ndarray:
 
 
 def combine(models: list[LeftToRightHMM], weights, *, variance_rule: str = "log", var_floor: float = 1e-6) -> LeftToRightHMM:
-    """Synthesise the HMM of a weighted combination of proto-symbols (ch. 4.3.1, eq. 4.2)."""
+    """Synthesise the HMM of a weighted combination of proto-symbols (ch. 4.3.1, eq. 4.2).
+
+    Parameters
+    ----------
+    models : list of LeftToRightHMM
+        Proto-symbols with as many states and features.
+    weights : array (len(models),)
+        Weights summing to 1; negative weights extrapolate (an emphatic motion, eq. 4.3).
+    variance_rule : {"log", "mimesis"}
+        How variances combine: weighted in the log domain (matrix log for full covariances:
+        stays positive definite under negative weights), or by the squared weights (the sum of
+        independent weighted outputs); floored at ``var_floor`` either way.
+
+    Returns
+    -------
+    LeftToRightHMM
+        Means and variances combined state by state; staying probabilities from the weighted
+        expected durations of the states.
+    """
     c = np.asarray(weights, float)
     if len(models) != len(c):
         raise BadInput("one weight per proto-symbol is needed")
@@ -182,7 +221,24 @@ def monte_carlo_trajectory(model: LeftToRightHMM, n_frames: int | None = None, *
 
 def generate(model: LeftToRightHMM, n_frames: int | None = None, *, method: str = "expected", seed: int = 0,
              n_paths: int = 10, n_outputs: int = 30) -> np.ndarray:
-    """Feature frames generated from a proto-symbol (eq. 2.7 / 4.1)."""
+    """Feature frames generated from a proto-symbol (eq. 2.7 / 4.1).
+
+    Parameters
+    ----------
+    model : LeftToRightHMM
+        A proto-symbol, or one synthesised by :func:`combine`.
+    n_frames : int, optional
+        Frames of the result (default: the model's expected duration).
+    method : {"expected", "monte_carlo"}
+        Each state's mean held for its expected duration, or the mean of ``n_paths`` sampled
+        state paths with ``n_outputs`` outputs each.
+    seed : int
+        The seed of the sampled paths.
+
+    Returns
+    -------
+    array (n_frames, n_features)
+    """
     if n_frames is not None and n_frames < 2:
         raise BadInput("a generated motion needs at least 2 frames")
     if method == "expected":
