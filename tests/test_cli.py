@@ -184,7 +184,7 @@ def test_schemas_prints_every_contract():
 
 
 def test_the_dashboard_opens_the_viewer_on_loopback_only(tmp_path):
-    """Issue 15: `make dashboard` started the viewer listening on 0.0.0.0:9876. The viewer cannot
+    """`make dashboard` started the viewer listening on 0.0.0.0:9876. The viewer cannot
     start on this machine without a GPU or Mesa's Vulkan driver, so a `rerun` on PATH records the
     command line the CLI gives it (analytics first, then the recording)."""
     import os

@@ -191,7 +191,7 @@ def _npz_variant(src, dst, meta_change=None, data=None):
     ("skeleton_broken", lambda m: dict(m, skeleton={"joints": "x"}), None, "unreadable skeleton"),
 ])
 def test_npz_with_an_odd_header_is_a_clear_error(bundled, tmp_path, name, change, data, words):
-    """Issue 17, row 13: odd NPZ headers were tracebacks."""
+    """Odd NPZ headers were tracebacks."""
     save_clip(load_clip(next(iter(find_clips([bundled / "amc"])))), tmp_path / "ok.npz")
     f = _npz_variant(tmp_path / "ok.npz", tmp_path / f"{name}.npz", change, data)
     with pytest.raises(ClipFormatError) as err:
@@ -214,7 +214,7 @@ def test_npz_zip_bomb_is_refused_before_it_is_inflated(tmp_path, monkeypatch):
 
 
 def test_a_bvh_nested_deeper_than_any_body_is_a_clear_error(tmp_path):
-    """Issue 17, row 13: 10,000 nested joints were a RecursionError."""
+    """10,000 nested joints were a RecursionError."""
     n = 10_000
     lines = ["HIERARCHY", "ROOT hip", "{", "OFFSET 0 0 0", "CHANNELS 3 Xposition Yposition Zposition"]
     for i in range(n):

@@ -272,7 +272,7 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
     assert r.returncode != 0 and "unknown population kind 'giants'" in r.stdout + r.stderr and "Traceback" not in r.stderr
     # the kinds outside the estimators' model are left out (two thirds of the run: their rule identification;
     # the section runs the same code as the in-model kinds', and test_uneven.py tests the kinds themselves)
-    r = cli(env, "reproduce", "ch3", "--out", tmp_path / "rep", "--sets", "1", "--others", "1", "--kinds", "mass,joints",
+    r = cli(env, "reproduce", "ch3", "--out", tmp_path / "rep", "--sets", "1", "--others", "1", "--kinds", "mass",
             "--no-outside", timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     report = (tmp_path / "rep/ch3/report.md").read_text()
@@ -281,7 +281,7 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
     assert "simulated agents" in report and "| 6 |" in report
     # the same seed again on the same (now used) cluster: the same numbers, bit for bit
     r = cli(env, "reproduce", "ch3", "--out", tmp_path / "again", "--sets", "1", "--others", "1", "--kinds",
-            "mass,joints", "--no-outside", timeout=600)
+            "mass", "--no-outside", timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     assert (tmp_path / "again/ch3/results.json").read_bytes() == (tmp_path / "rep/ch3/results.json").read_bytes()
     assert sorted(json.loads((tmp_path / "rep/ch3/results.json").read_text())) == [
@@ -367,7 +367,7 @@ def test_the_dashboard_recording_holds_what_the_cluster_did(cluster, bundled, tm
 
 
 def test_up_fails_fast_and_names_the_cause_when_the_router_port_is_taken(tmp_path):
-    """Issue 17, row 15: a foreign program on the router's port made `up` wait its whole timeout
+    """A foreign program on the router's port made `up` wait its whole timeout
     and then blame the services."""
     import socket
 
@@ -436,7 +436,7 @@ def test_the_supervisor_owns_its_children(tmp_path):
 
 
 def test_a_reused_pid_is_never_taken_for_the_supervisor(tmp_path):
-    """Issue 17, row 8: another process's pid in the pid file made `up` refuse for 120 s and
+    """Another process's pid in the pid file made `up` refuse for 120 s and
     `down` signal that unrelated process."""
     env = cluster_env(tmp_path / "home")
     run = tmp_path / "home/run"
@@ -520,7 +520,7 @@ def test_a_long_request_is_waited_for_and_a_frozen_service_noticed(cluster, dev_
 
 @pytest.mark.slow
 def test_no_answer_names_its_cause(tmp_path):
-    """Issue 17, row 12: "service X is not running (start it with `make up`)" came also when
+    """The message "service X is not running (start it with `make up`)" came also when
     the router died, the service was frozen or restarting."""
     from shared.bus.client import Client, Unavailable
 
@@ -658,7 +658,7 @@ def test_sigkill_during_a_build_leaves_other_spaces_intact(cluster, dev_split, b
 
 @pytest.mark.slow
 def test_a_study_with_scripted_participants_and_a_coach_seat(cluster, bundled, tmp_path):
-    """Issue 14: `mirrorcoach study` runs fig. 4.3 / Table 4.2 with people's own attempts
+    """`mirrorcoach study` runs fig. 4.3 / Table 4.2 with people's own attempts
     (here: scripted participants sending real HDM05 squats), counterbalanced and seeded, keeps a
     trial whose log line a kill lost, and exports the tidy table the report reads."""
     from shared.reproduce.tidy import matrix, read

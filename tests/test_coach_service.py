@@ -143,7 +143,7 @@ def test_killing_the_coach_mid_session_loses_no_completed_trial(coach_services, 
 
 
 def test_sessions_never_take_what_is_anothers(coach_services, client_of, clips):
-    """Issue 17, row 6: a second session with the same learner name reset the first one's
+    """A second session with the same learner name reset the first one's
     learner, and `coach start --session mine` replaced the user's own space `coach-mine`."""
     from shared.bus.client import RemoteError
 

@@ -1,4 +1,4 @@
-"""Issue 15: the `make demo` recording opened in the real rerun viewer, headless (Mesa's Vulkan
+"""The `make demo` recording opened in the real rerun viewer, headless (Mesa's Vulkan
 driver; `shared.observe.viewer`), and live streaming of two sessions at once. Skipped, saying
 why, where the viewer cannot run; a failure under CI, which installs the driver."""
 

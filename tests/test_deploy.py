@@ -1,4 +1,4 @@
-"""Issue 16: a cluster across hosts, secured. Real routers and services with TLS and Zenoh's
+"""A cluster across hosts, secured. Real routers and services with TLS and Zenoh's
 access control; first on loopback, then on three "hosts" in network namespaces this test makes
 (``ip netns``, veth, a bridge, 10.213.0.0/24), torn down at the end."""
 

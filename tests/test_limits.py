@@ -1,4 +1,4 @@
-"""Issue 17 on real processes: a full disk (row 9) and time limits.
+"""On real processes: a full disk and time limits.
 
 For the full disk the cluster's home is a 40 MiB tmpfs the test mounts (skipped, saying why,
 where it cannot mount one); the disk is filled by a plain file."""
@@ -162,7 +162,7 @@ def test_a_line_the_full_disk_cut_is_taken_back(small_disk):
 
 
 def test_a_request_past_its_time_limit_stops_and_changes_nothing(tmp_path, bundled, client_of):
-    """Issue 17: time limits. A build of 12 clips under a 1 ms limit (its clips alone take longer to read) stops before its next HMM
+    """Time limits. A build of 12 clips under a 1 ms limit (its clips alone take longer to read) stops before its next HMM
     (``unavailable``, cause ``time_limit``), writes nothing, and the service answers the next
     request at once."""
     from shared.bus.client import RemoteError

@@ -302,7 +302,7 @@ def _shm_maps(pid: int) -> list[str]:
 
 
 def test_concurrent_clients_leave_nothing_in_shared_memory(pss_service, clips, built):
-    """Issue 17, row 10: Zenoh's shared memory was on by default, and every client session that
+    """Zenoh's shared memory was on by default, and every client session that
     sent more than 3 KB left a pool in /dev/shm (7.4 GB after two bursts of 200 clients)."""
     import os
     from concurrent.futures import ThreadPoolExecutor
@@ -327,7 +327,7 @@ def test_concurrent_clients_leave_nothing_in_shared_memory(pss_service, clips, b
 
 @pytest.mark.slow
 def test_an_oversize_request_is_dropped_before_it_is_read_whole(pss_service, built):
-    """Issue 17, row 11: a 600 MiB request was reassembled whole by the router (1.1 GB kept) and
+    """A 600 MiB request was reassembled whole by the router (1.1 GB kept) and
     the service (1.66 GB) before the 64 MiB limit applied. Now Zenoh's message ceiling is the
     payload limit plus 1 MiB: the router drops the rest, and our client refuses to send it."""
     from shared.bus.client import Client, Unavailable
@@ -355,7 +355,7 @@ def test_an_oversize_request_is_dropped_before_it_is_read_whole(pss_service, bui
 
 @pytest.mark.slow
 def test_a_saturated_service_answers_unavailable_at_once(tmp_path_factory, dev_split):
-    """Issue 17, row 1: requests queued without bound behind long work. With one worker and two
+    """Requests queued without bound behind long work. With one worker and two
     places in the queue, a long build holds the worker: two requests wait, the rest are told
     `unavailable` (cause `saturated`) while the build still runs, and the waiting two are
     answered."""

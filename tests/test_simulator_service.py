@@ -122,7 +122,7 @@ def test_a_person_answers_in_the_others_seat(simulator_service, client_of):
 
 
 def test_questions_to_people_never_hold_the_workers(simulator_service, client_of):
-    """Issue 17, row 3: four questions to a person-other held every simulator worker, and `list`
+    """Four questions to a person-other held every simulator worker, and `list`
     waited 14-29 s. Six questions (more than the four workers) wait for their person while
     every other verb answers; then the person answers them all."""
     from concurrent.futures import ThreadPoolExecutor

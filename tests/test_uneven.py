@@ -1,4 +1,4 @@
-"""Issue 13: others whose bodies really differ, the body estimator, rule identification on the
+"""Others whose bodies really differ, the body estimator, rule identification on the
 estimated body, and the chapter-3 report's computed words."""
 
 from __future__ import annotations

@@ -21,7 +21,8 @@ Entities and timelines (each kind of data on the timelines where it belongs):
   line per trial (adverb, alpha shown and chosen, why it was lowered, d_p, R, d_cop), on
   ``trial`` and at the start of the trial's ``playback`` block;
 * ``sessions/<s>/space``: the session's space (``coach-<s>``): its proto-symbols, the attempts
-  ``x_p`` as a numbered path, the emphatic points ``x_s`` and the target ``x_t``;
+  ``x_p`` as a path, the emphatic points ``x_s``, the target ``x_t``, and the playing trial's
+  two labelled (``now``);
 * ``spaces/<space>``: any other space, coloured by class, one label per class;
 * ``estimates/<e>/{k_other,k_self,symbol_error,scale}`` per conversation set (timeline ``set``),
   ``estimates/<e>/transcript`` with each line on the set it belongs to, ``estimates/<e>/space``;
@@ -70,8 +71,8 @@ step. `trial` shows the last frame of each trial; `set` is the estimator's conve
 
 **A session's tab.** Left: the three people side by side (blue target, orange attempt, red
 emphatic motion; yellow joints are the left side, cyan the right), the same overlaid, and joint
-angles. Right: the session's proto-symbol space (the attempts' numbered path, the emphatic
-points `s1, s2, ...`), `d_p` (distance to the target), `R` (d_p over the first trial's) and
+angles. Right: the session's proto-symbol space (the attempts' path and the emphatic points,
+the playing trial's labelled), `d_p` (distance to the target), `R` (d_p over the first trial's) and
 alpha, and the coach's words per trial with the reason alpha was lowered.
 
 **Estimates** (switch the timeline to `set`): the other's felt symbol against the self's
@@ -433,10 +434,13 @@ class Dashboard:
         self.rec.log(f"{base}/target", rr.Points3D([_xyz(ev["x_t"])], labels=["target"], radii=[0.0],
                                                    colors=[COLOURS["target"]], show_labels=True))
         self.rec.log(f"{base}/path", rr.LineStrips3D([path], colors=[COLOURS["attempt"]]))
-        self.rec.log(f"{base}/attempts", rr.Points3D(path, labels=[str(i + 1) for i in range(len(path))],
-                                                     colors=[COLOURS["attempt"]], show_labels=True))
-        self.rec.log(f"{base}/emphatic", rr.Points3D(emph, labels=[f"s{i + 1}" for i in range(len(emph))],
-                                                     colors=[COLOURS["emphatic"]], show_labels=True))
+        # every trial's points drawn, only this trial's labelled (the labels of all of them piled up
+        # into one blob where the attempts converge): which trial is playing reads off the space
+        self.rec.log(f"{base}/attempts", rr.Points3D(path, colors=[COLOURS["attempt"]], show_labels=False))
+        self.rec.log(f"{base}/emphatic", rr.Points3D(emph, colors=[COLOURS["emphatic"]], show_labels=False))
+        self.rec.log(f"{base}/now", rr.Points3D([path[-1], emph[-1]], labels=[f"attempt {n}", f"shown after {n}"],
+                                                colors=[COLOURS["attempt"], COLOURS["emphatic"]], radii=[0.0],
+                                                show_labels=True))
         self._people(s, "target", self.poses.get(s), n)
         for role, clip in (("attempt", attempt), ("emphatic", emphatic)):
             if clip is not None:  # drawn with the target's skeleton when it came without one
