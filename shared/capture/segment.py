@@ -293,7 +293,7 @@ def _aligned(a: np.ndarray, b: np.ndarray, s: int, e: int, slack: int, floor: fl
     acc, start = subsequence_dtw(cost)
     norm = np.where(np.isfinite(acc), acc / (n + np.arange(hi - lo) - start + 1), np.inf)
     if several:
-        return [(lo + int(start[j]), lo + j + 1) for j in np.flatnonzero(np.isfinite(norm))]
+        return [(lo + int(start[j]), lo + int(j) + 1) for j in np.flatnonzero(np.isfinite(norm))]
     ends = np.arange(hi - lo)
     ok = np.isfinite(norm) & (ends >= e - slack - lo - 1)
     if not ok.any():
