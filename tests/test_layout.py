@@ -6,6 +6,7 @@ longer than a reader takes in at once."""
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -86,7 +87,7 @@ def test_the_graph_finds_a_circle_and_a_private_import(tmp_path, monkeypatch):
     (pkg / "b.py").write_text("from shared.a import f as _f\nfrom shared.a import _hidden\n")
     (pkg / "c.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from shared.d import T\n")
     (pkg / "d.py").write_text("from shared.c import g\n")
-    monkeypatch.setattr(__import__(__name__), "REPO", tmp_path)
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
     edges, private = _imports(_modules())
     assert _circles(edges) == [["shared.a", "shared.b"]]
     assert private == [("shared.b", "shared.a", "_hidden")]
@@ -105,7 +106,7 @@ def test_no_module_is_longer_than_a_reader_takes_in():
 
 #: the library's layers, lowest first (shared/__init__.py says what each owns); a package may
 #: import its own layer and the layers below it, never one above
-LAYERS = (("shared.errors", "shared.deadline", "shared.compiled"), ("shared.motion",), ("shared.io",),
+LAYERS = (("shared.errors", "shared.deadline", "shared.compiled", "shared.extras"), ("shared.motion",), ("shared.io",),
           ("shared.bodies",), ("shared.pss",), ("shared.estimation",), ("shared.coaching",), ("shared.agents",),
           ("shared.capture", "shared.observe"), ("shared.bus", "schemas"), ("shared.reproduce",), ("shared.reports",),
           ("shared.cli", "shared.demo", "services"))
@@ -131,7 +132,6 @@ def test_the_pss_core_s_public_api_is_documented_and_costs_nothing_to_import():
     Parameters and Returns; importing the package imports none of its modules."""
     import inspect
     import subprocess
-    import sys
 
     import shared.pss as pss
 

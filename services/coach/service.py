@@ -339,9 +339,7 @@ def make_service(settings: Settings | None = None) -> Service:
     root = settings.data_dir("coach")
     root.mkdir(parents=True, exist_ok=True)
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
-    for verb, handler in CoachHandlers(root, svc.client, svc.publish).handlers().items():
-        svc.handler(verb)(handler)
-    return svc
+    return svc.serve(CoachHandlers(root, svc.client, svc.publish).handlers())
 
 
 class _Renamed:

@@ -402,7 +402,5 @@ def make_service(settings: Settings | None = None) -> Service:
     root = settings.data_dir("estimator")
     root.mkdir(parents=True, exist_ok=True)
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
-    for verb, handler in EstimatorHandlers(root, svc.client, svc.publish).handlers().items():
-        svc.handler(verb)(handler)
-    return svc
+    return svc.serve(EstimatorHandlers(root, svc.client, svc.publish).handlers())
 

@@ -66,7 +66,8 @@ INVERSE_DYNAMICS_BYTES = 14
 
 class SimulatorHandlers:
     """The simulator service's verbs, one method each: :func:`make_service` registers :meth:`handlers`
-    on a :class:`~shared.bus.runtime.Service`; without one (tests), give it an agent store and a publisher."""
+    and :meth:`costs` on a :class:`~shared.bus.runtime.Service`; without one (tests), give it an
+    agent store and a publisher."""
 
     def __init__(self, store: AgentStore, publish) -> None:
         self.store, self.publish = store, publish
@@ -236,10 +237,7 @@ def make_service(settings: Settings | None = None) -> Service:
     store = AgentStore(settings.data_dir("simulator"))
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
     handlers = SimulatorHandlers(store, svc.publish)
-    for verb, handler in handlers.handlers().items():
-        svc.handler(verb)(handler)
-    for verb, cost in handlers.costs().items():
-        svc.cost(verb)(cost)
+    svc.serve(handlers.handlers(), handlers.costs())
     svc.store = store
     svc.on_promote.append(store.reload)
     return svc

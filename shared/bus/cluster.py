@@ -46,6 +46,7 @@ from shared.bus.pidfiles import (
     write_pid,
 )
 from shared.errors import MirrorcoachError
+from shared.extras import missing
 
 PLAN = Path(__file__).resolve().with_name("cluster.toml")  # package data: the plan travels with the wheel
 log = logging.getLogger("mirrorcoach.supervisor")
@@ -72,25 +73,23 @@ def _read_plan(path: Path) -> dict:
     return d
 
 
-def _installed(module: str | None) -> bool:
-    import importlib.util
-
-    return module is None or importlib.util.find_spec(module) is not None
+def plan_with_left_out(path: Path = PLAN) -> tuple[list[Proc], list[str]]:
+    """Router first, then the services of ``shared/bus/cluster.toml`` whose optional dependency
+    (``needs``) is installed; and, for each one left out, why (:mod:`shared.extras`)."""
+    d = _read_plan(path)
+    procs, left = [Proc("router", d.get("router", {}).get("module", "shared.bus.router"))], []
+    for s in d.get("service", []):
+        why = missing(s["needs"]) if s.get("needs") else None
+        if why is None:
+            procs.append(Proc(str(s["name"]), str(s["module"])))
+        else:
+            left.append(f"{s['name']} is not started: {why}")
+    return procs, left
 
 
 def load_plan(path: Path = PLAN) -> list[Proc]:
-    """Router first, then the services of ``shared/bus/cluster.toml`` whose optional dependency
-    (``needs``) is installed (:func:`left_out` names the others)."""
-    d = _read_plan(path)
-    procs = [Proc("router", d.get("router", {}).get("module", "shared.bus.router"))]
-    procs += [Proc(str(s["name"]), str(s["module"])) for s in d.get("service", []) if _installed(s.get("needs"))]
-    return procs
-
-
-def left_out(path: Path = PLAN) -> list[str]:
-    """Why services of the plan are not started: their optional dependency is not installed."""
-    return [f"{s['name']} is not started: it needs {s['needs']} (pip install 'mirrorcoach[{s.get('extra', s['needs'])}]')"
-            for s in _read_plan(path).get("service", []) if not _installed(s.get("needs"))]
+    """The processes :func:`plan_with_left_out` starts."""
+    return plan_with_left_out(path)[0]
 
 
 def reap_orphans(s: Settings, plan: list[Proc], echo=print, grace_s: float = 15.0) -> None:
@@ -238,7 +237,7 @@ def status(settings: Settings | None = None) -> list[dict]:
 def private_home(s: Settings) -> None:
     """The cluster's home (spaces, transcripts, clips, logs, recordings) is its user's alone:
     the folder 0700, and every process of the cluster creates files 0600 (umask 077, set in the
-    supervisor, inherited by every service). Issue 17, row 16: they were 0644 in 0755 folders."""
+    supervisor, inherited by every service); they were 0644 in 0755 folders."""
     s.home.mkdir(parents=True, exist_ok=True)
     s.home.chmod(0o700)
     for d in (s.run_dir, s.log_dir):
@@ -284,8 +283,8 @@ def up(settings: Settings | None = None, wait_s: float = 60.0, echo=print) -> in
         echo(f"error: MIRRORCOACH_DEPLOY is set ({s.deploy}): a deployed cluster runs each process on its host "
              f"(deploy/README.md: systemd units or compose); `up` starts the loopback cluster only")
         return 2
-    plan = load_plan()
-    for why in left_out():
+    plan, left = plan_with_left_out()
+    for why in left:
         echo(f"note: {why}")
     private_home(s)
     proc = None

@@ -156,6 +156,16 @@ class Service:
         ``PAYLOAD_FACTOR`` times its payload (the estimate of every other verb)."""
         return self._declare(self.costs, verb)
 
+    def serve(self, handlers: dict[str, Callable[[dict], dict]],
+              costs: dict[str, Callable[[dict], float]] | None = None) -> Service:
+        """Register ``handlers`` (verb -> handler, as :meth:`handler` does) and ``costs``
+        (verb -> estimate, as :meth:`cost` does) at once: a service whose verbs are methods."""
+        for verb, handle in handlers.items():
+            self.handler(verb)(handle)
+        for verb, estimate in (costs or {}).items():
+            self.cost(verb)(estimate)
+        return self
+
     # ------------------------------------------------------------------ life cycle
     def start(self) -> Service:
         import zenoh

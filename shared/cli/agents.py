@@ -371,7 +371,7 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
     """Rerun the thesis's experiments on the cluster (simulated agents) and write reports with plots."""
     from shared.bus.client import Client
 
-    need("matplotlib", "reports", "reproduce (its plots)")
+    need("matplotlib", "reproduce (its plots at the end of the run)")
     from shared.bus.cluster import down, running, up
     from shared.bus.config import Settings
 

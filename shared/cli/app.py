@@ -247,6 +247,13 @@ def main() -> None:
     except MirrorcoachError as e:
         typer.echo(f"error: {e.message}", err=True)
         sys.exit(2)
+    except ModuleNotFoundError as e:  # an optional part not installed: say which extra, not a traceback
+        from shared.extras import hint_for
+
+        if hint_for(e) is None:
+            raise
+        typer.echo(f"error: {hint_for(e)}", err=True)
+        sys.exit(2)
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
         sys.exit(130)

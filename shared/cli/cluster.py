@@ -20,7 +20,6 @@ from shared.cli.common import (
     fail,
     jsonable,
     load_clips,
-    need,
     parse_mix,
     parse_point,
     read_clip,
@@ -305,7 +304,6 @@ def dashboard(recording: Path | None = typer.Argument(None, help="A .rrd file (d
 
     from shared.bus.config import Settings
 
-    need("rerun", "dashboard", "the dashboard")
     path = recording or (Settings().home / "recordings" / "latest.rrd")
     if not path.exists():
         fail(f"no recording at {path}: run `make demo` (or `make up` and use the cluster) first")

@@ -46,12 +46,14 @@ def read_clip(path, skeleton=None, label: str | None = None):
     return load_clip(path, skeleton=skeleton, label=label, **READING)
 
 
-def need(module: str, extra: str, what: str) -> None:
-    """Fail with one line when an optional dependency is not installed (the extras of pyproject.toml)."""
-    import importlib.util
+def need(module: str, what: str) -> None:
+    """Fail with one line before long work when an optional dependency it ends with is missing
+    (any other command gets the same line from :func:`shared.cli.app.main` when the import fails)."""
+    from shared.extras import missing
 
-    if importlib.util.find_spec(module) is None:
-        fail(f"{what} needs {module}, which is not installed: pip install 'mirrorcoach[{extra}]'")
+    why = missing(module)
+    if why is not None:
+        fail(f"{what} needs {why}")
 
 
 def fail(msg: str) -> None:

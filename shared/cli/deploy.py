@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import app, need
+from shared.cli.common import app
 
 deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small CA, each process its own certificate, "
                               "Zenoh configs with TLS (mutual authentication) and access control per role.",
@@ -40,7 +40,6 @@ def deploy_init(out: Path = typer.Argument(..., help="Folder for the CA and one 
     Run a process with MIRRORCOACH_DEPLOY=OUT/NAME. ca/ca.key signs certificates: keep it off the hosts."""
     from shared.bus.deploy import init
 
-    need("cryptography", "deploy", "deploy init")
     made = init(out, router, identity or DEFAULT_IDENTITIES, prefix=prefix, days=days, lease_ms=lease_ms, ca_from=ca)
     typer.echo(f"wrote {out}: " + ", ".join(f"{n} ({r})" for n, r in made.items()))
     typer.echo(f"run each process with MIRRORCOACH_DEPLOY={out}/<name>; keep {out}/ca/ca.key off the hosts")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import SKELETON_HELP, app, client, fail, need, read_clip, wire
+from shared.cli.common import SKELETON_HELP, app, client, fail, read_clip, wire
 
 study_app = typer.Typer(help="Run the thesis's studies with people: participants send their own attempts (fig. 4.3, "
                              "Table 4.2) and human coaches name adverbs from a coach seat (chapter 5).",
@@ -480,7 +480,6 @@ def study_export(folder: Path = FOLDER, out: Path = typer.Option(..., help="CSV 
     from shared.reports.study import seat_rows, tidy
     from shared.reproduce.tidy import write
 
-    need("matplotlib", "reports", "study report (its plots)")
     p, events = _study(folder)
     rows = tidy(events, p["target"])
     write(rows, out)

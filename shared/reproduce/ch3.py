@@ -160,7 +160,7 @@ class Ch3:
         return row
 
     def uneven(self, kinds=None) -> dict:
-        """Issue 13: every kind of other, 10 each; the three estimators after the sets
+        """Every kind of other, 10 each; the three estimators after the sets
         (``WORKERS`` others at a time: the services are separate processes). ``kinds``: these
         instead of the run's (the kinds outside the estimator's model)."""
         res = {}
