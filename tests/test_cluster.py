@@ -344,22 +344,25 @@ def test_the_dashboard_recording_holds_what_the_cluster_did(cluster, bundled, tm
     assert log.count("refused event on") == 20 and "Traceback" not in log and "(20 refused)" in log
     data = read(rec)
     paths = set(data)
-    for p in ("/sessions/watched/d_p", "/sessions/watched/alpha", "/sessions/watched/R", "/sessions/watched/coaching",
+    for p in ("/sessions/watched/d_p", "/sessions/watched/alpha", "/sessions/watched/now", "/sessions/watched/coaching",
               "/sessions/watched/space/path", "/sessions/watched/space/emphatic", "/sessions/watched/body/target",
               "/sessions/watched/body/attempt", "/sessions/watched/body/emphatic", "/sessions/watched/overlay/emphatic",
               "/sessions/watched/curves/rfemur.rx/emphatic", "/estimates/watch/scale", "/estimates/watch/transcript",
-              "/estimates/watch/space/proto_symbols/points", "/readme"):
+              "/estimates/watch/space/proto_symbols/points", "/readme", "/cluster/latency"):
         assert p in paths, p
-    assert [r["trial"] for r in data["/sessions/watched/d_p"] if r.get("Scalars:scalars")] == [1, 2, 3]
-    path = data["/sessions/watched/space/path"][-1]["LineStrips3D:strips"][0]
+    # a bar per trial so far, on each trial's block; the playing trial's bar apart
+    bars = [r for r in data["/sessions/watched/d_p"] if r.get("BarChart:values") is not None]
+    assert [r["trial"] for r in bars] == [1, 2, 3]
+    assert [len(r["BarChart:values"][0]["buffer"]) for r in bars] == [1, 2, 3]
+    assert [r["trial"] for r in data["/sessions/watched/d_p/now"] if r.get("BarChart:values") is not None] == [1, 2, 3]
+    path = data["/sessions/watched/space/path"][-1]["LineStrips2D:strips"][0]
     assert len(path) == 3  # the attempts' path across the trials
-    assert [r["set"] for r in data["/estimates/watch/scale"] if r.get("Scalars:scalars")] == [1, 2]
-    assert abs([r for r in data["/estimates/watch/scale"] if r.get("Scalars:scalars")][-1]["Scalars:scalars"][0] - 2.0) < 0.1
+    scale = [r for r in data["/estimates/watch/scale"] if r.get("BarChart:values") is not None]
+    assert [int(r["set"]) for r in scale] == [1, 2] and all(int(r["playback"]) == 0 for r in scale)  # on set, and at playback 0
+    assert abs(scale[-1]["BarChart:values"][0]["buffer"][-1] - 2.0) < 0.1
     transcript = [r for r in data["/estimates/watch/transcript"] if r.get("TextLog:text")]
     assert len(transcript) == lines and {r["set"] for r in transcript} == {1, 2}  # each line on its own set
-    assert any(p.startswith("/cluster/latency/coach/") for p in paths)
-    # the latencies carry no trial or set (they carried whatever was set last)
-    assert all("trial" not in r and "set" not in r for p in paths if p.startswith("/cluster/latency/") for r in data[p])
+    assert "| coach | run | " in data["/cluster/latency"][-1]["TextDocument:text"][0]
     # every motion of a trial has the same number of frames on the playback timeline: they play in step
     frames = {role: sorted({r["playback"] for r in data[f"/sessions/watched/body/{role}"] if r.get("trial") == 2})
               for role in ("target", "attempt", "emphatic")}

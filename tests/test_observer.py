@@ -45,7 +45,7 @@ def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of
     carried_mb = [float(x) for x in re.findall(r"\(([\d.]+) MB carried on\)", log())]
     assert len(carried_mb) >= 4 and max(carried_mb) <= 1.0, carried_mb  # a new file starts with half the limit at most
     data = read(latest)  # the newest file starts with what is still true: the space, the newest sessions
-    assert "/spaces/seen/points" in data
+    assert "/spaces/seen/proto_symbols/points" in data
     carried = {p.split("/")[2] for p in data if p.startswith("/sessions/") and p.endswith("/body/target")}
     assert f"s{i}" in carried and "s0" not in carried  # bounded: the oldest sessions are not carried on
 
@@ -80,8 +80,8 @@ def test_the_dashboard_keeps_a_bounded_number_of_sessions(tmp_path, bundled):
         d.session_started(f"s{i}", target)
         d.progress({"estimate": f"e{i}", "set": 1, "scale": 2.0, "k_other": [3], "k_self": [2]})
     assert list(d.targets) == [f"s{i}" for i in range(5, MAX_KEPT + 5)] and len(d.estimates) == MAX_KEPT
-    tabs = d.blueprint().root_container.contents  # a tab per kept session and estimate, and the cluster's
-    assert len(tabs) == 2 * MAX_KEPT + 1
+    tabs = d.blueprint().root_container.contents  # a tab per kept session and estimate, the cluster's, the readme's
+    assert len(tabs) == 2 * MAX_KEPT + 2
     d.close()
     assert "/sessions/s0/body/target" in read(tmp_path / "r.rrd")  # what was drawn stays in the recording
 
@@ -99,8 +99,9 @@ def test_request_events_draw_only_the_contracts_verbs(tmp_path, monkeypatch):
         for service, verb in (("pss", f"nope{i}"), ("pss", "list"), ("intruder", f"x{i}")):
             o.handle(d, f"mc/events/{service}/request", pack({"service": service, "verb": verb, "ms": 1.0, "code": "ok"}))
     d.close()
-    latency = {p for p in read(tmp_path / "r.rrd") if p.startswith("/cluster/latency/")}
-    assert latency == {"/cluster/latency/pss/list", "/cluster/latency/pss/unknown_verb"}, latency
+    table = read(tmp_path / "r.rrd")["/cluster/latency"][-1]["TextDocument:text"][0]
+    rows = [line.split("|")[1:3] for line in table.splitlines() if line.startswith("| pss") or line.startswith("| intr")]
+    assert sorted((a.strip(), b.strip()) for a, b in rows) == [("pss", "list"), ("pss", "unknown_verb")], table
 
 
 def test_a_new_recording_carries_a_session_whose_target_has_no_skeleton(tmp_path, bundled):
@@ -120,3 +121,4 @@ def test_a_new_recording_carries_a_session_whose_target_has_no_skeleton(tmp_path
     assert list(new.targets) == ["with", "without"]
     new.close()
     assert "/sessions/with/body/target" in read(tmp_path / "b.rrd")
+

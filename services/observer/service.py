@@ -105,7 +105,7 @@ class Observer:
         if contract is not None and topic in contract.EVENTS:
             ev = contract.EVENTS[topic].validate(ev)  # what its service declared: anything else is refused here
         if service == "coach" and topic == "session":
-            dash.session_started(ev["session"], clip_from_wire(ev["target"]))
+            dash.session_started(ev["session"], clip_from_wire(ev["target"]), ev.get("learner"))
         elif service == "coach" and topic == "trial":
             dash.trial(ev, clip_from_wire(ev["attempt"]) if ev.get("attempt") else None,
                        clip_from_wire(ev["emphatic"]) if ev.get("emphatic") else None)

@@ -5,35 +5,39 @@ The recording opens with its own blueprint (re-sent whenever a session, space or
 appears): one tab per coaching session, one per estimate, one for the other spaces and one for
 the cluster, in the style of rerun's robotics examples.
 
-Entities and timelines (each kind of data on the timelines where it belongs):
+Entities and timelines (each kind of data on the timelines where it belongs; the layout and
+why every tab reads on ``playback`` in :mod:`shared.observe.layout`):
 
 * ``readme``: a short markdown text explaining the views (static);
 * ``sessions/<s>/body/{target,attempt,emphatic}``: upright people (the skeleton's own up axis
-  as the view coordinates, a floor, a front camera), side by side 1.5 m apart; joints are
-  keypoints of an annotation context (named on hover; left side, right side, head and feet
-  coloured apart, bones in the motion's colour); ``sessions/<s>/overlay/...`` the same three
-  overlaid. Timeline ``playback``: trial ``n`` occupies ``n * K ... n * K + K - 1`` where ``K``
-  is the target's frame count at 30 fps, and the target, the attempt and the emphatic motion
-  shown next are each resampled to those ``K`` frames, so any trial plays in step; also
-  timeline ``trial`` (its last frame at ``n``);
+  as the view coordinates, a floor, a front camera), side by side 1.5 m apart, each turned so
+  that its first frame faces the camera; joints are keypoints of an annotation context (named
+  on hover; left side, right side, head and feet coloured apart, bones in the motion's colour);
+  ``sessions/<s>/overlay/...`` the same three overlaid. Timeline ``playback``: trial ``n``
+  occupies ``n * K ... n * K + K - 1`` where ``K`` is the target's frame count at 30 fps, and
+  the target, the attempt and the emphatic motion shown next are each resampled to those ``K``
+  frames, so any trial plays in step; also timeline ``trial`` (its last frame at ``n``);
 * ``sessions/<s>/curves/<channel>/<role>``: joint angles on the same timelines;
-* ``sessions/<s>/{d_p,R,alpha}`` per trial with markers and ``sessions/<s>/coaching``: one text
-  line per trial (adverb, alpha shown and chosen, why it was lowered, d_p, R, d_cop), on
-  ``trial`` and at the start of the trial's ``playback`` block;
-* ``sessions/<s>/space``: the session's space (``coach-<s>``): its proto-symbols, the attempts
-  ``x_p`` as a path, the emphatic points ``x_s``, the target ``x_t``, and the playing trial's
-  two labelled (``now``);
-* ``spaces/<space>``: any other space, coloured by class, one label per class;
-* ``estimates/<e>/{k_other,k_self,symbol_error,scale}`` per conversation set (timeline ``set``),
-  ``estimates/<e>/transcript`` with each line on the set it belongs to, ``estimates/<e>/space``;
-* ``cluster/warnings`` and ``cluster/latency/<service>/<verb>`` on the log time only;
-* ``cluster/captures``: one line per live take's start and end (the capture service: its
-  source, frames, why it ended or failed), on the log time.
+* ``sessions/<s>/now``: the trial playing (adverb, alpha shown and chosen, why it was lowered,
+  d_p, R, d_cop) at the start of its ``playback`` block; ``sessions/<s>/{d_p,alpha}``: bar
+  charts of every trial so far, the playing trial's bar lighter (``.../now``);
+  ``sessions/<s>/coaching``: one short line per trial;
+* ``sessions/<s>/space``: the session's space (``coach-<s>``) on its first two axes: its
+  proto-symbols, the attempts ``x_p`` as a path, the emphatic points ``x_s``, the target
+  ``x_t``, labels placed so that none overlaps another (:mod:`shared.observe.labels`);
+* ``spaces/<space>``: any other space, coloured by class, one label per class where it fits;
+* ``estimates/<e>/{symbols,scale}``: bar charts per conversation set, ``estimates/<e>/transcript``
+  with each line on the set it belongs to, ``estimates/<e>/space``: on timeline ``set`` and at
+  ``playback`` 0 (the latest shows on ``playback``);
+* ``cluster/warnings`` and ``cluster/captures`` (one line per live take's start and end: its
+  source, frames, why it ended or failed) on the log time and at ``playback`` 0;
+  ``cluster/latency``: a table of the requests' latencies per service and verb (static).
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -41,12 +45,16 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from shared.motion.clip import Clip
+from shared.observe import labels as lab
+from shared.observe import layout as lay
 
 CURVE_CHANNELS = ("rfemur.rx", "rtibia.rx", "lowerback.rx", "rhumerus.rx", "shoulder_pitch", "elbow")
 MAX_CURVES = 3
 ROLES = ("target", "attempt", "emphatic")
 SIDE_BY_SIDE = {"target": 0.0, "attempt": 1.5, "emphatic": 3.0}
 COLOURS = {"target": (80, 160, 255), "attempt": (255, 170, 60), "emphatic": (230, 60, 90)}
+LIGHTER = {"d_p": (255, 215, 160), "alpha": (250, 160, 180)}  # the playing trial's bar
+METRIC_COLOURS = {"d_p": COLOURS["attempt"], "alpha": COLOURS["emphatic"]}
 CLASS_OF = {"target": 1, "attempt": 2, "emphatic": 3}
 JOINT_COLOURS = {"left": (255, 235, 90), "right": (90, 235, 255), "head": (60, 230, 60), "foot": (255, 60, 255),
                  "centre": (235, 235, 235)}
@@ -61,29 +69,11 @@ CARRY_OVER = 4
 #: in the file (rerun writes each view's properties as their own chunks), so sending it on every new
 #: session made the layout most of a long run's recording (0.9 MB per session at 16 tabs)
 LAYOUT_EVERY_S = 2.0
-
-README = """# mirrorcoach dashboard
-
-**Timelines.** `playback` (the default) plays every coaching trial in turn: the target, the
-learner's attempt and the emphatic motion shown next, resampled to one length so they move in
-step. `trial` shows the last frame of each trial; `set` is the estimator's conversation sets;
-`log_time` the cluster's requests.
-
-**A session's tab.** Left: the three people side by side (blue target, orange attempt, red
-emphatic motion; yellow joints are the left side, cyan the right), the same overlaid, and joint
-angles. Right: the session's proto-symbol space (the attempts' path and the emphatic points,
-the playing trial's labelled), `d_p` (distance to the target), `R` (d_p over the first trial's) and
-alpha, and the coach's words per trial with the reason alpha was lowered.
-
-**Estimates** (switch the timeline to `set`): the other's felt symbol against the self's
-estimate, the torque scale, the transcript of each conversation set. **Spaces**: every other
-space, coloured by class. **Cluster**: failed requests, live capture takes (started, ended, why)
-and latencies.
-"""
-
-
-def _short(name: str) -> str:
-    return name if len(name) <= 24 else name[:21] + "..."
+LATENCY_EVERY_S = 1.0  # the latency table is written again at most this often (and on close)
+LATENCY_KEPT = 500  # the newest requests per service and verb the table's percentiles are of
+#: a session's own tables (carried to a new recording, forgotten together)
+SESSION_TABLES = ("targets", "learners", "frames", "poses", "paths", "emphatic", "trials", "curves", "metrics",
+                  "session_space")
 
 
 def _side(name: str, names: set[str]) -> str:
@@ -99,15 +89,6 @@ def _side(name: str, names: set[str]) -> str:
     return "centre"
 
 
-def _text_columns(timeline: str | None = None):
-    """A text log showing its words (and ``timeline``), not entity paths and every timeline."""
-    enc = rrb.encodings
-    return rrb.archetypes.TextLogColumns(
-        timeline_columns=[enc.TimelineColumn(t, visible=t == timeline) for t in ("playback", "trial", "set", "log_time")],
-        text_log_columns=[enc.TextLogColumn("EntityPath", visible=False), enc.TextLogColumn("LogLevel", visible=False),
-                          enc.TextLogColumn("Body")])
-
-
 def _resample(clip: Clip, n: int) -> np.ndarray:
     """The clip's frames resampled to ``n`` (time-normalised: start to start, end to end)."""
     x = np.asarray(clip.data, float)
@@ -118,33 +99,36 @@ def _resample(clip: Clip, n: int) -> np.ndarray:
     return np.stack([np.interp(dst, src, x[:, j]) for j in range(x.shape[1])], axis=1)
 
 
-def _front(x: float, distance: float, up: int) -> rrb.EyeControls3D:
-    """A camera in front of people standing on the floor at ``x`` (up axis 1 = Y or 2 = Z)."""
-    position, target, eye_up = [x, 1.2, distance], [x, 0.85, 0.0], [0.0, 1.0, 0.0]
-    if up == 2:
-        position, target, eye_up = [x, -distance, 1.2], [x, 0.0, 0.85], [0.0, 0.0, 1.0]
-    return rrb.EyeControls3D(kind=rrb.components.Eye3DKind.Orbital, position=position, look_target=target,
-                             eye_up=eye_up)
+def face_the_camera(pos: np.ndarray, sides: list[str], up: int) -> np.ndarray:
+    """Joint positions (frames x joints x 3, the first frame's root at the origin) turned about the
+    up axis so that the first frame's left side points along the first ground axis: a person then
+    faces +Z (Y up) or -Y (Z up), where :func:`shared.observe.layout.front` puts the camera
+    (their left on the viewer's right). Unchanged without a left and a right side."""
+    left = [i for i, s in enumerate(sides) if s == "left"]
+    right = [i for i, s in enumerate(sides) if s == "right"]
+    if not left or not right:
+        return pos
+    g0, g1 = [a for a in range(3) if a != up]
+    lr = pos[0, left].mean(axis=0) - pos[0, right].mean(axis=0)
+    if np.hypot(lr[g0], lr[g1]) < 1e-9:
+        return pos
+    theta = -np.arctan2(lr[g1], lr[g0])
+    c, s = np.cos(theta), np.sin(theta)
+    out = pos.copy()
+    out[..., g0], out[..., g1] = c * pos[..., g0] - s * pos[..., g1], s * pos[..., g0] + c * pos[..., g1]
+    return out
 
 
-def _series_style(rec, entity: str, name: str, colour, markers: bool = True) -> None:
-    """A series' name and colour (and markers, for values per trial or per set), once."""
-    parts: list = [rr.SeriesLines(colors=[colour], names=[name])]
-    if markers:
-        parts.append(rr.SeriesPoints(colors=[colour], markers=["circle"], marker_sizes=[4.0], names=[name]))
-    rec.log(entity, *parts, static=True)
+def _xy(p) -> list[float]:
+    p = [float(v) for v in list(p)[:2]]
+    return p + [0.0] * (2 - len(p))
 
 
-def _views(layout) -> int:
-    """The number of views in a layout or a container (what a layout's size in the file grows with)."""
-    if isinstance(layout, rrb.Blueprint):
-        layout = layout.root_container
-    return sum(_views(x) if isinstance(x, rrb.Container) else 1 for x in layout.contents)
-
-
-def _xyz(p) -> list[float]:
-    p = list(p)[:3]
-    return [float(v) for v in p] + [0.0] * (3 - len(p))
+def _bars(rec, entity: str, xs: list[int], values: list[float], colour, width: float = 0.8, offset: float = 0.0):
+    """A bar per ``x`` (a trial, a conversation set), centred on it (rerun puts a bar's left edge
+    at its abscissa)."""
+    rec.log(entity, rr.BarChart(np.asarray(values, float), abscissa=np.asarray(xs, float) + offset - width / 2,
+                                widths=np.full(len(xs), width), color=colour))
 
 
 class Dashboard:
@@ -160,78 +144,55 @@ class Dashboard:
         if sinks:
             self.rec.set_sinks(*sinks)
         self.targets: dict[str, Clip] = {}
+        self.learners: dict[str, str | None] = {}
         self.frames: dict[str, int] = {}  # K per session: the target's frames at 30 fps
         self.poses: dict[str, tuple | None] = {}  # the target's, resampled and by forward kinematics
         self.paths: dict[str, list] = {}
         self.emphatic: dict[str, list] = {}
+        self.metrics: dict[str, dict[str, list]] = {}  # per session: trial numbers, d_p and alpha
+        self.session_space: dict[str, tuple] = {}  # per session: its space's points (2-D) and their classes
         self.spaces: dict[str, None] = {}  # in order of arrival
         self.estimates: dict[str, int] = {}  # conversation sets completed per estimate
+        self.others: dict[str, str] = {}  # the other each estimate talks to (from its transcript)
+        self.sets: dict[str, dict[str, list]] = {}  # per estimate: sets, mean k of the other and self, scale
         self.trials: dict[str, int] = {}  # trials completed per session
         self.pending: dict[str, dict] = {}  # a session's space event that came before the session
         self.curves: dict[str, list[str]] = {}
+        self.latency: dict[tuple[str, str], dict] = {}
+        self._latency_at = float("-inf")
         self.path = None if path is None else Path(path)
         self.view_bytes = 0.0  # measured when a layout is written to the file
         self._layout_due, self._layout_sent = False, float("-inf")
-        self.rec.log("readme", rr.TextDocument(README, media_type=rr.MediaType.MARKDOWN), static=True)
+        self.rec.log("readme", lay.readme(), static=True)
         self._layout()
 
     def close(self) -> None:
+        self._latency_table()
         self.send_layout(force=True)
         self.rec.flush()
         self.rec.disconnect()
 
     # ------------------------------------------------------------------ layout
+    def session_title(self, s: str) -> str:
+        """A session's tab: its motion, its learner and its id."""
+        target = self.targets[s]
+        parts = [lay.short(target.label or target.name or "target", 20)]
+        if self.learners.get(s):
+            parts.append(lay.short(self.learners[s], 16))
+        return " · ".join(parts + [s])  # the id whole: tabs are told apart by it
+
     def _session_tab(self, s: str) -> rrb.Container:
         up = self.targets[s].skeleton.up_axis if self.targets[s].skeleton else 1
-        curves = [rrb.TimeSeriesView(origin=f"sessions/{s}/curves/{c}", name=f"{c} (deg)",
-                                     plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop))
-                  for c in self.curves.get(s, [])]
-        series = [rrb.TimeSeriesView(origin=f"sessions/{s}/{m}", name=label, plot_legend=rrb.PlotLegend(visible=False))
-                  for m, label in (("d_p", "d_p"), ("R", "R"), ("alpha", "alpha"))]
-        return rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Spatial3DView(origin=f"sessions/{s}/body", name="target | attempt | emphatic",
-                                  eye_controls=_front(SIDE_BY_SIDE["attempt"], 4.3, up)),
-                rrb.Horizontal(rrb.Spatial3DView(origin=f"sessions/{s}/overlay", name="overlaid",
-                                                 eye_controls=_front(0.0, 3.2, up)), *curves),
-                row_shares=[3, 2]),
-            rrb.Vertical(
-                rrb.Spatial3DView(origin=f"sessions/{s}/space", name=f"space coach-{_short(s)}"),
-                rrb.Horizontal(*series),
-                rrb.TextLogView(origin=f"sessions/{s}/coaching", name="coaching", columns=_text_columns()),
-                rrb.TextDocumentView(origin="readme", name="about these views"),
-                row_shares=[2.6, 2, 1.7, 1.2]),
-            column_shares=[3, 2], name=f"session {_short(s)}")
+        return lay.session_tab(s, self.session_title(s), self.curves.get(s, []), up, SIDE_BY_SIDE["attempt"])
 
-    def _estimate_tab(self, e: str) -> rrb.Container:
-        return rrb.Horizontal(
-            rrb.Vertical(rrb.TimeSeriesView(origin=f"estimates/{e}/symbols", name="felt symbol: other vs self's estimate",
-                                            plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop)),
-                         rrb.TimeSeriesView(origin=f"estimates/{e}/scale", name="torque scale other / self",
-                                            plot_legend=rrb.PlotLegend(visible=False))),
-            rrb.Vertical(rrb.Spatial3DView(origin=f"estimates/{e}/space", name=f"the other's space est-{_short(e)}"),
-                         rrb.TextLogView(origin=f"estimates/{e}/transcript", name="transcript (by set)",
-                                         columns=_text_columns("set"))),
-            name=f"estimate {_short(e)}")
+    def estimate_title(self, e: str) -> str:
+        """An estimate's tab: the other it talks to (once a transcript line named it) and its id."""
+        other = f"{lay.short(self.others[e], 16)} · " if e in self.others else ""
+        return f"estimate · {other}{e}"
 
     def blueprint(self) -> rrb.Blueprint:
-        tabs = [self._session_tab(s) for s in self.targets]
-        tabs += [self._estimate_tab(e) for e in self.estimates]
-        others = sorted(self.spaces)
-        if others:
-            tabs.append(rrb.Grid(*[rrb.Spatial3DView(origin=f"spaces/{sp}", name=f"space {_short(sp)}") for sp in others],
-                                 name="spaces"))
-        tabs.append(rrb.Horizontal(
-            rrb.TextDocumentView(origin="readme", name="about these views"),
-            rrb.Vertical(rrb.TextLogView(origin="cluster/warnings", name="failed requests", columns=_text_columns()),
-                         rrb.TextLogView(origin="cluster/captures", name="capture takes", columns=_text_columns()),
-                         rrb.TextLogView(origin="estimates", name="every transcript", columns=_text_columns("set")),
-                         rrb.TimeSeriesView(origin="cluster/latency", name="request latency (ms)",
-                                            plot_legend=rrb.PlotLegend(corner=rrb.components.Corner2D.LeftTop))),
-            name="cluster"))
-        return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0),
-                             rrb.TimePanel(state="expanded", timeline="playback" if self.targets else "log_time"),
-                             rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"))
+        return lay.blueprint([self._session_tab(s) for s in self.targets],
+                             [lay.estimate_tab(e, self.estimate_title(e)) for e in self.estimates], sorted(self.spaces))
 
     def _layout(self) -> None:
         """The layout changed (a tab came or went): :meth:`send_layout` sends it (the observer, at
@@ -244,7 +205,7 @@ class Dashboard:
 
     def layout_bytes(self) -> float:
         """What sending the layout now would add to the file (0 until one has been measured)."""
-        return _views(self.blueprint()) * self.view_bytes
+        return lay.views(self.blueprint()) * self.view_bytes
 
     def send_layout(self, force: bool = False) -> bool:
         """Send the layout if it changed and ``LAYOUT_EVERY_S`` has passed (or ``force``)."""
@@ -254,7 +215,7 @@ class Dashboard:
         before = self.file_bytes() if self.path is not None else 0
         self.rec.send_blueprint(blueprint)
         if self.path is not None:  # what a view costs in the file, for the rotation's estimates
-            self.view_bytes = max(self.view_bytes, (self.file_bytes() - before) / max(1, _views(blueprint)))
+            self.view_bytes = max(self.view_bytes, (self.file_bytes() - before) / max(1, lay.views(blueprint)))
         self._layout_due, self._layout_sent = False, time.monotonic()
         return True
 
@@ -264,6 +225,11 @@ class Dashboard:
         self.rec.reset_time()
         for k, v in times.items():
             self.rec.set_time(k, sequence=int(v))
+
+    def _everywhere(self, **times) -> None:
+        """``times`` and ``playback`` and ``trial`` 0: what an estimate or the cluster logs shows on
+        the timeline the recording opens on too (the latest of it, from the first frame on)."""
+        self._at(**{"playback": 0, "trial": 0, **times})
 
     def _body_context(self, s: str, clip: Clip) -> None:
         sk = clip.skeleton
@@ -291,7 +257,7 @@ class Dashboard:
 
     def _pose(self, s: str, clip: Clip) -> tuple[Clip, np.ndarray] | None:
         """A motion resampled to the session's K frames, and its joints by forward kinematics,
-        from the same start and on the floor (``None`` without a skeleton)."""
+        from the same start, on the floor and facing the camera (``None`` without a skeleton)."""
         sk = clip.skeleton or self.targets[s].skeleton
         if sk is None:
             return None
@@ -300,6 +266,8 @@ class Dashboard:
         ground = [a for a in range(3) if a != sk.up_axis]
         pos[..., ground] -= pos[:1, :1, ground]
         pos[..., sk.up_axis] -= pos[..., sk.up_axis].min()
+        lower = {j.name.lower() for j in sk.joints}
+        pos = face_the_camera(pos, [_side(j.name, lower) for j in sk.joints], sk.up_axis)
         return clip.with_data(data, skeleton=sk), pos
 
     def _people(self, s: str, role: str, pose: tuple[Clip, np.ndarray] | None, trial: int) -> None:
@@ -323,11 +291,13 @@ class Dashboard:
                                 columns=rr.Scalars.columns(scalars=data[:, clip.channels.index(c)]))
 
     # ------------------------------------------------------------------ events
-    def session_started(self, session: str, target: Clip) -> None:
+    def session_started(self, session: str, target: Clip, learner: str | None = None) -> None:
         new = session not in self.targets
         self.targets[session] = target
+        self.learners[session] = learner
         self.frames[session] = max(2, int(round(target.n_frames * PLAYBACK_FPS / target.fps)))
         self.paths[session], self.emphatic[session] = [], []
+        self.metrics[session] = {"trial": [], "d_p": [], "alpha": []}
         self.curves[session] = [c for c in CURVE_CHANNELS if c in target.channels][:MAX_CURVES]
         self.trials[session] = 0
         self._forget_oldest()
@@ -341,11 +311,15 @@ class Dashboard:
     def _session_series(self, session: str) -> None:
         for c in self.curves[session]:
             for r in ROLES:
-                _series_style(self.rec, f"sessions/{session}/curves/{c}/{r}", r, COLOURS[r], markers=False)
-        for m, colour in (("d_p", (255, 170, 60)), ("R", (200, 200, 200)), ("alpha", (230, 60, 90))):
-            _series_style(self.rec, f"sessions/{session}/{m}", m, colour)
+                self.rec.log(f"sessions/{session}/curves/{c}/{r}", rr.SeriesLines(colors=[COLOURS[r]], names=[r]),
+                             static=True)
 
     def _show_target(self, session: str, target: Clip) -> None:
+        self._at(playback=0, trial=0)
+        who = f", learner {self.learners[session]}" if self.learners.get(session) else ""
+        self.rec.log(f"sessions/{session}/now", rr.TextDocument(
+            f"**The target** {target.name or ''} ({target.label or 'no label'}){who}: no trial yet. Each trial plays "
+            "the target, the attempt and the emphatic motion shown after it.", media_type=rr.MediaType.MARKDOWN))
         if target.skeleton is None:
             return
         self._body_context(session, target)
@@ -359,17 +333,17 @@ class Dashboard:
         With ``budget_bytes`` (and a file) nothing more is carried once the file and the layout it
         will need would pass it, so a new file starts small (the newest session always goes on)."""
         self.view_bytes = view_bytes = max(old.view_bytes, self.view_bytes)
-        self.estimates, self.pending = dict(old.estimates), dict(old.pending)
+        self.estimates, self.pending, self.others = dict(old.estimates), dict(old.pending), dict(old.others)
         self.spaces = {}
 
         def fits(extra_views: int) -> bool:
             if budget_bytes is None or self.path is None:
                 return True
-            layout = (_views(self.blueprint()) + extra_views) * view_bytes
+            layout = (lay.views(self.blueprint()) + extra_views) * view_bytes
             return self.file_bytes() + layout <= budget_bytes
 
         def carry(s: str) -> None:
-            for name in ("targets", "frames", "poses", "paths", "emphatic", "trials", "curves"):
+            for name in SESSION_TABLES:
                 table = getattr(old, name)
                 if s in table:  # (a target without a skeleton has no pose)
                     getattr(self, name)[s] = table[s]
@@ -384,7 +358,7 @@ class Dashboard:
                 break
             self.space(ev)
         for s in newest_first[1:]:
-            if not fits(_views(old._session_tab(s))):
+            if not fits(lay.views(old._session_tab(s))):
                 break
             carry(s)
         self.targets = {s: self.targets[s] for s in old.targets if s in self.targets}  # in order of arrival
@@ -399,11 +373,12 @@ class Dashboard:
         """At most ``MAX_KEPT`` sessions, estimates and spaces (the oldest go first)."""
         while len(self.targets) > MAX_KEPT:
             s = next(iter(self.targets))
-            for table in (self.targets, self.frames, self.poses, self.paths, self.emphatic, self.trials,
-                          self.curves, self.pending):
-                table.pop(s, None)
+            for name in (*SESSION_TABLES, "pending"):
+                getattr(self, name).pop(s, None)
         while len(self.estimates) > MAX_KEPT:
-            self.estimates.pop(next(iter(self.estimates)))
+            e = next(iter(self.estimates))
+            for table in (self.estimates, self.others, self.sets):
+                table.pop(e, None)
         while len(self.spaces) > MAX_KEPT:
             self.spaces.pop(next(iter(self.spaces)))
 
@@ -414,42 +389,80 @@ class Dashboard:
         self.trials[s] = n
         k = self.frames[s]
         self._at(trial=n, playback=n * k)
-        d_p, r = float(ev["d_p"]), ev.get("R")  # R is absent when the first trial's d_p was 0
-        self.rec.log(f"sessions/{s}/d_p", rr.Scalars(d_p))
-        self.rec.log(f"sessions/{s}/alpha", rr.Scalars(float(ev["alpha"])))
-        if r is not None:
-            self.rec.log(f"sessions/{s}/R", rr.Scalars(float(r)))
+        d_p, r, alpha = float(ev["d_p"]), ev.get("R"), float(ev["alpha"])  # R: absent when the first d_p was 0
+        m = self.metrics.setdefault(s, {"trial": [], "d_p": [], "alpha": []})
+        m["trial"].append(n)
+        for name, value in (("d_p", d_p), ("alpha", alpha)):
+            m[name].append(float(value))
+            _bars(self.rec, f"sessions/{s}/{name}", m["trial"], m[name], METRIC_COLOURS[name])
+            _bars(self.rec, f"sessions/{s}/{name}/now", [n], [m[name][-1]], LIGHTER[name])
         chosen = ev.get("alpha_chosen")
-        lowered = (f"; lowered from {chosen:g}: {ev.get('feasibility', '')}" if ev.get("alpha_reduced") and chosen
-                   else "")
-        extra = f", d_cop {ev['d_cop']:.2f}" if ev.get("d_cop") is not None else ""
-        self.rec.log(f"sessions/{s}/coaching", rr.TextLog(
-            f"trial {n}: \"{ev.get('adverb') or 'no adverb'}\", alpha {ev['alpha']:g}{lowered} | d_p {d_p:.1f}"
-            + (f", R {r:.2f}" if r is not None else "") + extra,
-            level="WARN" if ev.get("alpha_reduced") else "INFO"))
-        path, emph = self.paths.setdefault(s, []), self.emphatic.setdefault(s, [])
-        path.append(_xyz(ev["x_p"]))
-        emph.append(_xyz(ev["x_s"]))
-        base = f"sessions/{s}/space"
-        self.rec.log(f"{base}/target", rr.Points3D([_xyz(ev["x_t"])], labels=["target"], radii=[0.0],
-                                                   colors=[COLOURS["target"]], show_labels=True))
-        self.rec.log(f"{base}/path", rr.LineStrips3D([path], colors=[COLOURS["attempt"]]))
-        # every trial's points drawn, only this trial's labelled (the labels of all of them piled up
-        # into one blob where the attempts converge): which trial is playing reads off the space
-        self.rec.log(f"{base}/attempts", rr.Points3D(path, colors=[COLOURS["attempt"]], show_labels=False))
-        self.rec.log(f"{base}/emphatic", rr.Points3D(emph, colors=[COLOURS["emphatic"]], show_labels=False))
-        self.rec.log(f"{base}/now", rr.Points3D([path[-1], emph[-1]], labels=[f"attempt {n}", f"shown after {n}"],
-                                                colors=[COLOURS["attempt"], COLOURS["emphatic"]], radii=[0.0],
-                                                show_labels=True))
+        lowered = bool(ev.get("alpha_reduced") and chosen)
+        adverb = f"\"{ev['adverb']}\"" if ev.get("adverb") else "no adverb"
+        values = f"d_p {d_p:.1f}" + (f", R {r:.2f}" if r is not None else "") + (
+            f", d_cop {ev['d_cop']:.2f}" if ev.get("d_cop") is not None else "")
+        shown = f"alpha {alpha:g}" + (f" (lowered from {chosen:g})" if lowered else "")
+        self.rec.log(f"sessions/{s}/coaching", rr.TextLog(f"trial {n}: {adverb}, {shown}, {values}",
+                                                          level="WARN" if lowered else "INFO"))
+        why = f"\n\nLowered from alpha {chosen:g}: {ev.get('feasibility') or 'infeasible'}" if lowered else ""
+        self.rec.log(f"sessions/{s}/now", rr.TextDocument(
+            f"**Trial {n}**: the coach said {adverb} and showed the emphatic motion with {shown}. "
+            f"The attempt: {values}.{why}", media_type=rr.MediaType.MARKDOWN))
+        self.paths.setdefault(s, []).append(_xy(ev["x_p"]))
+        self.emphatic.setdefault(s, []).append(_xy(ev["x_s"]))
+        self._draw_session_space(s, n, _xy(ev["x_t"]))
         self._people(s, "target", self.poses.get(s), n)
         for role, clip in (("attempt", attempt), ("emphatic", emphatic)):
             if clip is not None:  # drawn with the target's skeleton when it came without one
                 self._people(s, role, self._pose(s, clip), n)
 
+    def _draw_session_space(self, s: str, n: int, x_t: list[float]) -> None:
+        """The session's space at trial ``n``: its proto-symbols (grey: they are the target and the
+        attempts themselves, named on hover), the attempts' path, the emphatic points, the target,
+        and the labels of the target and the playing trial's two points."""
+        path, emph = np.array(self.paths[s]), np.array(self.emphatic[s])
+        pts, ids = self.session_space.get(s, (np.zeros((0, 2)), []))
+        layers = [("proto_symbols/points", rr.Points2D, pts,
+                   {"class_ids": ids, "radii": [-3.0], "colors": [(110,) * 3], "show_labels": False}),
+                  ("path", rr.LineStrips2D, path, {"colors": [COLOURS["attempt"]]}),
+                  ("attempts", rr.Points2D, path, {"colors": [COLOURS["attempt"]], "radii": [-4.0]}),
+                  ("emphatic", rr.Points2D, emph, {"colors": [COLOURS["emphatic"]], "radii": [-4.0]}),
+                  ("target", rr.Points2D, np.array([x_t]), {"colors": [COLOURS["target"]], "radii": [-6.0]})]
+        self.space_2d(f"sessions/{s}/space", layers, [x_t, path[-1], emph[-1]],
+                      ["target", f"attempt {n}", f"shown after {n}"], lay.SESSION_SPACE_PX,
+                      [COLOURS["target"], COLOURS["attempt"], COLOURS["emphatic"]])
+
+    def space_2d(self, base: str, layers, anchors, texts: list[str], panel_px, colours, static: bool = False) -> None:
+        """A space's layers ``(entity, archetype, points, style)`` and its labels, in a fixed region:
+        the points are mapped so that their frame (:func:`shared.observe.labels.frame`) is always
+        ``[-a, a] x [-1, 1]`` (``a`` the panel's aspect), the region the view shows
+        (:func:`shared.observe.layout.space_view`; left to itself, it fits all it has ever shown,
+        with margins of its own, and labels landed where they were not placed). Labels go where
+        none overlaps another (:func:`shared.observe.labels.place`), each at an invisible point,
+        with a thin line to its point where it had to move away from it."""
+        anchors = np.asarray(anchors, float).reshape(-1, 2)
+        lo, hi = lab.frame(np.vstack([np.asarray(x, float).reshape(-1, 2) for *_, x, _ in layers] + [anchors]), panel_px)
+        centre, half = (lo + hi) / 2, (hi - lo)[1] / 2
+
+        def mapped(x):
+            return ((np.asarray(x, float).reshape(-1, 2) - centre) / half).tolist()
+
+        for entity, archetype, x, style in layers:
+            data = [mapped(x)] if archetype is rr.LineStrips2D else mapped(x)
+            self.rec.log(f"{base}/{entity}", archetype(data, **style), static=static)
+        a = (hi - lo)[0] / 2 / half
+        placed = lab.place(mapped(anchors), texts, panel_px, (np.array([-a, -1.0]), np.array([a, 1.0])))
+        self.rec.log(f"{base}/labels", rr.Points2D([p.xy for p in placed], labels=[p.text for p in placed],
+                                                   radii=[0.0], colors=[colours[p.index] for p in placed],
+                                                   show_labels=True), static=static)
+        moved = [[p.anchor, p.xy] for p in placed if p.anchor != p.xy]
+        self.rec.log(f"{base}/labels/leaders", rr.LineStrips2D(moved, colors=[(120, 120, 120)], radii=[-0.5]),
+                     static=static)
+
     def space(self, ev: dict) -> None:
-        """A session's space on the trial it changed in (``coach-<s>``: before the session's first
-        event, it waits for it), an estimate's on its conversation set (``est-<e>``), any other
-        as it is now (static: visible on every timeline)."""
+        """A session's space (``coach-<s>``: kept, and drawn with the session's next trial; before
+        the session's first event, it waits for it), an estimate's on its conversation set
+        (``est-<e>``, and at ``playback`` 0), any other as it is now (static: on every timeline)."""
         name = ev["space"]
         static = False
         if name.startswith(("estspace-", "estself-")):  # the space estimator's own spaces: not drawn
@@ -462,19 +475,19 @@ class Dashboard:
                 while len(self.pending) > MAX_KEPT:
                     self.pending.pop(next(iter(self.pending)))
                 return
-            entity = f"sessions/{s}/space/proto_symbols"
+            entity, panel = f"sessions/{s}/space", lay.SESSION_SPACE_PX
             n = self.trials.get(s, 0) + 1  # the trial in progress
             self._at(trial=n, playback=n * self.frames[s])
         elif name.startswith("est-"):
             e = name[4:]
-            entity = f"estimates/{e}/space/proto_symbols"
+            entity, panel = f"estimates/{e}/space", lay.ESTIMATE_SPACE_PX
             if e not in self.estimates:
                 self.estimates[e] = 0
                 self._forget_oldest()
                 self._layout()
-            self._at(set=self.estimates[e] + 1)  # the conversation set in progress
+            self._everywhere(set=self.estimates[e] + 1)  # the conversation set in progress
         else:
-            entity, static = f"spaces/{name}", True
+            entity, static, panel = f"spaces/{name}", True, lay.OTHER_SPACE_PX
             if name not in self.spaces and ev["change"] != "deleted":
                 self.spaces[name] = None
                 self._forget_oldest()
@@ -486,58 +499,67 @@ class Dashboard:
                 self.rec.log(entity, rr.Clear(recursive=True), static=True)
                 self._layout()
                 return
+            if name.startswith("coach-"):  # the session's path and target stay
+                self.session_space.pop(name[6:], None)
+                entity += "/proto_symbols"
             self.rec.log(entity, rr.Clear(recursive=True))
             return
         info = ev["info"]
         pts = np.asarray(info["points"], float)
         if pts.ndim != 2 or len(pts) == 0:
             return
-        pts = np.hstack([pts[:, :3], np.zeros((len(pts), max(0, 3 - pts.shape[1])))])
-        labels = [p["label"] for p in info["proto_symbols"]]
-        classes = sorted(set(labels))
-        ids = [classes.index(x) + 1 for x in labels]
-        self.rec.log(entity, rr.AnnotationContext([rr.AnnotationInfo(i + 1, _short(c), PALETTE[i % len(PALETTE)])
-                                                   for i, c in enumerate(classes)]), static=static)
-        scale = float(np.ptp(pts, axis=0).max()) or 1.0
-        self.rec.log(f"{entity}/points", rr.Points3D(pts, class_ids=ids, radii=[scale * 0.012], show_labels=False),
-                     static=static)
+        pts = np.hstack([pts[:, :2], np.zeros((len(pts), max(0, 2 - pts.shape[1])))])
+        names = [p["label"] for p in info["proto_symbols"]]
+        classes = sorted(set(names))
+        ids = [classes.index(x) + 1 for x in names]
+        self.rec.log(f"{entity}/proto_symbols", rr.AnnotationContext(
+            [rr.AnnotationInfo(i + 1, lay.short(c), PALETTE[i % len(PALETTE)]) for i, c in enumerate(classes)]),
+            static=static)
         if name.startswith("coach-"):
-            return  # the session's own points carry the labels (target, 1, 2, ..., s1, s2, ...)
-        centres = [pts[[i for i, x in enumerate(labels) if x == c]].mean(axis=0) for c in classes]
-        self.rec.log(f"{entity}/classes", rr.Points3D(centres, class_ids=list(range(1, len(classes) + 1)),
-                                                      labels=[_short(c) for c in classes], radii=[0.0], show_labels=True),
-                     static=static)
+            self.session_space[s] = (pts, ids)
+            return
+        medoids = []  # each class labelled at its proto-symbol nearest the class's centre
+        for c in classes:
+            members = pts[[i for i, x in enumerate(names) if x == c]]
+            medoids.append(members[np.argmin(((members - members.mean(axis=0)) ** 2).sum(axis=1))])
+        colours = [PALETTE[i % len(PALETTE)] for i in range(len(classes))]
+        layers = [("proto_symbols/points", rr.Points2D, pts,
+                   {"class_ids": ids, "radii": [-5.0], "colors": [colours[i - 1] for i in ids], "show_labels": False})]
+        self.space_2d(entity, layers, medoids, [lay.short(c) for c in classes], panel, colours, static=static)
 
     def progress(self, ev: dict) -> None:
+        """A conversation set completed: bars per set of the felt symbol (the other's answer and the
+        self's estimate, mean over the set's motions) and of the torque scale."""
         e, n = ev["estimate"], int(ev["set"])
         if e not in self.estimates:
             self.estimates[e] = 0
             self._forget_oldest()
             self._layout()
-        if n == 1 or not self.estimates[e]:
-            for m, colour in (("symbols/k_other", (230, 60, 90)), ("symbols/k_self", (80, 160, 255)),
-                              ("symbols/symbol_error", (200, 200, 200)), ("scale", (255, 170, 60))):
-                _series_style(self.rec, f"estimates/{e}/{m}", m.split("/")[-1], colour)
         self.estimates[e] = n
-        self._at(set=n)
         k_o, k_s = np.asarray(ev["k_other"], float), np.asarray(ev["k_self"], float)
-        self.rec.log(f"estimates/{e}/symbols/k_other", rr.Scalars(float(k_o.mean())))
-        self.rec.log(f"estimates/{e}/symbols/k_self", rr.Scalars(float(k_s.mean())))
-        self.rec.log(f"estimates/{e}/symbols/symbol_error", rr.Scalars(float(np.mean(np.abs(k_o - k_s)))))
-        self.rec.log(f"estimates/{e}/scale", rr.Scalars(float(ev["scale"])))
+        t = self.sets.setdefault(e, {"set": [], "k_other": [], "k_self": [], "scale": []})
+        for key, value in (("set", n), ("k_other", k_o.mean()), ("k_self", k_s.mean()), ("scale", ev["scale"])):
+            t[key].append(float(value))
+        self._everywhere(set=n)
+        _bars(self.rec, f"estimates/{e}/symbols/other", t["set"], t["k_other"], COLOURS["emphatic"], 0.4, -0.2)
+        _bars(self.rec, f"estimates/{e}/symbols/self", t["set"], t["k_self"], COLOURS["target"], 0.4, 0.2)
+        _bars(self.rec, f"estimates/{e}/scale", t["set"], t["scale"], COLOURS["attempt"])
 
     def transcript(self, line: dict) -> None:
         """A line goes on the conversation set in progress: one more than the estimate has completed."""
         d = line["dialogue"]
-        self._at(set=self.estimates.get(d, 0) + 1)
         who = line["speaker"]
+        if d in self.estimates and d not in self.others and who != "self":
+            self.others[d] = who  # the estimate's tab is named by the other it talks to
+            self._layout()
+        self._everywhere(set=self.estimates.get(d, 0) + 1)
         extra = f" (k = {line['k']})" if line.get("k") else (f" ({line['answer']})" if line.get("answer") else "")
         level = "WARN" if line.get("understood") is False or line["kind"] == "note" else "INFO"
         self.rec.log(f"estimates/{d}/transcript", rr.TextLog(f"{who}: {line['text']}{extra}", level=level))
 
     def capture_take(self, ev: dict) -> None:
         """A live take started, ended or failed (the capture service's take event)."""
-        self.rec.reset_time()
+        self._everywhere()
         text = f"take {ev['take']}: {ev['state']}, {ev['frames']} frames ({ev['seconds']:.1f} s) from {ev['source']}"
         if ev.get("ended"):
             text += f"; {ev['ended']}"
@@ -547,8 +569,29 @@ class Dashboard:
         self.rec.log("cluster/captures", rr.TextLog(text, level=level))
 
     def request(self, ev: dict) -> None:
-        self.rec.reset_time()
-        self.rec.log(f"cluster/latency/{ev['service']}/{ev['verb']}", rr.Scalars(float(ev["ms"])))
+        """A request's latency (into the table) and, when it failed, a line."""
+        key = (ev["service"], ev["verb"])
+        st = self.latency.setdefault(key, {"n": 0, "failed": 0, "ms": deque(maxlen=LATENCY_KEPT)})
+        st["n"] += 1
+        st["ms"].append(float(ev["ms"]))
         if ev.get("code") not in (None, "ok"):
+            st["failed"] += 1
+            self._everywhere()
             self.rec.log("cluster/warnings", rr.TextLog(f"{ev['service']}/{ev['verb']} failed: {ev['code']}",
                                                         level="ERROR" if ev["code"] == "internal" else "WARN"))
+        if time.monotonic() - self._latency_at >= LATENCY_EVERY_S:
+            self._latency_table()
+
+    def _latency_table(self) -> None:
+        """Requests, failures and latency percentiles per service and verb (static: on every timeline)."""
+        if not self.latency:
+            return
+        rows = ["| service | verb | requests | failed | median ms | p95 ms | max ms |", "|---|---|--:|--:|--:|--:|--:|"]
+        for (service, verb), st in sorted(self.latency.items()):
+            ms = np.asarray(st["ms"])
+            rows.append(f"| {service} | {verb} | {st['n']} | {st['failed']} | {np.median(ms):.1f} | "
+                        f"{np.percentile(ms, 95):.1f} | {ms.max():.1f} |")
+        note = f"\n\nPercentiles of each verb's newest {LATENCY_KEPT} requests; requests and failures of all."
+        self.rec.log("cluster/latency", rr.TextDocument("\n".join(rows) + note, media_type=rr.MediaType.MARKDOWN),
+                     static=True)
+        self._latency_at = time.monotonic()

@@ -163,6 +163,26 @@ class HeadlessViewer:
         """The names of the blueprint's tabs, in order."""
         return list(self._tabs()[2])
 
+    def tab_views(self, name: str) -> list:
+        """The views of the tab ``name`` (rerun's ``View``: ``view_id``, ``view_class``, ``name``,
+        ``origin``), walking the blueprint's containers."""
+        info, _, names = self._tabs()
+        bp = info.blueprint
+
+        def walk(key: str):
+            entry = bp.get(key if key.startswith("/") else "/" + key, {})
+            if "ContainerBlueprint" not in entry:
+                yield key.rsplit("/", 1)[-1]
+                return
+            contents = entry["ContainerBlueprint"].get("contents", [])
+            for c in [contents] if isinstance(contents, str) else contents:
+                yield from walk(c)
+
+        if name not in names:
+            raise BadInput(f"the recording has no tab {name!r} (tabs: {', '.join(names)})")
+        ids = set(walk(names[name]))
+        return [v for v in self.views() if str(v.view_id) in ids]
+
     def show_tab(self, name: str, settle_s: float = 2.0) -> None:
         info, tabs, names = self._tabs()
         if name not in names:
@@ -191,10 +211,20 @@ class HeadlessViewer:
         return path
 
 
+def tab_kind(origins: list[str]) -> tuple[str, str]:
+    """What a tab of the dashboard shows, from its views' origins: ``("session", id)``,
+    ``("estimate", id)`` or ``("other", "")``."""
+    for o in origins:
+        parts = o.strip("/").split("/")
+        if len(parts) >= 2 and parts[0] in ("sessions", "estimates"):
+            return parts[0][:-1], parts[1]
+    return "other", ""
+
+
 def dashboard_screenshots(recording, folder, log=None) -> list[Path]:
-    """Every tab of a recording in the real viewer: a session's tab in the middle of its last
-    trial (timeline ``playback``), an estimate's at its last conversation set, the others as
-    they open. Returns the PNG files (``<tab>.png``)."""
+    """Every tab of a recording in the real viewer, on the timeline it opens on: a session's tab
+    in the middle of its last trial (timeline ``playback``), the others as they open. Returns the
+    PNG files (``session_<id>.png``, ``estimate_<id>.png``, or the tab's name)."""
     folder, recording = Path(folder), Path(recording)
     with open(recording, "rb") as f:  # before starting a viewer that would wait for it to load
         if f.read(4) != RRD_MAGIC:
@@ -207,14 +237,11 @@ def dashboard_screenshots(recording, folder, log=None) -> list[Path]:
             return [v.screenshot(folder / "dashboard.png")]
         for tab in v.tabs():
             v.show_tab(tab)
-            if tab.startswith("session ") and "playback" in lines and "trial" in lines:
+            kind, ident = tab_kind([view.origin for view in v.tab_views(tab)])
+            if kind == "session" and "playback" in lines and "trial" in lines:
                 n = lines["trial"][1]
                 k = (lines["playback"][1] + 1) // (n + 1)
                 v.set_time("playback", n * k + k // 2)
-            elif tab.startswith("estimate ") and "set" in lines:
-                v.set_time("set", lines["set"][1])
-            elif tab == "cluster" and "log_time" in lines:
-                v.set_time("log_time", lines["log_time"][1])
-            name = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in tab)
-            out.append(v.screenshot(folder / f"{name}.png"))
+            name = f"{kind}_{ident}" if ident else tab
+            out.append(v.screenshot(folder / ("".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name) + ".png")))
     return out
