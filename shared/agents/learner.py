@@ -270,12 +270,16 @@ class SimulatedLearner:
 
     def felt_effort(self, clip: Clip) -> float:
         """How heavy ``clip`` feels to this learner's body: ``E(clip) / (E(target) strength)``."""
+        if self.params.strength is None or self.target.skeleton is None:
+            raise BadInput("felt effort needs a learner with a strength and a target with a skeleton")
         if self._body is None:
             from shared.bodies.human import human_body  # MuJoCo: loaded only for learners with a strength
 
             self._body = human_body(self.target.skeleton)
             self._target_effort = self._effort(self.target)
-        return self._effort(clip) / (self._target_effort * float(self.params.strength))
+        target_effort = self._target_effort
+        assert target_effort is not None  # (set with the body)
+        return self._effort(clip) / (target_effort * float(self.params.strength))
 
     def _effort(self, clip: Clip) -> float:
         from shared.bodies.body import perform

@@ -163,6 +163,7 @@ class AgentStore:
                 del self.others[other]
                 (self.root / "others" / f"{_check(other)}.json").unlink(missing_ok=True)
                 return other
+            assert learner is not None  # (exactly one of the two, checked above)
             self.learner(learner)
             del self.learners[learner]
             (self.root / "learners" / f"{_check(learner)}.npz").unlink(missing_ok=True)

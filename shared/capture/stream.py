@@ -31,6 +31,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from shared.errors import BadInput
 from shared.motion.clip import Clip
@@ -386,7 +387,7 @@ def record(source: str, out: Path, *, seconds: float | None = None, frames: int 
                     if on_frame is not None:
                         on_frame(len(rows) - 1, numbers, frame_time)
                     step = max(int(round(check_every / (frame_time or 1 / 30))), 1)
-                    if until is not None and len(rows) % step == 0:
+                    if until is not None and so_far_numbers is not None and len(rows) % step == 0:
                         reason = until(so_far.clip(header, rows, so_far_numbers, frame_time, out))
                         last_arrival = time.monotonic()  # the check's own time is no gap in the stream
                         if reason:
@@ -458,7 +459,8 @@ class _Numbers:
     def __init__(self):
         import numpy as np
 
-        self._np, self._data, self._n = np, None, 0
+        self._np, self._n = np, 0
+        self._data: Any = None  # an array once the first frame came
 
     def append(self, numbers: list[float]) -> None:
         if self._data is None:

@@ -72,6 +72,7 @@ def join(clips: list[Clip], seed: int = 0, rest: tuple[float, float] = REST, lea
         parts.append(data)
         t += len(data)
         prev = data[-1]
+    assert prev is not None  # (there is a first clip)
     parts.append(rest_frames(prev, lead))
     take = first.with_data(np.vstack(parts), name=name, label=first.label)
     return take, bounds

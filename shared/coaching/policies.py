@@ -105,7 +105,7 @@ def best_alpha(final_error: dict) -> float:
     """EMU-Model 2 (fig. 5.8): the alpha of a sweep ``{alpha: final error}`` that ended lowest."""
     if not final_error:
         raise BadInput("EMU-Model 2 needs a sweep: {alpha: final error}")
-    return float(min(final_error, key=final_error.get))
+    return float(min(final_error, key=final_error.__getitem__))
 
 
 def fit_aeu(rows) -> dict:
@@ -244,6 +244,8 @@ class Policy:
             a = float(self.per_learner.get(learner, self.alpha))
             return a, table_adverb(a) if self.adverb == "table" else self.adverb
         # nb
+        if not self.nb:
+            raise BadInput("a naive Bayes policy needs a trained classifier (policy_fit)", field="nb")
         return self.alpha, predict_nb(self.nb, d_p, d_cop if d_cop is not None else 0.0)
 
     def to_dict(self) -> dict:

@@ -50,7 +50,7 @@ from shared.coaching.effort import EffortEstimate
 from shared.coaching.feasibility import MIN_KEPT, emphasis_kept, make_feasible, worse_than_target
 from shared.coaching.parts import error_shares, partial_emphasis
 from shared.coaching.policies import Policy, table_adverb
-from shared.errors import BadInput
+from shared.errors import BadInput, Unavailable
 from shared.motion.clip import Clip
 
 ALPHA_STEP = 0.25
@@ -231,7 +231,7 @@ def _goal(session: Session, attempts: list[Clip], name: str, number: int, ports:
     plan = session.subgoals
     if plan is None:
         shares = error_shares(session.target, attempts)
-        order = [p for p in sorted(shares, key=shares.get, reverse=True) if shares[p] >= SUBGOAL_MIN_SHARE]
+        order = [p for p in sorted(shares, key=shares.__getitem__, reverse=True) if shares[p] >= SUBGOAL_MIN_SHARE]
         goals = []
         # names new on every try (a trial cut short is sent again, its proto-symbols already in the
         # space) and the same in every run (reports repeat bit for bit): the space's size says which try
@@ -289,7 +289,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
         d_cop = _d_cop(session.target_cog, cog)
     alpha, adverb = session.policy.choose(d_p, d_cop, session.learner)
     shares = error_shares(session.target, attempts)
-    part = max(shares, key=shares.get) if session.policy.body_part else None
+    part = max(shares, key=shares.__getitem__) if session.policy.body_part else None
     goal, base = _goal(session, attempts, name, number, ports) if session.policy.subgoal else ("target", session.target)
     g_goal = ports.generate(session.space, {goal: 1.0}) if session.mode == "residual" and alpha > 0 else None
 
@@ -307,7 +307,10 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
 
     def effort_of(demo: Clip) -> float:
         if id(demo) not in efforts:
-            efforts[id(demo)] = (demo, float(ports.effort(demo)))
+            e = ports.effort(demo)
+            if e is None:  # (a session with an effort estimate has a learner with a body)
+                raise Unavailable("the learner's body cannot tell the demonstration's effort", cause="no_body")
+            efforts[id(demo)] = (demo, float(e))
         return efforts[id(demo)][1]
 
     def why_not(demo: Clip) -> str | None:

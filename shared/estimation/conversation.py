@@ -451,7 +451,7 @@ class OtherEstimate:
             noise.append(spread / g)
             n.append(np.mean(where) / max(n_answers - 1, 1))
         corr = fit(np.array(x), np.array(t), np.array(noise), np.array(n))  # no answers yet: no correction
-        self._correction = (n_answers, corr)
+        self._correction: tuple[int, Any] | None = (n_answers, corr)
         return corr
 
     def forget_body(self) -> None:

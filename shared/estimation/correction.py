@@ -107,6 +107,7 @@ class Correction:
         """``r`` at features ``x`` for the other as it is now; 0 when the correction is off."""
         if not self.active:
             return 0.0
+        assert self.z is not None and self.n is not None and self.alpha is not None  # set together by fit()
         z = (np.asarray(x, float) - self.centre) / self.scale
         k = kernel(z[None, :], self.z, np.ones(1), self.n, self.amplitude, self.length, self.drift)[0]
         return float(k @ self.alpha)

@@ -267,7 +267,7 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
     flat[np.array(where, dtype=np.int64)] = values
     data = flat.reshape(n_frames, nch)
     # angles in the unit the AMC declares (:RADIANS / :DEGREES), else its ASF's; lengths stay file units
-    scale = {"radians": 180.0 / math.pi, "degrees": 1.0}.get(declared, skeleton.__dict__.get("amc_angle_scale", 1.0))
+    scale = {"radians": 180.0 / math.pi, "degrees": 1.0}.get(declared or "", skeleton.__dict__.get("amc_angle_scale", 1.0))
     if scale != 1.0:
         rot = [i for i, c in enumerate(channels) if c.rsplit(".", 1)[1] in ("rx", "ry", "rz")]
         data[:, rot] *= scale

@@ -211,14 +211,14 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
     size = max(float(np.ptp(cv.rest_points(sk), axis=0).max()), 1e-9)
     modes = {}
     for j in sk.joints:
-        t = [col.get(f"{j.name}.t{a}") for a in "xyz"]
-        if all(k is not None for k in t):
+        t = [k for k in (col.get(f"{j.name}.t{a}") for a in "xyz") if k is not None]
+        if len(t) == 3:
             if j.parent >= 0:  # the root waits for the up axis and the unit: its floor decides
                 modes[j.name] = translations if translations in ("add", "replace") else \
                     cv.joint_translation_mode(data[:, t], rest[j.name], size)
                 if modes[j.name] == "replace":
                     data[:, t] -= rest[j.name]
-        elif any(k is not None for k in t) and translations != "add" and np.any(j.offset):
+        elif t and translations != "add" and np.any(j.offset):
             raise ClipFormatError(path, f"joint {j.name!r} has only some of its position channels and an offset; "
                                         "say how they combine (--translations add|replace)")
     axis = {"y": 1, "z": 2}[up] if up else cv.detect_up(sk, data, channels, path)
@@ -232,8 +232,8 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
         height = float(heights.max())
     sk.unit_m = cv.choose_unit(path, height, units)
     root = sk.root
-    t = [col.get(f"{root.name}.t{a}") for a in "xyz"]
-    if all(k is not None for k in t):
+    t = [k for k in (col.get(f"{root.name}.t{a}") for a in "xyz") if k is not None]
+    if len(t) == 3:
         modes[root.name] = translations if translations in ("add", "replace") else \
             cv.root_translation_mode(sk, data, channels, root_rest, 1, size)
         if modes[root.name] == "replace":

@@ -196,8 +196,9 @@ def fold_scene_root(sk, data: np.ndarray, channels: list[str]):
         if turned and not all(c in col for c in rot):
             break  # a turned scene node over a joint that cannot turn freely: kept as it is
         data = np.array(data, dtype=float)
-        if all(c is not None for c in tcols):  # a trajectory node's path becomes the hips' own
-            data[:, tcols] = data[:, tcols] @ r0.T + (troot - t0)
+        hips = [c for c in tcols if c is not None]
+        if len(hips) == len(tcols):  # a trajectory node's path becomes the hips' own
+            data[:, hips] = data[:, hips] @ r0.T + (troot - t0)
         if turned:
             from scipy.spatial.transform import Rotation
 
@@ -276,7 +277,8 @@ def turn_z_up_to_y_up(skeleton, data: np.ndarray, channels: list[str]):
             if any(k is None for k in t):
                 raise ClipFormatError(skeleton.name, f"joint {j.name!r} has only some of its position channels; "
                                                      "cannot turn it to Y up (give --up y to read it as it is)")
-            data[:, t] = data[:, t] @ Z_TO_Y.T
+            xyz = [k for k in t if k is not None]
+            data[:, xyz] = data[:, xyz] @ Z_TO_Y.T
         joints.append(Joint(j.name, j.parent, Z_TO_Y @ j.offset, list(j.dofs), j.euler, Z_TO_Y @ j.pre,
                             None if j.end is None else Z_TO_Y @ j.end, dict(j.limits)))
     return Skeleton(skeleton.name, joints, skeleton.unit_m, 1, skeleton.source_format), data

@@ -45,6 +45,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from shared.motion.clip import Clip
+from shared.motion.skeleton import Skeleton
 from shared.observe import labels as lab
 from shared.observe import layout as lay
 
@@ -120,8 +121,7 @@ def face_the_camera(pos: np.ndarray, sides: list[str], up: int) -> np.ndarray:
 
 
 def _xy(p) -> list[float]:
-    p = [float(v) for v in list(p)[:2]]
-    return p + [0.0] * (2 - len(p))
+    return ([float(v) for v in list(p)[:2]] + [0.0, 0.0])[:2]  # a point on the first two axes (0 where it has none)
 
 
 def _bars(rec, entity: str, xs: list[int], values: list[float], colour, width: float = 0.8, offset: float = 0.0):
@@ -177,12 +177,14 @@ class Dashboard:
         """A session's tab: its motion, its learner and its id."""
         target = self.targets[s]
         parts = [lay.short(target.label or target.name or "target", 20)]
-        if self.learners.get(s):
-            parts.append(lay.short(self.learners[s], 16))
+        learner = self.learners.get(s)
+        if learner:
+            parts.append(lay.short(learner, 16))
         return " · ".join(parts + [s])  # the id whole: tabs are told apart by it
 
     def _session_tab(self, s: str) -> rrb.Container:
-        up = self.targets[s].skeleton.up_axis if self.targets[s].skeleton else 1
+        sk = self.targets[s].skeleton
+        up = sk.up_axis if sk is not None else 1
         return lay.session_tab(s, self.session_title(s), self.curves.get(s, []), up, SIDE_BY_SIDE["attempt"])
 
     def estimate_title(self, e: str) -> str:
@@ -231,8 +233,7 @@ class Dashboard:
         the timeline the recording opens on too (the latest of it, from the first frame on)."""
         self._at(**{"playback": 0, "trial": 0, **times})
 
-    def _body_context(self, s: str, clip: Clip) -> None:
-        sk = clip.skeleton
+    def _body_context(self, s: str, sk: Skeleton) -> None:
         names = [j.name for j in sk.joints]
         lower = {n.lower() for n in names}
         keypoints = [rr.AnnotationInfo(i, n, JOINT_COLOURS[_side(n, lower)]) for i, n in enumerate(names)]
@@ -271,12 +272,14 @@ class Dashboard:
         return clip.with_data(data, skeleton=sk), pos
 
     def _people(self, s: str, role: str, pose: tuple[Clip, np.ndarray] | None, trial: int) -> None:
-        """One motion (:meth:`_pose`) on the trial's block of ``playback``, side by side and overlaid."""
+        """One motion (:meth:`_pose`: with a skeleton) on the trial's block of ``playback``, side by
+        side and overlaid."""
         if pose is None:
             return
         clip, pos = pose
         k = self.frames[s]
-        data, ground = clip.data, [a for a in range(3) if a != clip.skeleton.up_axis]
+        up = clip.skeleton.up_axis if clip.skeleton is not None else 1
+        data, ground = clip.data, [a for a in range(3) if a != up]
         n, j = pos.shape[:2]
         times = [rr.TimeColumn("playback", sequence=trial * k + np.arange(n)),
                  rr.TimeColumn("trial", sequence=np.full(n, trial))]
@@ -322,7 +325,7 @@ class Dashboard:
             "the target, the attempt and the emphatic motion shown after it.", media_type=rr.MediaType.MARKDOWN))
         if target.skeleton is None:
             return
-        self._body_context(session, target)
+        self._body_context(session, target.skeleton)
         self.poses[session] = self._pose(session, target)  # drawn again in every trial's block, computed once
         self._people(session, "target", self.poses[session], 0)
 

@@ -27,8 +27,8 @@ requests, live capture takes, every transcript, request latencies) and this one.
 **A session's tab.** Left: three people side by side, blue the target, orange the learner's
 attempt, red the emphatic motion shown next (yellow joints are the left side, cyan the right),
 the same three overlaid, and joint angles. Right: the trial playing and the coach's words; the
-session's proto-symbol space (its motions' points, the attempts' path in orange, the emphatic
-points in red, the target in blue, the playing trial labelled); `d_p` (distance to the target)
+session's proto-symbol space on its first two axes (its points grey, the attempts' path in
+orange, the emphatic points in red, the target in blue, the playing trial labelled); `d_p` (distance to the target)
 and alpha per trial, the playing trial's bar lighter; one line per trial with `R` (`d_p` over the
 first trial's).
 
@@ -87,7 +87,8 @@ def session_tab(s: str, title: str, curves: list[str], up: int, side_by_side_x: 
             rrb.Spatial3DView(origin=f"sessions/{s}/body", name="target (blue) | attempt (orange) | shown next (red)",
                               eye_controls=front(side_by_side_x, 4.0, up)),
             rrb.Horizontal(rrb.Spatial3DView(origin=f"sessions/{s}/overlay", name="overlaid",
-                                             eye_controls=front(0.0, 3.0, up)), *curve_views),
+                                             eye_controls=front(0.0, 3.0, up)), *curve_views,
+                           column_shares=[1.5] + [1.0] * len(curve_views)),
             row_shares=[3, 2]),
         rrb.Vertical(
             rrb.TextDocumentView(origin=f"sessions/{s}/now", name="the trial playing"),

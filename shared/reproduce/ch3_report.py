@@ -179,7 +179,7 @@ def equal_population_lines(summ: dict, which: str) -> list[str]:
         if e["body"] > min(s["thesis_unknown"], s["space_unknown"]):
             behind.append(kind)
         lines.append(f"| {kind} | {e['thesis_questions']} | {_pct(s['thesis_unknown'])} | {_pct(s['space_unknown'])} | "
-                     f"{_pct(e['body'])} ({e['questions']:.0f}) | {min(errs, key=errs.get)} |")
+                     f"{_pct(e['body'])} ({e['questions']:.0f}) | {min(errs, key=errs.__getitem__)} |")
     lines += ["", "**The body estimator at least matches the thesis and space estimators at equal numbers of "
               f"questions on every kind:** {verdict(not behind)}" + (f" (behind on {', '.join(behind)})" if behind else "") + ".", ""]
     return lines
@@ -224,7 +224,7 @@ def equal_questions_lines(curves: dict, group: str = "unknown") -> list[str]:
         if f"space_{group}" in last:  # the space estimator asks the thesis's questions
             errs["space"] = last[f"space_{group}"]["error"]
         lines.append(f"| {label} | {q} | {_pct(errs['thesis'])} | {_pct(errs['space']) if 'space' in errs else '-'} | "
-                     f"{_pct(errs['body'])} (set {b['set']}, {b['questions']['body']} asked) | {min(errs, key=errs.get)} |")
+                     f"{_pct(errs['body'])} (set {b['set']}, {b['questions']['body']} asked) | {min(errs, key=errs.__getitem__)} |")
     return lines + [""]
 
 

@@ -128,7 +128,7 @@ def run_target(client, target, key: str, learners: int, echo=print, family: str 
             gains = {adv: logs[adv][i]["trials"][t]["d_p"] - logs[adv][i]["trials"][t + 1]["d_p"] for adv in ADVERBS}
             row = logs[ADVERBS[1]][i]["trials"][t]
             feats.append([row["d_p"], row.get("d_cop") or 0.0])
-            labels.append(max(gains, key=gains.get))
+            labels.append(max(gains, key=gains.__getitem__))
     try:
         nb = client.request("coach", "policy_fit", {"kind": "nb", "features": feats, "labels": labels, "alpha": 2.0})
         nb_d = Experiment.d(ex.group("nb", lambda i: nb["policy"]))

@@ -228,6 +228,7 @@ def _section(out: Path, family: str, key: str, res: dict) -> list[str]:
         lines += [f"Naive Bayes: not trained ({nb['why']}).", ""]
     else:
         f = _finding(res, "nb")
+        assert f is not None  # (trained: its d is there)
         lines += [f"Naive Bayes, trained on {len(nb['labels'])} states of population {NB_TRAIN_SEED} (labels: "
                   + ", ".join(f"{a} {nb['labels'].count(a)}" for a in ADVERBS) + f"), tested on this one: R_4 "
                   f"{r4_of(nb['d']).mean():.3f}; the best fixed case, {f['against']}, "
