@@ -129,14 +129,15 @@ def qpos_trajectory(body: Body, clip: Clip) -> np.ndarray:
             q[:, d.qpos] = np.radians(angles[:, k]) if d.scale is None else angles[:, k] * d.scale
     if body.root is not None:
         sk = body.skeleton
+        assert sk is not None  # (a free root: a person's body, built from a skeleton)
         r = body.root
         trans = np.stack([clip.column(f"{r}.t{a}") if f"{r}.t{a}" in clip.channels else np.zeros(n) for a in "xyz"], axis=1)
         trans = savgol_filter(trans, w, 3, axis=0, mode="interp")
         root_joint = sk.joints[sk.index(r)]
         q[:, 0:3] = (root_joint.offset + trans) * sk.unit_m
-        rot = [c for c in clip.channels if c.startswith(f"{r}.r")]
-        smooth = savgol_filter(clip.select(rot), w, 3, axis=0, mode="interp") if rot else np.zeros((n, 0))
-        values = {c: smooth[:, k] for k, c in enumerate(rot)}
+        root_rot = [c for c in clip.channels if c.startswith(f"{r}.r")]
+        smooth = savgol_filter(clip.select(root_rot), w, 3, axis=0, mode="interp") if root_rot else np.zeros((n, 0))
+        values = {c: smooth[:, k] for k, c in enumerate(root_rot)}
         glob = sk.local_rotations(values, n, joints=[root_joint])[0]
         from scipy.spatial.transform import Rotation
 
@@ -319,7 +320,7 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
             outside += 1
             flags[t] = True
             worst = max(worst, dist - margin)
-        if wrench is not None:
+        if wrench is not None and cop is not None:
             push = float(wrench[0][t, up])
             # the ground pulls (more than a tenth of the weight), or its push acts outside the feet
             dyn[t] = push < -0.1 * weight or (push > 0.1 * weight and np.all(np.isfinite(cop[t]))
@@ -342,10 +343,9 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
         if d.channel in body.friction:
             tau[:, d.dof] += body.friction[d.channel] * coulomb(v[:, d.dof])
     limits = {}
-    limited = [d for d in body.dofs if d.limits is not None and d.channel in clip.channels]
-    for d in limited:
+    limited = [(d, d.limits) for d in body.dofs if d.limits is not None and d.channel in clip.channels]
+    for d, (lo, hi) in limited:
         x = clip.column(d.channel)
-        lo, hi = d.limits
         bad = int(np.sum((x < lo - 1.0) | (x > hi + 1.0)))
         if bad:
             limits[d.channel] = {"frames": bad, "min": float(x.min()), "max": float(x.max()), "limits": [lo, hi]}

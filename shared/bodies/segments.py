@@ -480,6 +480,7 @@ def body_frame(sk: Skeleton, data: np.ndarray | None = None, channels: list[str]
     if standing:
         best = answers(rest, r0)[0]
     elif data is not None and len(data):
+        assert channels is not None  # (the data's columns)
         data = np.asarray(data, float)
         idx = np.unique(np.linspace(0, len(data) - 1, min(len(data), FRAME_SAMPLES)).round().astype(int))
         votes = answers(sk.forward_kinematics(data[idx], channels, ends=False), sk.root_matrices(data[idx], channels))

@@ -177,6 +177,7 @@ def plant_feet(body: Body, reference: Clip, motion: Clip) -> tuple[Clip, dict]:
         delta[t] = qt[adr] - x0
     delta = _smoothed(delta, motion.fps)
     data_out = motion.data.copy()
+    assert body.skeleton is not None  # (feet to plant: a person's body)
     data_out[:, motion.channels.index(root_up)] += delta[:, 0] / body.skeleton.unit_m
     for k, d in enumerate(legs):
         i = motion.channels.index(d.channel)

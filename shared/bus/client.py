@@ -110,7 +110,8 @@ class Client:
         self.arrays = arrays
         self.settings = settings or Settings()
         try:
-            self.session = zenoh.open(client_config(self.settings, wait=False, connect_timeout_s=connect_timeout_s))
+            self._session: zenoh.Session | None = zenoh.open(client_config(self.settings, wait=False,
+                                                                           connect_timeout_s=connect_timeout_s))
         except zenoh.ZError:
             ident = self.settings.identity
             if ident is not None:
@@ -132,9 +133,16 @@ class Client:
         for s in self._subs:
             s.undeclare()
         self._subs.clear()
-        if self.session is not None:
-            self.session.close()
-            self.session = None
+        if self._session is not None:
+            self._session.close()
+            self._session = None
+
+    @property
+    def session(self):
+        """The open Zenoh session (closed by :meth:`close`: a request after it is refused)."""
+        if self._session is None:
+            raise Unavailable("this client is closed", cause="closed")
+        return self._session
 
     # ------------------------------------------------------------------ requests
     def request_raw(self, service: str, verb: str, payload: bytes, timeout: float | None = None) -> dict:

@@ -34,6 +34,7 @@ import time
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from shared.bus.config import Settings
 from shared.bus.pidfiles import (
@@ -168,6 +169,7 @@ class Supervisor:
                         if now >= p.restart_at:
                             self._start(p)
                         continue
+                    assert p.popen is not None  # (started, and not waiting to restart)
                     code = p.popen.poll()
                     if code is None:
                         if now - p.started > 30:
@@ -217,6 +219,7 @@ def status(settings: Settings | None = None) -> list[dict]:
             alive = c.alive(timeout=1.0)
     except Unavailable:
         pass
+    rows: list[dict[str, Any]]
     if s.identity is not None:  # deployed: processes live on other hosts; the bus says who is alive
         rows = [{"name": "router", "pid": None, "alive": router_up}]
         for p in plan:

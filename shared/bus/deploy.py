@@ -46,6 +46,7 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from shared.errors import BadInput
 
@@ -255,7 +256,7 @@ def zenoh_config(ident: Identity, max_message_size: int, lease_ms: int, acl_sect
     resolves them)."""
     tls = {"root_ca_certificate": "ca.pem", "enable_mtls": True, "verify_name_on_connect": True,
            "connect_private_key": "key.pem", "connect_certificate": "cert.pem"}
-    cfg = {
+    cfg: dict[str, Any] = {
         "mode": "router" if ident.role == "router" else "client",
         # a router links to the cluster's other routers; everyone else to every router
         "connect": {"endpoints": [e for e in ident.routers if e not in (ident.listen or [])]},
@@ -378,7 +379,8 @@ def init(out, routers: list[str], identities: list[str], prefix: str = "mc", day
     for n, role in ids:
         members[role].append(cert_name(n, role))
     section = acl(prefix, members)
-    plan = [(n, "router", [a], [_endpoint(a, p)]) for n, a, p in rs] + [(n, role, [], None) for n, role in ids]
+    plan: list[tuple[str, str, list[str], list[str] | None]] = [(n, "router", [a], [_endpoint(a, p)]) for n, a, p in rs]
+    plan += [(n, role, [], None) for n, role in ids]
     for name, role, hosts, listen in plan:
         folder = out / name
         key, cert = issue(ca_key, ca_cert, cert_name(name, role), hosts, days, role)

@@ -150,7 +150,7 @@ def main() -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    where = ", ".join(settings.identity.listen) + " (TLS, access control)" if settings.identity else settings.router
+    where = ", ".join(settings.identity.listen or []) + " (TLS, access control)" if settings.identity else settings.router
     log.info("router listening on %s", where)
     while not stop.wait(0.5):
         pass

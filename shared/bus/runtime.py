@@ -203,9 +203,15 @@ class Service:
                 out.append(str(r.ok.key_expr).rsplit("/", 1)[-1])
         return out
 
+    def _me(self) -> str:
+        """This instance's identity (leadership runs only with one: several hosts)."""
+        ident = self.settings.identity
+        assert ident is not None
+        return ident.name
+
     def _leadership(self, period_s: float = 0.5) -> None:
         """Lead or stand by (module docstring), checked every ``period_s`` until stopped."""
-        me = self.settings.identity.name
+        me = self._me()
         while not self._stop.wait(period_s):
             try:
                 connected = bool(list(self._session.info.routers_zid()))
@@ -225,7 +231,7 @@ class Service:
             return
         for hook in self.on_promote:
             hook()
-        me = self.settings.identity.name
+        me = self._me()
         self._leader_token = self._session.liveliness().declare_token(self.settings.key("leader", self.name, me))
         self._queryable = self._session.declare_queryable(self.settings.key(self.name, "*"), self._on_query)
         self._token = self._session.liveliness().declare_token(self.settings.key("alive", self.name))
@@ -242,7 +248,7 @@ class Service:
                     obj.undeclare()
                 except Exception:  # the session may already be cut off
                     pass
-        log.warning("service %s: %s stands by (%s)", self.name, self.settings.identity.name, why)
+        log.warning("service %s: %s stands by (%s)", self.name, self._me(), why)
 
     def run(self) -> int:
         """Start, serve until SIGTERM/SIGINT, stop. Returns the exit code."""
@@ -328,7 +334,9 @@ class Service:
                     {"cause": "saturated", "service": self.name}))
             return
         try:
-            (self._wait_pool if waits else self._pool).submit(self._serve, query, size, waits)
+            pool = self._wait_pool if waits else self._pool
+            assert pool is not None  # (started before the queryable; a question waits only where a pool waits)
+            pool.submit(self._serve, query, size, waits)
         except RuntimeError:  # pool shut down: we are stopping
             self._done(size, waits)
             with query:

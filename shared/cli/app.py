@@ -109,6 +109,7 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
             reading = prog.add_task("reading clips (statistics, then one HMM at a time)", total=2 * len(files))
             clips = LazyClips(files, read=lambda f: read_clip(f, skeleton=skeleton),
                               on_read=lambda _: prog.advance(reading))
+        assert clips is not None  # (read, or to be read one at a time)
         task = prog.add_task("training proto-symbols", total=len(clips))
         space = ProtoSymbolSpace.build(clips, dim=dim, n_states=states, group_by=group_by, name=out.stem,
                                        progress=lambda done, total: prog.update(task, completed=done, total=total))
@@ -198,7 +199,7 @@ def space_generate(space_file: Path = typer.Argument(..., help="Space file."),
     if point is not None:
         clip = space.generate(parse_point(point), method=method, seed=seed, name=out.stem)
     else:
-        clip = space.generate(weights=space.mix_weights(parse_mix(mix)), method=method, seed=seed, name=out.stem)
+        clip = space.generate(weights=space.mix_weights(parse_mix(mix or [])), method=method, seed=seed, name=out.stem)
     save_clip(clip, out)
     typer.echo(f"wrote {out} ({clip.n_frames} frames at {clip.fps:g} fps)")
 

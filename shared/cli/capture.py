@@ -238,6 +238,7 @@ def capture_cut(name: str = typer.Argument(..., help="A finished take on the cap
     files = []
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
+        assert whole is not None  # (asked for with out)
         save_clip(clip_from_wire(whole), out / "take.bvh")
         for k, part in enumerate(r["clips"], 1):
             save_clip(clip_from_wire(part), out / f"rep{k}.bvh")

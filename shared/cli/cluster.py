@@ -139,7 +139,7 @@ def space_generate(name: str = typer.Argument(..., help="Space name."),
     if point is not None:
         req["point"] = parse_point(point)
     else:
-        req["mix"] = parse_mix(mix)
+        req["mix"] = parse_mix(mix or [])
     with client() as c:
         r = c.request("pss", "generate", req, timeout=timeout)
     clip = clip_from_wire(r["clip"])

@@ -242,7 +242,7 @@ def study_attempt(folder: Path = FOLDER,
     if take is not None:
         attempts = _cut(read_clip(take, skeleton=skeleton), load_clip(folder / "target.npz"), expected)
     else:
-        attempts = [read_clip(x, skeleton=skeleton) for x in clips]
+        attempts = [read_clip(x, skeleton=skeleton) for x in clips or []]
     _trial(folder, participant, attempts, say, aloud)
 
 
@@ -281,7 +281,7 @@ def _trial(folder: Path, participant: str, attempts: list, say: bool, aloud: boo
                                                    "adverb": r.get("adverb")}, shown))
     typer.echo(f"{participant}, case {case}, trial {step['trial']}: d_p {r['d_p']:.1f}"
                + ("; case done" if last else f"; next: show {shown}" + (f' and say "{r["adverb"]}"' if r.get("adverb") else "")))
-    if say and not last and r.get("adverb"):
+    if say and shown is not None and r.get("adverb"):
         from shared.cli.live import say as say_adverb
 
         say_adverb(r["adverb"], Path(shown).with_suffix(".wav"), aloud)
@@ -436,6 +436,7 @@ def study_seat(folder: Path = FOLDER, coach: str = typer.Option(..., help="The h
                 attempt = c.request("simulator", "learner_imitate", {"learner": learner, "demonstration": demo})["attempts"]
             c.request("simulator", "delete", {"learner": learner})
             r = c.request("coach", "attempt", {"session": session, "clips": attempt})
+            assert attempt is not None  # (imitated at least once)
             shown = _save_shown(folder, f"seat_{coach}_{k + 1}_attempt", clip_from_wire(attempt[0], target.skeleton),
                                 target.fps)
             typer.echo(f"attempt {k + 1} of {count}: {shown}  (target: {_target_shown(folder)})")
