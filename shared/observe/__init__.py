@@ -1,2 +1,4 @@
-"""Observability: the rerun dashboard fed by the cluster's events (only the observer imports it)
-and the real viewer driven headless for screenshots. Imports ``motion`` and ``errors``."""
+"""Observability: the rerun dashboard fed by the cluster's events (``dashboard``: what is logged;
+``layout``: its tabs and views; ``labels``: labels that never overlap; only the observer imports
+it) and the real viewer driven headless for screenshots (``viewer``). Imports ``motion`` and
+``errors``."""
