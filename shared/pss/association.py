@@ -100,6 +100,7 @@ def associate_frames(space: ProtoSymbolSpace, clip, method, seed, weighting="aff
         ll = m.log_likelihood_of([seq], end_in_last=False)
         if ll > best_ll:
             best_ll, best_prog = ll, m.progress(seq)
+    assert best_prog is not None  # (one model at least)
     k = int(np.argmax(best_prog)) + 1
     k = int(np.clip(k, 1, min(p.n_states, len(seq))))
     hmm = fit_hmm([seq], k, covariance_type=p.covariance_type, var_floor=p.var_floor, backend=p.backend, n_iter=p.n_iter)

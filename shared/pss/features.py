@@ -58,7 +58,7 @@ heading and floor position integrated from the yaw rate and the velocity (starti
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -147,6 +147,12 @@ def _point_rows(sk: Skeleton, ref: Skeleton) -> np.ndarray:
     return np.array([row[n] for n in names(ref)])
 
 
+def _needed(sk: Skeleton | None) -> Skeleton:
+    if sk is None:
+        raise BadInput("this feature map has no skeleton (its space was built from clips without one)")
+    return sk
+
+
 class MotionFeatures:
     """The invertible feature map of one space (all its clips share one skeleton layout).
 
@@ -190,8 +196,8 @@ class MotionFeatures:
         self.rot_joints = [j for j, chs in per_joint.items() if len(chs) == 3] if (
             rotations == "6d" and skeleton is not None) else []
         #: their axis pre-rotations ``C`` in the space's skeleton (R, 3, 3)
-        self.rot_pre = np.array([skeleton.joints[skeleton.index(j)].pre for j in self.rot_joints],
-                                dtype=float).reshape(-1, 3, 3)
+        self.rot_pre = np.array([skeleton.joints[skeleton.index(j)].pre for j in self.rot_joints]
+                                if skeleton is not None else [], dtype=np.float64).reshape(-1, 3, 3)
         self.sincos_channels = [c for c in self.angle_channels if c.rsplit(".", 1)[0] not in self.rot_joints]
         self.plain_channels = [c for c in self.motion_channels
                                if c not in self.angle_channels and c.rsplit(".", 1)[0] != root]
@@ -237,9 +243,14 @@ class MotionFeatures:
     def has_position(self) -> bool:
         return bool(self.position_feature_names)
 
-    def body(self, clip: Clip) -> Skeleton:
+    @property
+    def sk(self) -> Skeleton:
+        """The space's skeleton, for the features that need one (a map without one has none of them)."""
+        return _needed(self.skeleton)
+
+    def body(self, clip: Clip) -> Skeleton | None:
         """The skeleton to read a clip with: its own (its bone lengths, Euler orders and axis
-        conventions) when it has the space's joints, else the space's."""
+        conventions) when it has the space's joints, else the space's (None: a space without one)."""
         sk = clip.skeleton
         if sk is not None and self.skeleton is not None and _layout(sk) == _layout(self.skeleton):
             return sk
@@ -247,10 +258,10 @@ class MotionFeatures:
 
     def _raw_positions(self, clip: Clip, root_terms: np.ndarray, psi: np.ndarray) -> np.ndarray:
         """The position group before z-scoring: joints in the heading frame ``psi``, in body heights."""
-        sk = self.body(clip)
+        sk = _needed(self.body(clip))
         p = sk.forward_kinematics(clip.data, clip.channels)  # (T, J + ends, 3) metres, Y up, in sk's order
         if sk is not self.skeleton:  # the same joints listed in another order (a BVH lists them depth first)
-            p = p[:, _point_rows(sk, self.skeleton)]
+            p = p[:, _point_rows(sk, self.sk)]
         height = sk.rest_height() if self.frame is None else stature(sk, head_top=False)
         rel = (p[:, 1:] - p[:, :1]) / height
         c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
@@ -284,7 +295,7 @@ class MotionFeatures:
         positions = bool(base._position_names())
         # the mean and deviation over every frame of every clip, clip by clip (a stack of all the
         # frames held 0.5 GB for 1,000 game-studio clips); shifted by the first clip's mean
-        sums: dict[str, list | None] = {"sensor": None, "position": None}
+        sums: dict[str, Any] = {"sensor": None, "position": None}  # [shift, total, squares] once a clip came
         count, largest = 0, 0.0
 
         def add(key: str, values: np.ndarray) -> None:
@@ -334,12 +345,12 @@ class MotionFeatures:
         """The clip's own skeleton when it composes some joint's rotation otherwise than the
         space's (another Euler order or axis pre-rotation), else None."""
         body = self.body(clip)
-        if body is self.skeleton or self.skeleton is None:
+        if body is None or body is self.skeleton:  # (a space without a skeleton: None)
             return None
         ref = self._angle_joints
         if ref is None:  # the space's own convention of the joints that carry angle channels, once
             names = list(dict.fromkeys(c.rsplit(".", 1)[0] for c in self.angle_channels))
-            joints = [self.skeleton.joints[self.skeleton.index(n)] for n in names]
+            joints = [self.sk.joints[self.sk.index(n)] for n in names]
             ref = self._angle_joints = (names, [j.euler for j in joints],
                                         np.array([j.pre for j in joints]).reshape(len(joints), 3, 3))
         names, eulers, pres = ref
@@ -364,7 +375,7 @@ class MotionFeatures:
         out = np.zeros((clip.n_frames, len(self.sincos_channels)))
         col = {c: i for i, c in enumerate(self.sincos_channels)}
         for name in dict.fromkeys(c.rsplit(".", 1)[0] for c in self.sincos_channels):
-            ref = self.skeleton.joints[self.skeleton.index(name)]
+            ref = self.sk.joints[self.sk.index(name)]
             m = ref.pre.T @ local[:, body.index(name)] @ ref.pre
             seq = ref.euler
             one = Rotation.from_matrix(m).as_euler(seq)
@@ -428,6 +439,7 @@ class MotionFeatures:
         if root is not None:
             cols.append(root)
         if "position" in groups and self.has_position:
+            assert root is not None and heading is not None  # (positions are had with the root's terms)
             cols.append((self._raw_positions(clip, root, heading) - self.position_mean) / self.position_scale)
         if "sensor" in groups and self.sensor_channels:
             miss = [c for c in self.sensor_channels if c not in clip.channels]
@@ -443,7 +455,7 @@ class MotionFeatures:
         """The three-axis joints' rotations (T, 6 R): the first two columns of each one's local
         rotation in the space skeleton's joint frame, ``M = C^T L C`` with ``L`` the clip's
         rotation in the world-aligned rest frame (module docstring)."""
-        body = self.body(clip)
+        body = _needed(self.body(clip))
         local = body.local_matrices(clip.data, clip.channels)[:, [body.index(j) for j in self.rot_joints]]
         pre = self.rot_pre
         m = np.einsum("jba,tjbc,jcd->tjad", pre, local, pre)  # C^T L C: the space's own joint frame
@@ -463,7 +475,7 @@ class MotionFeatures:
         e2 = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
         local = np.stack([e1, e2, np.cross(e1, e2)], axis=-1)  # columns of M
         for k, name in enumerate(self.rot_joints):
-            j = self.skeleton.joints[self.skeleton.index(name)]
+            j = self.sk.joints[self.sk.index(name)]
             m = local[:, k]  # already in the joint's own frame (M = C^T L C)
             ang = continuous_euler(Rotation.from_matrix(m).as_euler(j.euler, degrees=True), j.euler)
             for i, ax in enumerate(j.euler.lower()):
@@ -474,7 +486,7 @@ class MotionFeatures:
 
     def _root_terms(self, clip: Clip) -> tuple[np.ndarray, np.ndarray]:
         """The root's motion features and its unwrapped heading (rad) per frame."""
-        sk = self.body(clip)
+        sk = _needed(self.body(clip))
         r = sk.root.name
         out = []
         rot = sk.root_matrices(clip.data, clip.channels)
@@ -531,10 +543,9 @@ class MotionFeatures:
         return Clip(np.column_stack(data), chans, fps, self.skeleton, groups, name=name)
 
     def _decode_root(self, x, k, fps, values) -> int:
-        sk = self.skeleton
+        sk = self.sk
         root = sk.root
         n = len(x)
-        up = None
         if self.root_rot:
             up = x[:, k:k + 3]
             k += 3

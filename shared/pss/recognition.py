@@ -184,7 +184,7 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
         block = d[lo:lo + 512].copy()
         rows_i = np.arange(lo, min(lo + 512, len(labels_a)))
         block[rows_i - lo, rows_i] = np.inf
-        if across:
+        if across and perf is not None:
             block[perf[rows_i][:, None] == perf[None, :]] = np.inf
         for k in range(len(classes)):
             cols = label_id == k
@@ -322,16 +322,16 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
     p = softmax_confidence(dc, cal.temperature)
     order = np.argsort(dc)
     k = int(order[0])
-    have = features is not None
-    model, p_model = novelty_model.judged(features) if novelty_model is not None and have else (0.0, 1.0)
-    ratio, p_ratio = discriminant.judged(features) if discriminant is not None and have else (0.0, 1.0)
+    model, p_model = (novelty_model.judged(features) if novelty_model is not None and features is not None
+                      else (0.0, 1.0))
+    ratio, p_ratio = discriminant.judged(features) if discriminant is not None and features is not None else (0.0, 1.0)
     distance = 0.0
     credibility = [p_model, p_ratio]
     if np.isfinite(cal.threshold) and cal.threshold > 0:
         scale = cal.class_scales[k] if cal.class_scales else 1.0
         distance = float(dc[k] / scale / cal.threshold)
         credibility.append(conformal_p_value(cal.scores or [], float(dc[k] / scale)))
-    if (discriminant is None or not have) and len(dc) > 1 and np.isfinite(cal.ratio_threshold) \
+    if (discriminant is None or features is None) and len(dc) > 1 and np.isfinite(cal.ratio_threshold) \
             and np.isfinite(dc[order[1]]) and cal.ratio_threshold > 0:
         distance = max(distance, float(dc[k] / max(dc[order[1]], 1e-12) / cal.ratio_threshold))
     novelty = max(distance, model, ratio)

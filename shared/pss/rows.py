@@ -46,6 +46,7 @@ def appended(array: np.ndarray, rows: np.ndarray) -> np.ndarray:
         out[:n] = array
         out[n:] = rows
         return out
+    assert buf is not None  # (mine: the array's own base)
     buf[n:n + k] = rows
     return buf[:n + k]
 

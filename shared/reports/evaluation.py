@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from shared.errors import BadInput
 from shared.motion.clip import Clip
 from shared.pss.space import ProtoSymbolSpace, performer
 
@@ -50,6 +51,13 @@ class RecognitionResult:
     seconds_per_clip: float  # median
     predictions: list[str] = field(default_factory=list)
     truth: list[str] = field(default_factory=list)
+
+
+def label_of(clip: Clip) -> str:
+    """A labelled clip's class (every clip of a recognition report is labelled: its folder)."""
+    if clip.label is None:
+        raise BadInput(f"clip {clip.name!r} has no label: a recognition report needs each clip's class")
+    return clip.label
 
 
 def _summarise(method, truth, pred, seconds) -> RecognitionResult:
@@ -208,7 +216,7 @@ def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.n
     performers) and the same discriminant ratio (a shrinkage LDA) as ours."""
     from shared.pss.recognition import DiscriminantRatio, NoveltyModel, calibrate, decide
 
-    classes = sorted({c.label for c in train})
+    classes = sorted({label_of(c) for c in train})
     rows = []
     for k, held in enumerate(classes):
         keep = np.array([c.label != held for c in train])
@@ -217,21 +225,24 @@ def open_set(train: list[Clip], test: list[Clip], *, dtw: tuple[np.ndarray, np.n
         row: dict[str, Any] = {"held_out": held, "novel": [c.label == held for c in test], "scores": {}}
         for c in test:
             r = space.recognize(c)
-            _tally(row, "pss", c.label == held, r.decision.novelty)  # and each of the decision's tests alone
-            _tally(row, "pss_distance", c.label == held, r.decision.distance_novelty)
-            _tally(row, "pss_ratio", c.label == held, r.decision.ratio_novelty)
-            _tally(row, "pss_model", c.label == held, r.decision.model_novelty)
+            d = r.decision
+            assert d is not None  # (a space calibrated on its own proto-symbols decides)
+            _tally(row, "pss", c.label == held, d.novelty)  # and each of the decision's tests alone
+            _tally(row, "pss_distance", c.label == held, d.distance_novelty)
+            _tally(row, "pss_ratio", c.label == held, d.ratio_novelty)
+            _tally(row, "pss_model", c.label == held, d.model_novelty)
             row.setdefault("confidence", []).append(float(r.confidence))  # what the user is told of its nearest class
         if dtw is not None:
             d_tr, d_te = dtw
-            labels = [c.label for c in tr]
+            labels = [label_of(c) for c in tr]
             cal = calibrate(d_tr[np.ix_(keep, keep)], labels, [performer(c) for c in tr])
             for c, di in zip(test, d_te[:, keep]):
                 _tally(row, "dtw", c.label == held, decide(di, labels, cal).novelty)
         if minirocket is not None:
             f_tr, f_te = minirocket
-            args = f_tr[keep], [c.label for c in tr], [performer(c) for c in tr]
+            args = f_tr[keep], [label_of(c) for c in tr], [performer(c) for c in tr]
             model, disc = NoveltyModel.fit(*args), DiscriminantRatio.fit(*args)
+            assert model is not None and disc is not None  # (fitted on every class but one: two at least)
             for c, f in zip(test, f_te):
                 _tally(row, "minirocket", c.label == held, max(model.novelty(f), disc.novelty(f)))
         rows.append(row)
@@ -270,6 +281,8 @@ def transformed(clip: Clip, how: str) -> Clip:
     from shared.motion.skeleton import Joint, Skeleton
 
     sk = clip.skeleton
+    if sk is None:
+        raise BadInput(f"clip {clip.name!r} has no skeleton: it cannot be moved, turned or scaled")
     root = sk.root
     tcols = [clip.channels.index(f"{root.name}.t{a}") for a in "xyz"]
     data = clip.data.copy()
@@ -345,7 +358,7 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
             recs = [space.recognize(c) for c in test]
             point = pss_recognition(space, test, use="point")
             robust = robustness(space, test)
-        truth = [c.label for c in test]
+        truth = [label_of(c) for c in test]
         ours = _summarise("PSS (label)", truth, [r.nearest_label for r in recs], [r.seconds for r in recs])
         shown = _summarise("PSS as shown", truth, [r.label or NONE_OF_THESE for r in recs], [r.seconds for r in recs])
         conf = np.array([r.confidence for r in recs])
