@@ -87,8 +87,7 @@ def session_tab(s: str, title: str, curves: list[str], up: int, side_by_side_x: 
             rrb.Spatial3DView(origin=f"sessions/{s}/body", name="target (blue) | attempt (orange) | shown next (red)",
                               eye_controls=front(side_by_side_x, 4.0, up)),
             rrb.Horizontal(rrb.Spatial3DView(origin=f"sessions/{s}/overlay", name="overlaid",
-                                             eye_controls=front(0.0, 3.0, up)), *curve_views,
-                           column_shares=[1.5] + [1.0] * len(curve_views)),
+                                             eye_controls=front(0.0, 2.4, up)), *curve_views),
             row_shares=[3, 2]),
         rrb.Vertical(
             rrb.TextDocumentView(origin=f"sessions/{s}/now", name="the trial playing"),
