@@ -104,15 +104,21 @@ def empty_views(viewer_ok, tmp_path_factory):
     return most
 
 
-def _empty_panels(v, tab: str, empty_views: dict) -> list[str]:
+def _empty_panels(v, tab: str, empty_views: dict, looks: int = 3) -> list[str]:
     """The views of ``tab`` that look like a view of their kind with nothing in it: no more pixels
     off the background than 1.5 times an empty one's (and 0.1 % of the panel) and no more than
-    twice its colours."""
+    twice its colours, each time it is looked at (``looks`` times, a second apart: a busy machine
+    may paint a panel late)."""
     out = []
     for view in v.tab_views(tab):
-        far, colours = _content(v.client.take_screenshot(view_id=view.view_id))
         ref_far, ref_colours = empty_views[view.view_class]
-        if far <= 1.5 * ref_far + 0.001 and colours <= 2 * ref_colours:
+        for look in range(looks):
+            far, colours = _content(v.client.take_screenshot(view_id=view.view_id))
+            if far > 1.5 * ref_far + 0.001 or colours > 2 * ref_colours:
+                break
+            if look < looks - 1:
+                time.sleep(1.0)
+        else:
             out.append(view.name)
     return out
 
@@ -122,15 +128,13 @@ def test_every_panel_of_every_tab_shows_something_on_the_timeline_it_opens_on(de
     """Opened as a user opens it (``playback``, the cursor at its end, where the viewer puts it),
     no panel of any tab is empty; the check itself finds the panels that are empty at the first
     frame, before any trial (the bars and the space of a session)."""
-    from shared.observe.viewer import tab_kind
-
     v = demo_viewer
     state = v.client.get_state()
     assert next(r for r in state.recordings if r.store_id == state.active_recording).current_timeline == "playback"
     v.set_time("playback", v.timelines()["playback"][1])
     empty = {tab: _empty_panels(v, tab, empty_views) for tab in (v.show_tab(t, settle_s=1.0) or t for t in v.tabs())}
     assert not any(empty.values()), empty
-    session = next(t for t in v.tabs() if tab_kind([x.origin for x in v.tab_views(t)]) == ("session", "demo"))
+    session = next(t for t, kind in v.tab_kinds().items() if kind == ("session", "demo"))
     v.show_tab(session, settle_s=1.0)
     v.set_time("playback", 0)
     before = _empty_panels(v, session, empty_views)
@@ -140,12 +144,10 @@ def test_every_panel_of_every_tab_shows_something_on_the_timeline_it_opens_on(de
 
 @pytest.mark.slow
 def test_the_demo_recording_in_the_real_viewer(demo_viewer, tmp_path):
-    from shared.observe.viewer import tab_kind
-
     v = demo_viewer
     lines = v.timelines()
     assert {"playback", "trial", "set"} <= set(lines)
-    kinds = {tab_kind([x.origin for x in v.tab_views(t)]): t for t in v.tabs()}
+    kinds = {kind: t for t, kind in v.tab_kinds().items()}
     # tabs named by what they show: the motion, the learner, the session; the other an estimate talks to
     assert kinds[("session", "demo")] == "squat1Reps · demo-learner · demo"
     assert kinds[("session", "demo-person")].startswith("squat1Reps · ")
@@ -213,7 +215,7 @@ def test_the_demo_recording_says_what_the_live_take_did(demo_recording):
 @pytest.mark.slow
 def test_live_streaming_of_two_sessions_at_once(viewer_ok, bundled, tmp_path):
     from shared.bus.client import Client
-    from shared.observe.viewer import HeadlessViewer, tab_kind
+    from shared.observe.viewer import HeadlessViewer
 
     squat = bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
     with HeadlessViewer(None, log=tmp_path / "viewer.log") as v:
@@ -235,7 +237,7 @@ def test_live_streaming_of_two_sessions_at_once(viewer_ok, bundled, tmp_path):
             deadline = time.monotonic() + 60
             while time.monotonic() < deadline and not all(any(t.endswith(f" · {s}") for t in v.tabs()) for s in sessions):
                 time.sleep(0.5)
-            tabs = {tab_kind([x.origin for x in v.tab_views(t)]): t for t in v.tabs()}
+            tabs = {kind: t for t, kind in v.tab_kinds().items()}
             assert sorted(ident for kind, ident in tabs if kind == "session") == sessions
             for s in sessions:
                 assert tabs[("session", s)].startswith("squat1Reps · l")  # the motion, its learner, the session

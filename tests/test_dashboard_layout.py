@@ -48,3 +48,19 @@ def test_people_are_turned_to_face_the_camera():
     out = face_the_camera(z_up, sides, up=2)
     assert (out[0, 1] - out[0, 2])[0] > 0.39 and np.allclose(out[..., 2], z_up[..., 2])
     assert face_the_camera(pos, ["centre"] * 4, up=1) is pos
+
+
+def test_the_latency_table_counts_every_request_and_says_when_it_changed():
+    """shared.observe.latency: requests and failures per service and verb, percentiles of the
+    newest ones; written again only after new requests came (the observer asks between events)."""
+    from shared.observe.latency import KEPT, LatencyTable
+
+    t = LatencyTable()
+    for ms, failed in ((1.0, False), (2.0, True), (3.0, False)):
+        t.add("pss", "list", ms, failed)
+    assert t.due
+    table = t.markdown()
+    assert "| pss | list | 3 | 1 | 2.0 | 2.9 | 3.0 |" in table and not t.due
+    for i in range(KEPT + 10):  # only the newest KEPT are in the percentiles; every one is counted
+        t.add("coach", "run", 1000.0 if i < 10 else 5.0, False)
+    assert t.due and f"| coach | run | {KEPT + 10} | 0 | 5.0 | 5.0 | 5.0 |" in t.markdown()

@@ -228,7 +228,7 @@ def test_the_body_estimator_follows_a_body_no_single_scale_fits(tmp_path):
     assert len(back.body(ports).answers) == len(b.answers) + 8
 
 
-def test_an_estimate_saved_before_issue_13_still_loads(tmp_path):
+def test_an_estimate_saved_before_the_body_estimator_existed_still_loads(tmp_path):
     est, ports, *_ = _converse({"mass": 4.8, "d": 6, "g_max": 0.6, "joints": list(ARM)}, 1)
     est.save(tmp_path / "new.npz")
     import json

@@ -149,6 +149,7 @@ class Observer:
                         start = dash.file_bytes() * self.closing_growth
                     elif layout:
                         dash.send_layout()
+                dash.refresh()
                 try:
                     key, payload = self.q.get(timeout=0.2)
                 except queue.Empty:

@@ -251,9 +251,10 @@ def main() -> None:
     except ModuleNotFoundError as e:  # an optional part not installed: say which extra, not a traceback
         from shared.extras import hint_for
 
-        if hint_for(e) is None:
+        hint = hint_for(e)
+        if hint is None:
             raise
-        typer.echo(f"error: {hint_for(e)}", err=True)
+        typer.echo(f"error: {hint}", err=True)
         sys.exit(2)
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)

@@ -37,7 +37,6 @@ why every tab reads on ``playback`` in :mod:`shared.observe.layout`):
 from __future__ import annotations
 
 import time
-from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +47,7 @@ from shared.motion.clip import Clip
 from shared.motion.skeleton import Skeleton
 from shared.observe import labels as lab
 from shared.observe import layout as lay
+from shared.observe.latency import LatencyTable
 
 CURVE_CHANNELS = ("rfemur.rx", "rtibia.rx", "lowerback.rx", "rhumerus.rx", "shoulder_pitch", "elbow")
 MAX_CURVES = 3
@@ -70,11 +70,8 @@ CARRY_OVER = 4
 #: in the file (rerun writes each view's properties as their own chunks), so sending it on every new
 #: session made the layout most of a long run's recording (0.9 MB per session at 16 tabs)
 LAYOUT_EVERY_S = 2.0
-LATENCY_EVERY_S = 1.0  # the latency table is written again at most this often (and on close)
-LATENCY_KEPT = 500  # the newest requests per service and verb the table's percentiles are of
 #: a session's own tables (carried to a new recording, forgotten together)
-SESSION_TABLES = ("targets", "learners", "frames", "poses", "paths", "emphatic", "trials", "curves", "metrics",
-                  "session_space")
+SESSION_TABLES = ("targets", "learners", "frames", "poses", "paths", "emphatic", "curves", "metrics", "session_space")
 
 
 def _side(name: str, names: set[str]) -> str:
@@ -155,11 +152,9 @@ class Dashboard:
         self.estimates: dict[str, int] = {}  # conversation sets completed per estimate
         self.others: dict[str, str] = {}  # the other each estimate talks to (from its transcript)
         self.sets: dict[str, dict[str, list]] = {}  # per estimate: sets, mean k of the other and self, scale
-        self.trials: dict[str, int] = {}  # trials completed per session
         self.pending: dict[str, dict] = {}  # a session's space event that came before the session
         self.curves: dict[str, list[str]] = {}
-        self.latency: dict[tuple[str, str], dict] = {}
-        self._latency_at = float("-inf")
+        self.latency = LatencyTable()
         self.path = None if path is None else Path(path)
         self.view_bytes = 0.0  # measured when a layout is written to the file
         self._layout_due, self._layout_sent = False, float("-inf")
@@ -167,7 +162,7 @@ class Dashboard:
         self._layout()
 
     def close(self) -> None:
-        self._latency_table()
+        self.refresh(force=True)
         self.send_layout(force=True)
         self.rec.flush()
         self.rec.disconnect()
@@ -186,6 +181,11 @@ class Dashboard:
         sk = self.targets[s].skeleton
         up = sk.up_axis if sk is not None else 1
         return lay.session_tab(s, self.session_title(s), self.curves.get(s, []), up, SIDE_BY_SIDE["attempt"])
+
+    def trials_done(self, s: str) -> int:
+        """The number of a session's last trial (0 before its first)."""
+        done = self.metrics.get(s, {}).get("trial")
+        return done[-1] if done else 0
 
     def estimate_title(self, e: str) -> str:
         """An estimate's tab: the other it talks to (once a transcript line named it) and its id."""
@@ -302,7 +302,6 @@ class Dashboard:
         self.paths[session], self.emphatic[session] = [], []
         self.metrics[session] = {"trial": [], "d_p": [], "alpha": []}
         self.curves[session] = [c for c in CURVE_CHANNELS if c in target.channels][:MAX_CURVES]
-        self.trials[session] = 0
         self._forget_oldest()
         self._session_series(session)
         self._show_target(session, target)
@@ -337,6 +336,8 @@ class Dashboard:
         will need would pass it, so a new file starts small (the newest session always goes on)."""
         self.view_bytes = view_bytes = max(old.view_bytes, self.view_bytes)
         self.estimates, self.pending, self.others = dict(old.estimates), dict(old.pending), dict(old.others)
+        self.latency = old.latency  # counts since the observer started
+        self.latency.due = bool(self.latency.stats)
         self.spaces = {}
 
         def fits(extra_views: int) -> bool:
@@ -389,11 +390,10 @@ class Dashboard:
         s, n = ev["session"], int(ev["trial"])
         if s not in self.targets:
             return  # a session started before this recording: nothing to draw it against
-        self.trials[s] = n
         k = self.frames[s]
         self._at(trial=n, playback=n * k)
         d_p, r, alpha = float(ev["d_p"]), ev.get("R"), float(ev["alpha"])  # R: absent when the first d_p was 0
-        m = self.metrics.setdefault(s, {"trial": [], "d_p": [], "alpha": []})
+        m = self.metrics[s]
         m["trial"].append(n)
         for name, value in (("d_p", d_p), ("alpha", alpha)):
             m[name].append(float(value))
@@ -411,8 +411,8 @@ class Dashboard:
         self.rec.log(f"sessions/{s}/now", rr.TextDocument(
             f"**Trial {n}**: the coach said {adverb} and showed the emphatic motion with {shown}. "
             f"The attempt: {values}.{why}", media_type=rr.MediaType.MARKDOWN))
-        self.paths.setdefault(s, []).append(_xy(ev["x_p"]))
-        self.emphatic.setdefault(s, []).append(_xy(ev["x_s"]))
+        self.paths[s].append(_xy(ev["x_p"]))
+        self.emphatic[s].append(_xy(ev["x_s"]))
         self._draw_session_space(s, n, _xy(ev["x_t"]))
         self._people(s, "target", self.poses.get(s), n)
         for role, clip in (("attempt", attempt), ("emphatic", emphatic)):
@@ -438,9 +438,9 @@ class Dashboard:
     def space_2d(self, base: str, layers, anchors, texts: list[str], panel_px, colours, static: bool = False) -> None:
         """A space's layers ``(entity, archetype, points, style)`` and its labels, in a fixed region:
         the points are mapped so that their frame (:func:`shared.observe.labels.frame`) is always
-        ``[-a, a] x [-1, 1]`` (``a`` the panel's aspect), the region the view shows
-        (:func:`shared.observe.layout.space_view`; left to itself, it fits all it has ever shown,
-        with margins of its own, and labels landed where they were not placed). Labels go where
+        the region the view shows (:func:`shared.observe.labels.region`; left to itself, a view
+        fits all it has ever shown, with margins of its own, and labels landed where they were
+        not placed). Labels go where
         none overlaps another (:func:`shared.observe.labels.place`), each at an invisible point,
         with a thin line to its point where it had to move away from it."""
         anchors = np.asarray(anchors, float).reshape(-1, 2)
@@ -453,8 +453,7 @@ class Dashboard:
         for entity, archetype, x, style in layers:
             data = [mapped(x)] if archetype is rr.LineStrips2D else mapped(x)
             self.rec.log(f"{base}/{entity}", archetype(data, **style), static=static)
-        a = (hi - lo)[0] / 2 / half
-        placed = lab.place(mapped(anchors), texts, panel_px, (np.array([-a, -1.0]), np.array([a, 1.0])))
+        placed = lab.place(mapped(anchors), texts, panel_px, lab.region(panel_px))
         self.rec.log(f"{base}/labels", rr.Points2D([p.xy for p in placed], labels=[p.text for p in placed],
                                                    radii=[0.0], colors=[colours[p.index] for p in placed],
                                                    show_labels=True), static=static)
@@ -479,7 +478,7 @@ class Dashboard:
                     self.pending.pop(next(iter(self.pending)))
                 return
             entity, panel = f"sessions/{s}/space", lay.SESSION_SPACE_PX
-            n = self.trials.get(s, 0) + 1  # the trial in progress
+            n = self.trials_done(s) + 1  # the trial in progress
             self._at(trial=n, playback=n * self.frames[s])
         elif name.startswith("est-"):
             e = name[4:]
@@ -573,28 +572,18 @@ class Dashboard:
 
     def request(self, ev: dict) -> None:
         """A request's latency (into the table) and, when it failed, a line."""
-        key = (ev["service"], ev["verb"])
-        st = self.latency.setdefault(key, {"n": 0, "failed": 0, "ms": deque(maxlen=LATENCY_KEPT)})
-        st["n"] += 1
-        st["ms"].append(float(ev["ms"]))
-        if ev.get("code") not in (None, "ok"):
-            st["failed"] += 1
+        failed = ev.get("code") not in (None, "ok")
+        self.latency.add(ev["service"], ev["verb"], ev["ms"], failed)
+        if failed:
             self._everywhere()
             self.rec.log("cluster/warnings", rr.TextLog(f"{ev['service']}/{ev['verb']} failed: {ev['code']}",
                                                         level="ERROR" if ev["code"] == "internal" else "WARN"))
-        if time.monotonic() - self._latency_at >= LATENCY_EVERY_S:
-            self._latency_table()
+        self.refresh()
 
-    def _latency_table(self) -> None:
-        """Requests, failures and latency percentiles per service and verb (static: on every timeline)."""
-        if not self.latency:
-            return
-        rows = ["| service | verb | requests | failed | median ms | p95 ms | max ms |", "|---|---|--:|--:|--:|--:|--:|"]
-        for (service, verb), st in sorted(self.latency.items()):
-            ms = np.asarray(st["ms"])
-            rows.append(f"| {service} | {verb} | {st['n']} | {st['failed']} | {np.median(ms):.1f} | "
-                        f"{np.percentile(ms, 95):.1f} | {ms.max():.1f} |")
-        note = f"\n\nPercentiles of each verb's newest {LATENCY_KEPT} requests; requests and failures of all."
-        self.rec.log("cluster/latency", rr.TextDocument("\n".join(rows) + note, media_type=rr.MediaType.MARKDOWN),
-                     static=True)
-        self._latency_at = time.monotonic()
+    def refresh(self, force: bool = False) -> None:
+        """Write what waits: the latency table when requests came and a second has passed (the
+        observer calls this between events, so the table is current a second after the last
+        request, not only at the next one)."""
+        if self.latency.stats and (self.latency.ready() or (force and self.latency.due)):
+            self.rec.log("cluster/latency", rr.TextDocument(self.latency.markdown(), media_type=rr.MediaType.MARKDOWN),
+                         static=True)

@@ -1,7 +1,8 @@
 """Labels of a 2-D scatter that never overlap on screen (the dashboard's spaces).
 
-A proto-symbol space is drawn in a 2-D view that fits its points to the panel, so a point's place
-on screen is known from the panel's size in pixels; a label's size is known from its text. Labels
+A proto-symbol space is drawn in a 2-D view that shows a fixed region (:func:`region`), its points
+mapped into it (:func:`frame`), so a point's place on screen is known from the panel's size in
+pixels; a label's size is known from its text. Labels
 are placed in order of importance, each at the first free spot among a few around its point (on
 it, above, below, right, left, then further above and below); a label with no free spot is left
 out (its point still names itself on hover). Free of rerun: the dashboard logs what this returns.
@@ -33,10 +34,10 @@ class Placed:
 
 
 def frame(points, panel_px: tuple[float, float], margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """The corners ``(lo, hi)`` of the region a 2-D view of ``panel_px`` (width, height) should
-    show: the points' bounding box and a ``margin`` around it, widened to the panel's aspect (a
-    flat or one-point space too: a view fitted to a box of no height draws nothing readable).
-    The dashboard logs the two corners as invisible points, so the view fits exactly this box."""
+    """The corners ``(lo, hi)`` of the box of data a 2-D view of ``panel_px`` (width, height)
+    should show: the points' bounding box and a ``margin`` around it, widened to the panel's
+    aspect (a flat or one-point space too: a box of no height draws nothing readable). The
+    dashboard maps this box onto :func:`region`, the region the view shows."""
     pts = np.asarray(points, float).reshape(-1, 2)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     size = hi - lo
@@ -50,8 +51,19 @@ def frame(points, panel_px: tuple[float, float], margin: float = 0.1) -> tuple[n
     return centre - (w / 2, h / 2), centre + (w / 2, h / 2)
 
 
+def region(panel_px: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The region a space's view shows, ``[-a, a] x [-1, 1]`` with ``a`` the panel's aspect: the
+    same whatever the points (a view left to fit them fits all it has ever shown)."""
+    a = panel_px[0] / panel_px[1]
+    return np.array([-a, -1.0]), np.array([a, 1.0])
+
+
+def _width(text: str) -> float:
+    return len(text) * CHAR_PX + 2 * PAD_PX
+
+
 def box_of(text: str, centre_px) -> tuple[float, float, float, float]:
-    w, h = len(text) * CHAR_PX + 2 * PAD_PX, LINE_PX
+    w, h = _width(text), LINE_PX
     return centre_px[0] - w / 2, centre_px[1] - h / 2, centre_px[0] + w / 2, centre_px[1] + h / 2
 
 
@@ -62,7 +74,7 @@ def overlap(a, b) -> bool:
 def place(points, texts: list[str], panel_px: tuple[float, float], region) -> list[Placed]:
     """Labels for ``points`` (n x 2, data units) in order of importance (``texts[0]`` first), none
     overlapping another (or another labelled point) on a panel of ``panel_px`` pixels that shows
-    ``region`` (:func:`frame`). A label whose every spot is taken is left out."""
+    ``region`` (:func:`region`, or any box of data). A label whose every spot is taken is left out."""
     pts = np.asarray(points, float).reshape(-1, 2)
     lo, hi = (np.asarray(c, float) for c in region)
     centre, scale = (lo + hi) / 2, FIT * float(min(panel_px[0] / (hi - lo)[0], panel_px[1] / (hi - lo)[1]))
@@ -73,7 +85,7 @@ def place(points, texts: list[str], panel_px: tuple[float, float], region) -> li
         if not text:
             continue
         px = (p - centre) * scale
-        w = len(text) * CHAR_PX + 2 * PAD_PX
+        w = _width(text)
         for dx, dy in ((0, 0), (0, -LINE_PX - 2 * MARK_PX), (w / 2 + PAD_PX, -LABEL_DY), (-w / 2 - PAD_PX, -LABEL_DY),
                        (0, LINE_PX), (0, -2 * LINE_PX - 2 * MARK_PX), (0, 2 * LINE_PX)):
             at = px + (dx, dy)

@@ -12,6 +12,8 @@ from __future__ import annotations
 import rerun as rr
 import rerun.blueprint as rrb
 
+from shared.observe.labels import region
+
 #: the smallest size in pixels (width, height) of a space's panel at the viewer's 1600 x 1000:
 #: labels are placed so that none overlaps another there (and so in any larger panel)
 SESSION_SPACE_PX = (600.0, 290.0)
@@ -70,8 +72,9 @@ def space_view(origin: str, name: str, panel_px: tuple[float, float]) -> rrb.Spa
     """A space in 2-D showing exactly the region its points are mapped to, ``[-a, a] x [-1, 1]``
     with ``a`` the panel's aspect (:meth:`shared.observe.dashboard.Dashboard.space_2d`): the
     labels were placed for that region on a panel of ``panel_px``."""
-    a = panel_px[0] / panel_px[1]
-    return rrb.Spatial2DView(origin=origin, name=name, visual_bounds=rrb.VisualBounds2D(x_range=[-a, a], y_range=[-1, 1]))
+    lo, hi = region(panel_px)
+    return rrb.Spatial2DView(origin=origin, name=name,
+                             visual_bounds=rrb.VisualBounds2D(x_range=[lo[0], hi[0]], y_range=[lo[1], hi[1]]))
 
 
 def bars(origin: str, name: str) -> rrb.BarChartView:

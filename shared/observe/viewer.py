@@ -167,21 +167,17 @@ class HeadlessViewer:
         """The views of the tab ``name`` (rerun's ``View``: ``view_id``, ``view_class``, ``name``,
         ``origin``), walking the blueprint's containers."""
         info, _, names = self._tabs()
-        bp = info.blueprint
-
-        def walk(key: str):
-            entry = bp.get(key if key.startswith("/") else "/" + key, {})
-            if "ContainerBlueprint" not in entry:
-                yield key.rsplit("/", 1)[-1]
-                return
-            contents = entry["ContainerBlueprint"].get("contents", [])
-            for c in [contents] if isinstance(contents, str) else contents:
-                yield from walk(c)
-
         if name not in names:
             raise BadInput(f"the recording has no tab {name!r} (tabs: {', '.join(names)})")
-        ids = set(walk(names[name]))
-        return [v for v in self.views() if str(v.view_id) in ids]
+        ids = set(_view_keys(info.blueprint, names[name]))
+        return [v for v in self.views() if f"view/{v.view_id}" in ids]
+
+    def tab_kinds(self) -> dict[str, tuple[str, str]]:
+        """What each tab shows (:func:`tab_kind`: ``("session", id)``, ...), in order: ``{name: kind}``."""
+        info, _, names = self._tabs()
+        bp = info.blueprint
+        return {name: tab_kind([bp["/" + k]["ViewBlueprint"].get("space_origin", "") for k in _view_keys(bp, key)])
+                for name, key in names.items()}
 
     def show_tab(self, name: str, settle_s: float = 2.0) -> None:
         info, tabs, names = self._tabs()
@@ -211,6 +207,18 @@ class HeadlessViewer:
         return path
 
 
+def _view_keys(bp: dict, key: str):
+    """The keys (``view/<id>``) of the views in the blueprint's container or view ``key``."""
+    key = key.lstrip("/")
+    entry = bp.get("/" + key, {})
+    if "ContainerBlueprint" not in entry:
+        yield key
+        return
+    contents = entry["ContainerBlueprint"].get("contents", [])
+    for c in [contents] if isinstance(contents, str) else contents:
+        yield from _view_keys(bp, c)
+
+
 def tab_kind(origins: list[str]) -> tuple[str, str]:
     """What a tab of the dashboard shows, from its views' origins: ``("session", id)``,
     ``("estimate", id)`` or ``("other", "")``."""
@@ -235,9 +243,8 @@ def dashboard_screenshots(recording, folder, log=None) -> list[Path]:
         lines = v.timelines()
         if not v.tabs():  # a recording without this dashboard's blueprint: the viewer as it opens it
             return [v.screenshot(folder / "dashboard.png")]
-        for tab in v.tabs():
+        for tab, (kind, ident) in v.tab_kinds().items():
             v.show_tab(tab)
-            kind, ident = tab_kind([view.origin for view in v.tab_views(tab)])
             if kind == "session" and "playback" in lines and "trial" in lines:
                 n = lines["trial"][1]
                 k = (lines["playback"][1] + 1) // (n + 1)
