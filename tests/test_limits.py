@@ -207,8 +207,9 @@ def test_library_code_is_limited_only_inside_a_request():
 def test_a_coaching_run_past_its_time_limit_keeps_the_trials_it_completed(tmp_path, bundled, client_of):
     """The coach's limit (only the coach's) stops a 50-trial run between trials: the reply says
     how many were completed and kept, the session holds exactly those, and it goes on. The limit
-    is set in work, not in seconds of a machine that may be loaded: about eight trials' worth, as
-    long as one trial takes on this machine now (measured first; the coach restarted with it)."""
+    is set in work, not in seconds of a machine that may be loaded: eight times the longest of a
+    cold and a warm trial on this machine now (measured first under a generous limit; the coach
+    then restarted with it)."""
     from shared.bus.client import RemoteError
     from shared.io import load_clip
     from tests.conftest import Processes
@@ -219,35 +220,35 @@ def test_a_coaching_run_past_its_time_limit_keeps_the_trials_it_completed(tmp_pa
     for name in ("pss", "simulator"):
         procs.start(name, f"services.{name}")
     squat = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc")
+
+    def start_coach(limit: float) -> None:
+        procs.env = {**env, "MIRRORCOACH_TIME_LIMIT": f"{limit:g}"}
+        procs.start("coach", "services.coach")
+        procs.wait_alive({"pss", "simulator", "coach"})
+
     try:
         c = client_of(env)
-        limit = 2.0
-        for attempt in range(4):
-            procs.env = {**env, "MIRRORCOACH_TIME_LIMIT": f"{limit:g}"}
-            procs.start("coach", "services.coach")
-            procs.wait_alive({"pss", "simulator", "coach"})
-            session = f"long{attempt}"
-            c.request("coach", "start", {"session": session, "target": clip_to_wire(squat), "learner": f"slow{attempt}"})
+        start_coach(300.0)
+        c.request("coach", "start", {"session": "measure", "target": clip_to_wire(squat), "learner": "measure"})
+        longest = 0.0
+        for _ in range(2):  # a cold trial, then a warm one
             t0 = time.monotonic()
-            try:
-                c.request("coach", "run", {"session": session, "trials": 1}, timeout=300)
-                one = time.monotonic() - t0  # a trial, warm
-            except RemoteError:
-                one = limit
-            if one <= limit / 8:
-                break
-            old = procs.procs.pop("coach")
-            old.terminate()
-            old.wait(timeout=60)
-            limit = max(2.0, 8 * one)
+            c.request("coach", "run", {"session": "measure", "trials": 1}, timeout=300)
+            longest = max(longest, time.monotonic() - t0)
+        old = procs.procs.pop("coach")
+        old.terminate()
+        old.wait(timeout=60)
+        start_coach(max(2.0, 8 * longest))
+        session = "long"
+        c.request("coach", "start", {"session": session, "target": clip_to_wire(squat), "learner": "slow"})
         with pytest.raises(RemoteError) as e:
             c.request("coach", "run", {"session": session, "trials": 50}, timeout=600)
         assert e.value.code == "unavailable" and e.value.details["cause"] == "time_limit", e.value.message
         done = int(e.value.message.split("stopped; ")[1].split(" of 50")[0])
         assert 0 < done < 50 and "completed and kept" in e.value.message
-        assert len(c.request("coach", "state", {"session": session})["trials"]) == done + 1
+        assert len(c.request("coach", "state", {"session": session})["trials"]) == done
         r = c.request("coach", "run", {"session": session, "trials": 1})
-        assert len(r["trials"]) == done + 2
+        assert len(r["trials"]) == done + 1
     finally:
         procs.stop()
     assert "Traceback" not in procs.log("coach")
