@@ -4,9 +4,11 @@
 
 Takes are real clips of one performer joined with rests (:func:`shared.capture.takes.join`).
 
-* **Chosen on** (tuning): HDM05 performer bd's takes, targets of performer bk, other motions
-  (the cohort) of performer dg. The cohort ratio is chosen there: the largest F1 among the
-  values that cut no take of another motion into repetitions (the fewest cuts if none does).
+* **Chosen on** (tuning, performer dg never seen): HDM05 performer bd's takes with performer
+  bk's targets, and bk's takes with bd's targets, the other motions (the cohort) of the
+  target's performer. The settings (:class:`shared.capture.segment.Settings`: cohort ratio,
+  largest cost, posture's weight, the person's own repetitions on or off) are chosen there: the
+  largest F1 among those that cut the fewest repetitions from takes of other motions.
 * **Reported on**: performer dg's takes, targets of bk, cohort of bd (cross-performer); dg's
   takes with dg's own first clip as the target (the same performer); and the game studio's
   dataset (bandai1: five styles of one content joined, the target its 'normal' style, the
@@ -19,8 +21,10 @@ error of matched boundaries, and how many repetitions were cut from takes of oth
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +33,9 @@ from shared.capture import segment as seg
 from shared.capture.takes import join, score
 from shared.io import load_clip
 
-COHORTS = (0.8, 0.85, 0.9)  # the cohort ratio (segment.COHORT) tried on the tuning takes
-MAX_COSTS = (0.9, 0.95, 1.0, 1.1)  # the largest cost (segment.MAX_COST) tried on the tuning takes
+#: the settings tried on the tuning takes (largest costs of 1.0-1.2 were tried there too: with the posture on, 4-8 cuts
+#: where 0.95 cuts none; without it, more cuts everywhere)
+GRID = {"cohort": (0.8, 0.9), "max_cost": (0.95,), "posture": (0.0, 0.25), "own": (0.0, 1.5)}
 COHORT_CLIPS = 3  # clips of each other motion in the cohort
 
 
@@ -38,13 +43,13 @@ def _hdm05(root: Path, performer: str, cls: str) -> list[Path]:
     return sorted((root / "amc" / cls).glob(f"HDM_{performer}_*.amc"))
 
 
-def run_set(takes: dict, targets: dict, cohort_of: dict, cohort: float, max_cost: float) -> dict:
+def run_set(takes: dict, targets: dict, cohort_of: dict, how: seg.Settings) -> dict:
     """Every target against every take: F1 and boundary errors on its own class, cuts on others."""
     rows, cuts, errors, seconds = {}, 0, [], []
     for ct, target in targets.items():
         for ck, (take, truth) in takes.items():
             t = time.perf_counter()
-            s = seg.segment(take, target, background=cohort_of[ct], cohort=cohort, max_cost=max_cost)
+            s = seg.segment(take, target, background=cohort_of[ct], settings=how)
             seconds.append(time.perf_counter() - t)
             found = [(r.start, r.end) for r in s.repetitions]
             if ck == ct:
@@ -131,26 +136,32 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", type=Path, default=Path("bench/results"))
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
-    tuning = hdm05_set(args.hdm05, "bd", "bk", "dg")
-    sweep = {f"{m} {c}": run_set(*tuning, cohort=c, max_cost=m) for m in MAX_COSTS for c in COHORTS}
-    for k, v in sweep.items():
-        print(f"tuning (bd takes, bk targets), max cost and cohort {k}: F1 {v['f1']:.3f}, cuts {v['other_motion_cuts']}",
-              flush=True)
+    tuning = [hdm05_set(args.hdm05, "bd", "bk", "bk"), hdm05_set(args.hdm05, "bk", "bd", "bd")]
+    sweep = {}
+    for values in itertools.product(*GRID.values()):
+        how = seg.Settings(**dict(zip(GRID, values)))
+        runs = [run_set(*t, how) for t in tuning]
+        key = " ".join(f"{k} {v:g}" for k, v in zip(GRID, values))
+        sweep[key] = {"f1": float(np.mean([r["f1"] for r in runs])), "other_motion_cuts": sum(r["other_motion_cuts"] for r in runs),
+                      "settings": asdict(how), "splits": runs}
+        print(f"tuning (bd takes with bk targets, bk takes with bd targets), {key}: F1 {sweep[key]['f1']:.3f}, "
+              f"cuts {sweep[key]['other_motion_cuts']}", flush=True)
     fewest = min(v["other_motion_cuts"] for v in sweep.values())
     key = max((k for k, v in sweep.items() if v["other_motion_cuts"] == fewest), key=lambda k: sweep[k]["f1"])
-    max_cost, chosen = (float(x) for x in key.split())
-    print(f"chosen: max cost {max_cost}, cohort {chosen} (the largest F1 among the fewest cuts of other motions)")
-    report = {"cross-performer (dg takes, bk targets)": run_set(*hdm05_set(args.hdm05, "dg", "bk", "bd"), chosen, max_cost),
-              "same performer (dg takes, dg's own first clip)": run_set(*hdm05_set(args.hdm05, "dg", "dg", "bd", own=True),
-                                                                       chosen, max_cost)}
+    how = seg.Settings(**sweep[key]["settings"])
+    same = asdict(how) == asdict(seg.Settings())
+    print(f"chosen: {key} (the largest F1 among the fewest cuts of other motions); "
+          f"{'the module defaults' if same else 'NOT the module defaults: update shared/capture/segment.py'}")
+    report = {"cross-performer (dg takes, bk targets)": run_set(*hdm05_set(args.hdm05, "dg", "bk", "bd"), how),
+              "same performer (dg takes, dg's own first clip)": run_set(*hdm05_set(args.hdm05, "dg", "dg", "bd", own=True), how)}
     if (args.bandai / "bvh").exists():
-        report["bandai1 (five styles of a gesture joined, target 'normal')"] = run_set(*bandai_set(args.bandai), chosen, max_cost)
+        report["bandai1 (five styles of a gesture joined, target 'normal')"] = run_set(*bandai_set(args.bandai), how)
     if (args.cmu / "131_01.bvh").exists():
-        report["cmu 131_01 (windows of one performance, time-warped)"] = run_set(*cmu_set(args.cmu), chosen, max_cost)
+        report["cmu 131_01 (windows of one performance, time-warped)"] = run_set(*cmu_set(args.cmu), how)
     for k, v in report.items():
         print(f"{k}: F1 {v['f1']:.2f}, median boundary error {v['median_boundary_error_ms']} ms, "
               f"other-motion cuts {v['other_motion_cuts']}, {v['seconds_per_take']:.2f} s a take", flush=True)
-    out = {"chosen_cohort": chosen, "chosen_max_cost": max_cost, "tuning": sweep, "report": report, "seconds": time.perf_counter() - t0}
+    out = {"chosen": asdict(how), "chosen_are_the_defaults": same, "tuning": sweep, "report": report, "seconds": time.perf_counter() - t0}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "segmentation.json").write_text(json.dumps(out, indent=1))
     return out

