@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from shared.capture.stream import ReplaySource, parse_source, record
+from shared.capture.takes import score
 from shared.errors import BadInput
 from shared.io import load_clip, save_clip
 
@@ -144,6 +145,36 @@ def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp
     r = subprocess.run(cmd + ["capture", "record", str(tmp_path / "x.txt"), "--source", address, "--seconds", "1"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "error:" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_capture_segment_says_which_test_failed_and_takes_a_larger_first_cost(bundled, tmp_path):
+    """Another performer's kicks against a kick farther from them than the default first cost:
+    the command says so with the number (exit 1); with ``--max-cost`` above it, the kicks are
+    cut (exit 0); a negative one is refused by the command line (exit 2)."""
+    import json
+    import subprocess
+    import sys
+
+    from shared.capture.takes import join
+
+    kicks = sorted((bundled / "amc/kickLFront1Reps").glob("HDM_bd_*.amc"))
+    target = next((bundled / "amc/kickLFront1Reps").glob("HDM_bk_*.amc"))
+    take, truth = join([load_clip(f) for f in kicks] * 2, seed=3)
+    save_clip(take, tmp_path / "kicks.bvh")
+    cmd = [sys.executable, "-m", "shared.cli", "capture", "segment", str(tmp_path / "kicks.bvh"), "--target", str(target),
+           "--expected", "4"]
+    r = subprocess.run(cmd + ["--json"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1, r.stderr
+    far = json.loads(r.stdout)
+    assert far["repetitions"] == [] and far["closest"] > 0.95
+    assert far["verdict"] == (f"not the target: the movement most like it differs from it by {far['closest']:.2f}, "
+                              "more than a first repetition may (0.95)")
+    r = subprocess.run(cmd + ["--max-cost", f"{far['closest'] + 0.1:.2f}", "--json"], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert score([(x["start"], x["end"]) for x in json.loads(r.stdout)["repetitions"]], truth)["f1"] == 1.0
+    r = subprocess.run(cmd + ["--max-cost", "-1"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
 
 
 def test_the_adverb_is_said_into_a_file_of_its_length_and_not_silent(tmp_path):

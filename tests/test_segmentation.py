@@ -113,6 +113,7 @@ def test_repetitions_of_the_same_performer_are_found_and_another_motion_is_not_c
     kicks, _ = join(_clips(bundled, "bk", "kickLFront1Reps") * 2, seed=2)
     none = seg.segment(kicks, target, expected=5, background=others)
     assert none.repetitions == [] and none.verdict.startswith("not the target")
+    assert none.closest is not None and none.to_dict()["closest"] == pytest.approx(none.closest, abs=1e-4)
     fewer = seg.segment(join([squat] * 3, seed=1)[0], target, expected=5, background=others)
     assert fewer.verdict == "fewer repetitions than expected: 3 found, 5 expected"
 
@@ -207,3 +208,22 @@ def test_the_persons_own_repetition_finds_the_others(bundled):
     assert score([(r.start, r.end) for r in own.repetitions], truth)["f1"] == 1.0, own.to_dict()
     kicks, _ = join(_clips(bundled, "bd", "kickLFront1Reps") * 2, seed=6)
     assert seg.segment(kicks, target, background=others, settings=replace(tight, own=1.5)).repetitions == []
+
+
+def test_not_the_target_names_the_test_every_movement_failed(bundled):
+    """"Not the target" says why: no movement long and large enough, the closest one too far
+    from the target, or every one nearer to another motion; each with its numbers."""
+    from dataclasses import replace
+
+    target = _clips(bundled, "bk", "squat1Reps")[0]
+    squats, _ = join(_clips(bundled, "bd", "squat1Reps") * 2, seed=9)
+    far = seg.segment(squats, target, settings=replace(seg.Settings(), max_cost=0.05))
+    assert far.repetitions == [] and far.closest is not None and far.closest > 0.05
+    assert far.verdict.startswith(f"not the target: the movement most like it differs from it by {far.closest:.2f}")
+    nearer = seg.segment(squats, target, background=[_clips(bundled, "bd", "squat1Reps")[0]],
+                         settings=replace(seg.Settings(), own=0.0))
+    assert nearer.repetitions == [] and nearer.refused is not None and nearer.refused > seg.COHORT
+    assert nearer.verdict.startswith("not the target: every movement like it is nearer to another motion")
+    still = squats.with_data(np.repeat(squats.data[:1], squats.n_frames, axis=0))
+    nothing = seg.segment(still, target)
+    assert nothing.closest is None and "no movement in the take is as long and as large" in nothing.verdict

@@ -175,12 +175,21 @@ class Segmentation:
     cohort: float
     refused: float | None = None  # the lowest cohort ratio of a stretch refused (how close the next one came)
     notes: list[str] = field(default_factory=list)
+    closest: float | None = None  # the lowest cost of a stretch against the target (None: no stretch to compare)
+    max_cost: float = MAX_COST  # the largest cost of a first repetition
 
     @property
     def verdict(self) -> str:
+        """What was found, and when nothing was, the test every movement failed."""
         n = len(self.repetitions)
         if n == 0:
-            return "not the target: no movement in the take is nearer to it than to standing still or another motion"
+            if self.closest is None:
+                return "not the target: no movement in the take is as long and as large as a repetition of it"
+            if self.closest > self.max_cost:
+                return (f"not the target: the movement most like it differs from it by {self.closest:.2f}, more than a "
+                        f"first repetition may ({self.max_cost:g})")
+            return (f"not the target: every movement like it is nearer to another motion (at best "
+                    f"{self.refused or 0.0:.2f} of the distance, at most {self.cohort:g})")
         if self.expected is None or n == self.expected:
             return f"{n} repetition(s) found"
         return f"{'fewer' if n < self.expected else 'more'} repetitions than expected: {n} found, {self.expected} expected"
@@ -196,7 +205,8 @@ class Segmentation:
     def to_dict(self) -> dict:
         return {"repetitions": [r.to_dict() for r in self.repetitions], "expected": self.expected,
                 "cohort": self.cohort, "verdict": self.verdict, "notes": list(self.notes),
-                "refused": None if self.refused is None else round(self.refused, 4)}
+                "refused": None if self.refused is None else round(self.refused, 4),
+                "closest": None if self.closest is None else round(self.closest, 4)}
 
 
 def _positions(features, clip: Clip) -> np.ndarray:
@@ -360,7 +370,8 @@ class _Template:
 
 def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings, fps: float):
     """Repetitions of the target ``a`` among the movements of the take ``b`` (module docstring):
-    (start, end exclusive, cost, cohort ratio) in frames, and the lowest ratio refused."""
+    (start, end exclusive, cost, cohort ratio) in frames, the lowest ratio refused and the lowest
+    cost of any stretch."""
     spread = _spread(a)
     floor = AMPLITUDE_FLOOR * spread
     moves = movements(b, REST_SHARE * float(np.mean(speed(a, fps))), fps)
@@ -397,7 +408,8 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings,
     taken = _greedy(cands, [x[0] for x in cands], lambda x: x[3] <= how.cohort)
     if taken and how.own:
         taken = _own(taken, sorted(scored)[:MAX_CHECKS], b, cohort_templates, how, floor)
-    return sorted((x[1], x[2], x[0], x[3]) for x in taken), min((x[3] for x in cands if x[3] > how.cohort), default=None)
+    refused = min((x[3] for x in cands if x[3] > how.cohort), default=None)
+    return sorted((x[1], x[2], x[0], x[3]) for x in taken), refused, min((x[0] for x in scored), default=None)
 
 
 def _own(taken: list, scored: list, b: np.ndarray, cohort_templates: list, how: Settings, floor: float) -> list:
@@ -461,10 +473,10 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
     if _spread(a) < 1e-6:
         raise BadInput("the target does not move: nothing to find", field="target")
     others = [o for o in others if len(o) > 1 and _spread(o) > 1e-6]
-    taken, best_refused = _find(a, b, others, how, fps)
+    taken, best_refused, closest = _find(a, b, others, how, fps)
     reps = [Repetition(float(s / fps), float(e / fps), float(c), max(0.0, 1.0 - float(ratio) / how.cohort), float(ratio))
             for s, e, c, ratio in taken]
-    return Segmentation(reps, expected, how.cohort, best_refused)
+    return Segmentation(reps, expected, how.cohort, best_refused, closest=closest, max_cost=how.max_cost)
 
 
 def until_repeated(target: Clip, expected: int, rest_after: float = REST_AFTER, background: list[Clip] | None = None):

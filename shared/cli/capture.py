@@ -89,16 +89,24 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
                                                                     "to the target than; repeat the option."),
                     out: Path | None = typer.Option(None, help="Write each repetition here as rep1.bvh, rep2.bvh, ..."),
                     skeleton: Path | None = typer.Option(None, help=SKELETON_HELP),
+                    max_cost: float | None = typer.Option(None, min=0.0, help="How far (as shapes and postures) the "
+                                                          "first repetition may be from the target; the default was "
+                                                          "chosen so that no other motion is cut (a person far from "
+                                                          "the demonstration's way of moving may need more)."),
                     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON.")):
     """Find the repetitions of a target in one continuous take (each with a confidence), and say
-    when the take holds fewer or more than expected, or not the target at all."""
-    from shared.capture.segment import segment
+    when the take holds fewer or more than expected, or not the target at all (and which test
+    every movement failed)."""
+    from dataclasses import replace
+
+    from shared.capture.segment import Settings, segment
     from shared.io import save_clip
 
     t = read_clip(take, skeleton=skeleton)
     tgt = read_clip(target, skeleton=skeleton)
     bg = [read_clip(b, skeleton=skeleton) for b in background]
-    result = segment(t, tgt, expected=expected, background=bg)
+    how = Settings() if max_cost is None else replace(Settings(), max_cost=max_cost)
+    result = segment(t, tgt, expected=expected, background=bg, settings=how)
     files = []
     if out is not None and result.repetitions:
         out.mkdir(parents=True, exist_ok=True)
