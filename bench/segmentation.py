@@ -9,7 +9,8 @@ Takes are real clips of one performer joined with rests (:func:`shared.capture.t
   target's performer. The settings (:class:`shared.capture.segment.Settings`: cohort ratio,
   largest cost, posture's weight, the person's own repetitions on or off) are chosen there: the
   largest F1 among those that cut the fewest repetitions from takes of other motions.
-* **Reported on**: performer dg's takes, targets of bk, cohort of bd (cross-performer); dg's
+* **Reported on**: performer dg's takes, targets of bk, cohort of bd (cross-performer; and with
+  no cohort, as a study run without other motions given); dg's
   takes with dg's own first clip as the target (the same performer); and the game studio's
   dataset (bandai1: five styles of one content joined, the target its 'normal' style, the
   cohort the other contents' 'normal' clips).
@@ -152,7 +153,10 @@ def main(argv=None) -> dict:
     same = asdict(how) == asdict(seg.Settings())
     print(f"chosen: {key} (the largest F1 among the fewest cuts of other motions); "
           f"{'the module defaults' if same else 'NOT the module defaults: update shared/capture/segment.py'}")
-    report = {"cross-performer (dg takes, bk targets)": run_set(*hdm05_set(args.hdm05, "dg", "bk", "bd"), how),
+    cross = hdm05_set(args.hdm05, "dg", "bk", "bd")
+    report = {"cross-performer (dg takes, bk targets)": run_set(*cross, how),
+              "cross-performer, no other motions given (study run without --background)":
+                  run_set(cross[0], cross[1], {c: [] for c in cross[1]}, how),
               "same performer (dg takes, dg's own first clip)": run_set(*hdm05_set(args.hdm05, "dg", "dg", "bd", own=True), how)}
     if (args.bandai / "bvh").exists():
         report["bandai1 (five styles of a gesture joined, target 'normal')"] = run_set(*bandai_set(args.bandai), how)

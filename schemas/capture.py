@@ -67,6 +67,10 @@ RECORD = Endpoint(
         "target": F(CLIP, "with expected: the take ends once that many repetitions of it are seen",
                     required=False),
         "expected": F(Int(1, 1000), "repetitions that end the take (with target)", required=False),
+        "background": F(List(CLIP, max_len=200), "other motions a repetition must be nearer the target than (with "
+                        "target): kept with the take while the service runs (its 16 latest), its `segment` for the "
+                        "same target uses them when it is given none", required=False,
+                        default=list),
         "check_every": F(Float(0.05, 60.0), "seconds of take between looks for the expected repetitions",
                          required=False, default=0.1),
         "replace": F(Bool(), "record over a finished take of that name", required=False, default=False),

@@ -89,6 +89,27 @@ def test_a_live_source_the_service_connects_to_and_a_take_stopped_on_request(cap
     assert [r["start"] for r in seen["repetitions"]] == pytest.approx([r["start"] for r in again["repetitions"]], abs=0.02)
 
 
+@pytest.mark.slow
+def test_a_take_recorded_with_other_motions_is_cut_with_them(capture_service, client_of, squats):
+    """The other motions a take is recorded with are its cut's cohort when the cut names none:
+    a take of the very squat given as another motion holds no repetition of the target (nearer
+    to that motion), while the same take recorded without it holds both; the recorded motions
+    are not used for another target."""
+    env, _ = capture_service
+    c = client_of(env)
+    take, truth = join([squats[1]] * 2, seed=6)
+    for name, background in (("told", [clip_to_wire(squats[1])]), ("plain", [])):
+        c.request("capture", "record", {"take": name, "replay": [clip_to_wire(take)], "idle": 0.5,
+                                        "target": clip_to_wire(squats[0]), "expected": 2, "background": background})
+        assert _wait_done(c, name)["state"] == "done"
+    told = c.request("capture", "segment", {"take": "told", "target": clip_to_wire(squats[0]), "expected": 2})
+    assert told["repetitions"] == [] and "nearer to another motion" in told["verdict"], told["verdict"]
+    plain = c.request("capture", "segment", {"take": "plain", "target": clip_to_wire(squats[0]), "expected": 2})
+    assert score([(r["start"], r["end"]) for r in plain["repetitions"]], truth)["f1"] == 1.0, plain["verdict"]
+    other = c.request("capture", "segment", {"take": "told", "target": clip_to_wire(squats[1]), "expected": 2})
+    assert len(other["repetitions"]) == 2, other["verdict"]
+
+
 def test_refusals_are_coded_errors(capture_service, client_of, squats, tmp_path):
     env, _ = capture_service
     c = client_of(env)

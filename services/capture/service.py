@@ -69,6 +69,7 @@ def make_service(settings: Settings | None = None) -> Service:
     lock = threading.Lock()
     live: dict[str, _Recording] = {}
     cut: dict[str, tuple] = {}  # take -> (target, expected, clip, segmentation) found while recording it
+    grounds: dict[str, tuple] = {}  # take -> (target, the other motions it was recorded with): its segment's default cohort
 
     def save(info: dict) -> None:
         atomic_write(root / f"{info['take']}.json", lambda f: f.write(json.dumps(info).encode()))
@@ -124,7 +125,12 @@ def make_service(settings: Settings | None = None) -> Service:
         try:
             if req.get("target") is not None and req.get("expected"):
                 target = clip_from_wire(req["target"])
-                until = until_repeated(target, req["expected"])
+                background = [clip_from_wire(c) for c in req.get("background") or []]
+                with lock:
+                    grounds[take] = (target, background)
+                    while len(grounds) > 16:
+                        grounds.pop(next(iter(grounds)))
+                until = until_repeated(target, req["expected"], background=background)
             if req.get("skeleton"):
                 fd, name = tempfile.mkstemp(prefix=".header-", suffix=".bvh", dir=root)
                 os.close(fd)
@@ -257,13 +263,15 @@ def make_service(settings: Settings | None = None) -> Service:
         target = clip_from_wire(req["target"])
         with lock:
             known = cut.get(req["take"])
+            ground = grounds.get(req["take"])
+        recorded_with = ground[1] if ground is not None and _same(ground[0], target) else []
         if (known is not None and not req["background"] and known[1] == req["expected"] and _same(known[0], target)
                 and info_of(req["take"])["state"] == "done"):
-            take, result = known[2], known[3]  # found while recording: the same take, target and count
+            take, result = known[2], known[3]  # found while recording: the same take, target, count and cohort
         else:
             take = finished(req["take"])
-            result = segment(take, target, expected=req["expected"],
-                             background=[clip_from_wire(c) for c in req["background"]])
+            background = [clip_from_wire(c) for c in req["background"]] or recorded_with
+            result = segment(take, target, expected=req["expected"], background=background)
         return {"take": req["take"], "verdict": result.verdict, "expected": req["expected"],
                 "repetitions": [{k: v for k, v in r.to_dict().items() if v is not None} for r in result.repetitions],
                 "clips": [clip_to_wire(c) for c in result.cut(take)]}

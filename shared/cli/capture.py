@@ -13,7 +13,7 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import SKELETON_HELP, app, fail, read_clip
+from shared.cli.common import BACKGROUND_HELP, SKELETON_HELP, app, fail, read_clip
 
 capture_app = typer.Typer(help="Live motion capture: a clip served as a live BVH stream, a take recorded from one, a "
                                "take cut into the repetitions of a target.", no_args_is_help=True)
@@ -85,8 +85,7 @@ def capture_record(out: Path = typer.Argument(..., help="The take's file (.bvh).
 def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh or .npz."),
                     target: Path = typer.Option(..., help="The target motion whose repetitions to find."),
                     expected: int = typer.Option(5, help="Repetitions the person was asked for."),
-                    background: list[Path] = typer.Option([], help="Other motions (clips) a repetition must be nearer "
-                                                                    "to the target than; repeat the option."),
+                    background: list[Path] = typer.Option([], help=BACKGROUND_HELP),
                     out: Path | None = typer.Option(None, help="Write each repetition here as rep1.bvh, rep2.bvh, ..."),
                     skeleton: Path | None = typer.Option(None, help=SKELETON_HELP),
                     max_cost: float | None = typer.Option(None, min=0.0, help="How far (as shapes and postures) the "
@@ -144,6 +143,8 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
                  target: Path | None = typer.Option(None, help="With --expected: end the take once that many "
                                                                   "repetitions of this motion are seen."),
                  expected: int | None = typer.Option(None, help="Repetitions that end the take (with --target)."),
+                 background: list[Path] = typer.Option([], help=BACKGROUND_HELP + " Kept with the take: `capture cut` "
+                                                                "uses them."),
                  seconds: float = typer.Option(120.0, help="The take's longest duration."),
                  idle: float = typer.Option(2.0, help="Seconds without a frame that end the take."),
                  reconnect: int = typer.Option(0, help="Connect again this many times when the source stops."),
@@ -168,6 +169,9 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
         fail("--target and --expected go together: the take ends once that many repetitions are seen")
     if target is not None:
         msg["target"], msg["expected"] = wire(read_clip(target)), expected
+        msg["background"] = [wire(read_clip(b)) for b in background]
+    elif background:
+        fail("--background goes with --target and --expected (the other motions the target's repetitions are told from)")
     if skeleton is not None:
         try:
             msg["skeleton"] = skeleton.read_text(encoding="latin-1")
@@ -227,8 +231,8 @@ def capture_stop(name: str = typer.Argument(..., help="The take to end (its fram
 def capture_cut(name: str = typer.Argument(..., help="A finished take on the capture service."),
                 target: Path = typer.Option(..., help="The target motion whose repetitions to find."),
                 expected: int = typer.Option(5, help="Repetitions the person was asked for."),
-                background: list[Path] = typer.Option([], help="Other motions a repetition must be nearer to the target "
-                                                                "than; repeat the option."),
+                background: list[Path] = typer.Option([], help=BACKGROUND_HELP + " Without any, those the take "
+                                                                "was recorded with."),
                 out: Path | None = typer.Option(None, help="Write the take as take.bvh and each repetition as "
                                                               "rep1.bvh, rep2.bvh, ... here."),
                 as_json: bool = typer.Option(False, "--json", help="Print the result as JSON.")):

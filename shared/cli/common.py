@@ -23,6 +23,8 @@ app.add_typer(clip_app, name="clip")
 app.add_typer(offline_app, name="offline")
 
 SKELETON_HELP = "ASF skeleton for AMC files (default: found beside the file or in a sibling asf/ folder)."
+BACKGROUND_HELP = ("Other motions (clips) a repetition must be nearer to the target than, so that a person doing "
+                   "one of them is not cut into repetitions of the target; repeat the option.")
 #: how this command reads motion files (the root options; docs/files.md)
 READING: dict[str, str | None] = {"units": None, "up": None, "translations": None}
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import SKELETON_HELP, app, client, fail, read_clip, wire
+from shared.cli.common import BACKGROUND_HELP, SKELETON_HELP, app, client, fail, read_clip, wire
 
 study_app = typer.Typer(help="Run the thesis's studies with people: participants send their own attempts (fig. 4.3, "
                              "Table 4.2) and human coaches name adverbs from a coach seat (chapter 5).",
@@ -229,6 +229,7 @@ def study_attempt(folder: Path = FOLDER,
                                                                            "(e.g. from `capture record`): cut "
                                                                            "automatically into them."),
                   expected: int = typer.Option(5, help="Repetitions in the take."),
+                  background: list[Path] = typer.Option([], help=BACKGROUND_HELP + " (With --take.)"),
                   say: bool = typer.Option(True, "--say/--no-say", help="Say the adverb aloud into show/*.wav "
                                                                         "(espeak-ng)."),
                   aloud: bool = typer.Option(False, "--aloud", help="Also play it through the speakers (aplay)."),
@@ -239,8 +240,11 @@ def study_attempt(folder: Path = FOLDER,
 
     if bool(clips) == bool(take):
         fail("give the attempt's repetitions as files, or one continuous --take (not both)")
+    if background and take is None:
+        fail("--background goes with --take (the other motions its repetitions are told from)")
     if take is not None:
-        attempts = _cut(read_clip(take, skeleton=skeleton), load_clip(folder / "target.npz"), expected)
+        others = [read_clip(b, skeleton=skeleton) for b in background]
+        attempts = _cut(read_clip(take, skeleton=skeleton), load_clip(folder / "target.npz"), expected, others)
     else:
         attempts = [read_clip(x, skeleton=skeleton) for x in clips or []]
     _trial(folder, participant, attempts, say, aloud)
@@ -324,6 +328,7 @@ def study_run(folder: Path = FOLDER,
               participant: str | None = typer.Option(None, help="Only this participant's trials."),
               steps: int | None = typer.Option(None, help="Run this many trials, then stop (default: all)."),
               expected: int = typer.Option(5, help="Repetitions in each take."),
+              background: list[Path] = typer.Option([], help=BACKGROUND_HELP),
               idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
               seconds: float = typer.Option(120.0, help="A take's longest duration."),
               retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
@@ -346,6 +351,7 @@ def study_run(folder: Path = FOLDER,
     target_clip = load_clip(folder / "target.npz")
     warm(target_clip)
     target = wire(target_clip)
+    others = [wire(read_clip(b)) for b in background]
     controls = Controls(folder)
     skipped: set[str] = set()
     done = 0
@@ -362,7 +368,7 @@ def study_run(folder: Path = FOLDER,
         who, case, n = step["participant"], step["case"], step["trial"]
         typer.echo(f"{who}, case {case}, trial {n}: recording from {source}")
         msg = {"source": source, "seconds": seconds, "idle": idle, "target": target, "expected": expected,
-               "check_every": check_every}
+               "check_every": check_every, "background": others}
         with client() as c:
             if n == 1:  # the coach is ready before the person has finished the take
                 _start_session(c, folder, p, who, case)
@@ -390,11 +396,12 @@ def study_run(folder: Path = FOLDER,
             return
 
 
-def _cut(take, target, expected: int) -> list:
-    """A continuous take cut into the target's repetitions (:mod:`shared.capture.segment`)."""
+def _cut(take, target, expected: int, background: list) -> list:
+    """A continuous take cut into the target's repetitions (:mod:`shared.capture.segment`), told
+    from the ``background`` motions."""
     from shared.capture.segment import segment
 
-    result = segment(take, target, expected=expected)
+    result = segment(take, target, expected=expected, background=background)
     typer.echo(f"take {take.name}: {result.verdict}", err=True)
     if not result.repetitions:
         fail(f"no repetition of the target in {take.name}: {result.verdict}")
