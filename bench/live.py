@@ -1,7 +1,8 @@
 """A live study from replayed takes, end to end: ``study run`` with a live source (a replay
 source on loopback playing one take per trial, real HDM05 clips of one performer joined with
 rests; the target another performer's), 2 participants x 4 cases x 4 trials, nobody touching a
-file; the takes go through the capture service like a capture suit's stream. Measures the whole study
+file; the takes go through the capture service like a capture suit's stream, told from one clip of
+every other motion class (``--background``, a third performer). Measures the whole study
 and, per trial, the time from the take's last frame to the next demonstration written and the
 adverb said, and how much of it passed before the take ended (the replay source closes after
 its take; a source that keeps streaming is ended by ``--idle`` or ``--seconds``). Writes
@@ -36,6 +37,9 @@ def main(argv=None) -> int:
     target = sorted(squats.glob("HDM_bk_*.amc"))[0]  # the demonstration: one performer's squat
     reps = [load_clip(f) for f in sorted(squats.glob("HDM_dg_*.amc"))[:5]]  # the learner: another performer
     takes = [join(reps, seed=k)[0].resample(30.0) for k in range(32)]
+    others = [f for d in sorted((args.hdm05 / "amc").iterdir()) if d.is_dir() and d.name != "squat1Reps"
+              for f in sorted(d.glob("HDM_bd_*.amc"))[:1]]  # other motions a person might do instead: a third performer's
+    background = [x for f in others for x in ("--background", str(f))]
     work = Path(tempfile.mkdtemp(prefix="mc-bench-live-"))
     cmd = [sys.executable, "-m", "shared.cli"]
     with private_cluster("benchlive"):
@@ -44,7 +48,7 @@ def main(argv=None) -> int:
                               "1,2,3,4", "--trials", "4", "--seed", "1"], check=True, capture_output=True)
         with ReplaySource(takes, speed=4.0, connections=32) as src:
             t0 = time.perf_counter()
-            r = subprocess.run(cmd + ["study", "run", str(study), "--source", src.address, "--idle", str(IDLE)],
+            r = subprocess.run(cmd + ["study", "run", str(study), "--source", src.address, "--idle", str(IDLE), *background],
                                capture_output=True, text=True, timeout=3600)
             seconds = time.perf_counter() - t0
         if r.returncode != 0:
@@ -57,7 +61,7 @@ def main(argv=None) -> int:
                               "2", "--trials", "5", "--seed", "1"], check=True, capture_output=True)
         joined = [join(reps, seed=100 + k) for k in range(4)]
         with ReplaySource([j[0].resample(30.0) for j in joined], speed=1.0, connections=4, hold=True) as src:
-            q = subprocess.run(cmd + ["study", "run", str(quick), "--source", src.address, "--steps", "4"],
+            q = subprocess.run(cmd + ["study", "run", str(quick), "--source", src.address, "--steps", "4", *background],
                                capture_output=True, text=True, timeout=900)
             started = list(src.started)
     if q.returncode != 0:
@@ -75,9 +79,11 @@ def main(argv=None) -> int:
            "trials": trials, "seconds": seconds, "idle_s": IDLE, "takes_speed": 4.0,
            "ready_after_last_frame_s": {"median": float(np.median(ready)), "max": float(np.max(ready))} if ready else None,
            "until_the_take_ended_s": {"median": float(np.median(waited))} if waited else None,
-           "takes_with_5_found": sum(1 for a, b in found if a == "5"), "takes": len(found)}
+           "takes_with_5_found": sum(1 for a, b in found if a == "5"), "takes": len(found),
+           "background": [f.name for f in others]}
     md = ["# A live study from replayed takes", "",
-          f"2 participants x 4 cases x 4 trials: {trials} trials in {seconds:.0f} s (takes played 4x faster).",
+          f"2 participants x 4 cases x 4 trials: {trials} trials in {seconds:.0f} s (takes played 4x faster), every "
+          f"take told from {len(others)} other motions (`--background`: one clip of each other class, a third performer).",
           f"Next demonstration and adverb ready {res['ready_after_last_frame_s']['median']:.2f} s (median; longest "
           f"{res['ready_after_last_frame_s']['max']:.2f} s) after the take's last frame, "
           f"{res['until_the_take_ended_s']['median']:.2f} s of which until the take ended (the replay source closes "
