@@ -35,6 +35,9 @@ def test_the_recording_rotates_and_keeps_the_newest(tmp_path, bundled, client_of
                 break
             time.sleep(0.25)
         assert log().count("recording to") >= 5, log()[-2000:]
+        # the last event's way to the observer before it is stopped (it draws everything it has received
+        # before it stops; an event still on its way when it stops is not received: CI saw s39 missing)
+        time.sleep(1.0)
     files = sorted(recordings.glob("2*.rrd"))
     assert len(files) == 3, files  # the newest three; older ones deleted and said so
     assert log().count("deleted the old recording") >= 2 and "Traceback" not in log()
