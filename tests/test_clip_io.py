@@ -9,7 +9,7 @@ import pytest
 
 from shared.errors import BadInput, ClipFormatError
 from shared.io import find_clips, find_skeleton, load_clip, read_asf, save_clip
-from shared.motion.clip import Clip
+from shared.motion.clip import Clip, time_normalised
 
 SQUAT = "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc"
 PAST_360 = "amc/depositFloorR/HDM_bd_depositFloorR_002_120.amc"
@@ -108,6 +108,17 @@ def test_resample_keeps_duration_and_values(hdm05):
     np.testing.assert_allclose(r.data[::1][: (c.n_frames - 1) // 4 + 1], c.data[::4][: (c.n_frames - 1) // 4 + 1], atol=1e-9)
     with pytest.raises(BadInput):
         c.resample(0)
+
+
+def test_time_normalised_frames_keep_their_ends_and_are_a_new_array():
+    """Frames resampled to n of normalised time: first to first, last to last, a straight line
+    stays straight; the same length is a copy (callers may change what they get)."""
+    x = np.column_stack([np.linspace(0.0, 9.0, 10), np.linspace(5.0, -4.0, 10)])
+    y = time_normalised(x, 4)
+    np.testing.assert_allclose(y, [[0, 5], [3, 2], [6, -1], [9, -4]], atol=1e-12)
+    same = time_normalised(x, 10)
+    assert np.array_equal(same, x) and same is not x
+    assert time_normalised(x[:, :1], 7).shape == (7, 1)
 
 
 @pytest.mark.parametrize(

@@ -7,6 +7,7 @@ from shared.capture import segment as seg
 from shared.capture.takes import join, score
 from shared.errors import BadInput
 from shared.io import load_clip
+from shared.motion.clip import time_normalised
 
 
 def _clips(hdm05, performer, cls):
@@ -166,12 +167,12 @@ def test_tempos_the_slopes_cannot_join_are_compared_not_waved_through(bundled):
     the check: now it is compared at the nearest tempo the slopes can join."""
     squat = _clips(bundled, "bd", "squat1Reps")[0]
     a = seg.Reader(squat).target
-    slow = seg._resample(a, 3 * len(a))
+    slow = time_normalised(a, 3 * len(a))
     assert seg.global_dtw(seg._distances(seg.shape(a), seg.shape(slow))) == np.inf
     near = seg._Template(a).cost(seg._Template(slow))
     assert np.isfinite(near) and near < 0.1
     kick = seg.Reader(squat).read(_clips(bundled, "bd", "kickLFront1Reps")[0])
-    assert seg._Template(a).cost(seg._Template(seg._resample(kick, 3 * len(a)))) > 5 * near
+    assert seg._Template(a).cost(seg._Template(time_normalised(kick, 3 * len(a)))) > 5 * near
 
 
 def test_a_movement_much_smaller_than_the_target_is_no_repetition(bundled):

@@ -86,9 +86,9 @@ from typing import Any
 import numpy as np
 
 from shared.coaching.effort import performed_effort, word
-from shared.coaching.parts import BODY_PARTS, N_PHASE, body_part, to_phase
+from shared.coaching.parts import BODY_PARTS, body_part, to_phase
 from shared.errors import BadInput
-from shared.motion.clip import Clip
+from shared.motion.clip import Clip, time_normalised
 
 REPETITIONS = 5
 #: the largest joint angle (degrees) or position a demonstration may hold
@@ -299,9 +299,7 @@ class SimulatedLearner:
         rng = np.random.default_rng([p.seed, self.trials])
         t = self.target
         n = max(5, int(round(t.n_frames * p.tempo)))
-        src = np.linspace(0, 1, N_PHASE)
-        dst = np.linspace(0, 1, n)
-        base = np.column_stack([np.interp(dst, src, self.memory[:, c]) for c in range(self.memory.shape[1])])
+        base = time_normalised(self.memory, n)
         width = max(1, int(round(0.2 * t.fps)))
         kernel = np.hanning(2 * width + 1)
         kernel /= np.sqrt(np.sum(kernel**2))

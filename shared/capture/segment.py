@@ -70,7 +70,7 @@ from scipy.spatial.distance import cdist
 from shared.compiled import kernel
 from shared.deadline import check_time
 from shared.errors import BadInput
-from shared.motion.clip import Clip
+from shared.motion.clip import Clip, time_normalised
 
 FPS = 30.0  # both clips are compared at this rate
 SPEEDS = (0.5, 2.0)  # a repetition lasts this many times the target's duration (the steps' slopes)
@@ -330,12 +330,6 @@ def _aligned(a: np.ndarray, b: np.ndarray, s: int, e: int, slack: int, floor: fl
     return [(lo + int(start[j]), lo + j + 1)]
 
 
-def _resample(x: np.ndarray, n: int) -> np.ndarray:
-    """``x`` (frames, columns) linearly resampled to ``n`` frames."""
-    t = np.linspace(0.0, len(x) - 1.0, max(n, 2))
-    return np.stack([np.interp(t, np.arange(len(x)), x[:, k]) for k in range(x.shape[1])], axis=1)
-
-
 @dataclass(frozen=True)
 class Settings:
     """How a take is cut (module docstring): chosen by ``bench.segmentation`` on tuning takes."""
@@ -363,7 +357,7 @@ class _Template:
         other = stretch.shape
         n, m = len(self.shape), len(other)
         if not (n + 1) // 2 < m < 2 * n - 1:  # tempos the slopes cannot join: the other's resampled to the nearest they can
-            other = _resample(other, int(np.clip(m, (n + 1) // 2 + 1, 2 * n - 2)))
+            other = time_normalised(other, int(np.clip(m, (n + 1) // 2 + 1, 2 * n - 2)))
         c = global_dtw(_distances(self.shape, other))
         return c + self.posture * float(np.linalg.norm(self.mean - stretch.mean)) / self.spread if self.posture else c
 
@@ -375,7 +369,6 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings,
     spread = _spread(a)
     floor = AMPLITUDE_FLOOR * spread
     moves = movements(b, REST_SHARE * float(np.mean(speed(a, fps))), fps)
-    A = shape(a)
     target = _Template(a, posture=how.posture)
     cohort_templates = [_Template(o, posture=how.posture) for o in others]
     slack = int(round(SLACK * fps))
@@ -388,8 +381,8 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings,
             if k > i and e - s > SPEEDS[1] * n + 2 * slack:
                 break
             if e - s + 2 * slack >= SPEEDS[0] * n:
-                stretches.update(_aligned(A, b, s, e, slack, floor))
-    scored = []
+                stretches.update(_aligned(target.shape, b, s, e, slack, floor))
+    scored = []  # (cost, start, end, template): (start, end) is unique, so the templates are never compared
     for k, (s, e) in enumerate(stretches):
         if k % 1000 == 999:
             check_time()
@@ -397,49 +390,53 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings,
             continue
         if _spread(b[s:e]) < how.min_amplitude * spread:  # a shift of weight, a step into the next pose
             continue
-        scored.append((target.cost(_Template(b[s:e], floor, how.posture)), s, e))
+        stretch = _Template(b[s:e], floor, how.posture)
+        scored.append((target.cost(stretch), s, e, stretch))
+    scored = sorted(scored)[:MAX_CHECKS]
+    near: dict[tuple[int, int], float] = {}
+
+    def nearest(s: int, e: int, stretch: _Template) -> float:
+        """The stretch's cost against the nearest other motion (each stretch compared once)."""
+        if (s, e) not in near:
+            near[s, e] = max(min((o.cost(stretch) for o in cohort_templates), default=np.inf), 1e-12)
+        return near[s, e]
+
     cands = []  # (cost, start, end, cohort ratio, template)
-    for c, s, e in sorted(scored)[:MAX_CHECKS]:
+    for c, s, e, stretch in scored:
         if not c <= how.max_cost:
             break
-        stretch = _Template(b[s:e], floor, how.posture)
-        nearest = min((o.cost(stretch) for o in cohort_templates), default=np.inf)
-        cands.append((c, s, e, c / max(nearest, 1e-12), stretch))
+        cands.append((c, s, e, c / nearest(s, e, stretch), stretch))
     taken = _greedy(cands, [x[0] for x in cands], lambda x: x[3] <= how.cohort)
     if taken and how.own:
-        taken = _own(taken, sorted(scored)[:MAX_CHECKS], b, cohort_templates, how, floor)
+        taken += _own(taken, scored, nearest, how)
     refused = min((x[3] for x in cands if x[3] > how.cohort), default=None)
-    return sorted((x[1], x[2], x[0], x[3]) for x in taken), refused, min((x[0] for x in scored), default=None)
+    return sorted((x[1], x[2], x[0], x[3]) for x in taken), refused, (scored[0][0] if scored else None)
 
 
-def _own(taken: list, scored: list, b: np.ndarray, cohort_templates: list, how: Settings, floor: float) -> list:
+def _own(taken: list, scored: list, nearest, how: Settings) -> list:
     """Once the take holds the target (a repetition taken), the others are looked for more widely
     among the ``scored`` stretches (bounded: ``MAX_CHECKS``): one not yet taken is a repetition
     when it is nearer to the target than to any other motion (by the cohort ratio) with a cost up
     to ``second_cost``, or when it is at most ``own`` times as far from the person's repetition
     most like the target as the other taken ones are on average (as ``max_cost`` when there are
-    none) and nearer to that one than to any other motion. Its cohort ratio is the one it passed."""
+    none) and nearer to that one than to any other motion. Its cohort ratio is the one it passed.
+    The repetitions found this way, none overlapping another or a taken one."""
     anchor = min(taken, key=lambda x: x[3])
     own = anchor[4]
     ref = [own.cost(x[4]) for x in taken if x is not anchor]
     limit = how.own * (float(np.mean(ref)) if ref else how.max_cost)
     extra = []
-    for c, s, e in scored:
+    for c, s, e, stretch in scored:
         if any(min(e, y[2]) - max(s, y[1]) > OVERLAP * (e - s) for y in taken):
             continue
-        stretch = _Template(b[s:e], floor, how.posture)
         d = own.cost(stretch)
         if c > how.second_cost and d > limit:
             continue
-        nearest = max(min((o.cost(stretch) for o in cohort_templates), default=np.inf), 1e-12)
-        ratio = min(c / nearest if c <= how.second_cost else np.inf, d / nearest if d <= limit else np.inf)
+        other = nearest(s, e, stretch)
+        ratio = min(c / other if c <= how.second_cost else np.inf, d / other if d <= limit else np.inf)
         if ratio <= how.cohort:
             extra.append((c, s, e, ratio, stretch, min(c, d)))
-    kept = list(taken)
-    for x in _greedy(extra, [x[5] for x in extra], lambda x: True):
-        if not any(min(x[2], y[2]) - max(x[1], y[1]) > OVERLAP * (x[2] - x[1]) for y in kept):
-            kept.append(x[:5])
-    return kept
+    return [x[:5] for x in _greedy(extra, [x[5] for x in extra], lambda x: True)]
 
 
 def _greedy(cands: list, key: list[float], accept) -> list:

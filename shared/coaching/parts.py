@@ -15,7 +15,7 @@ import re
 import numpy as np
 
 from shared.errors import BadInput
-from shared.motion.clip import Clip
+from shared.motion.clip import Clip, time_normalised
 
 N_PHASE = 100  # samples of normalised time a motion is compared on (learners and body parts)
 
@@ -43,9 +43,7 @@ def to_phase(clip: Clip, channels: list[str], n: int = N_PHASE) -> np.ndarray:
     x = clip.select(channels)
     if len(x) < 2:
         raise BadInput("a demonstration needs at least 2 frames")
-    src = np.linspace(0, 1, len(x))
-    dst = np.linspace(0, 1, n)
-    return np.column_stack([np.interp(dst, src, x[:, c]) for c in range(x.shape[1])])
+    return time_normalised(x, n)
 
 
 def rotation_channels(clip: Clip) -> list[str]:

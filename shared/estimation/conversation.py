@@ -55,7 +55,7 @@ import numpy as np
 
 from shared.errors import BadInput
 from shared.estimation.language import Language, evaluate, scale_interval, scale_of
-from shared.motion.clip import Clip
+from shared.motion.clip import Clip, time_normalised
 
 __all__ = ["OtherEstimate", "Ports", "LocalPorts", "SetRecord", "Language", "evaluate", "scale_interval", "scale_of",
            "hold", "with_torques", "METHODS", "SPACES", "TORQUE_PREFIX"]
@@ -406,8 +406,8 @@ class OtherEstimate:
     def _relative(self, motion: Clip, ports: Ports) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`relative`, the self's own torques and the association in the other's space."""
         own = np.asarray(ports.perform_self(motion), float)
-        other = _on_frames(np.asarray(ports.associate(motion, "space"), float), len(own))
-        mine = _on_frames(np.asarray(ports.associate(motion, "self"), float), len(own))
+        other = time_normalised(ports.associate(motion, "space"), len(own))  # the space answers on its own rate
+        mine = time_normalised(ports.associate(motion, "self"), len(own))
         a, b = np.abs(other).mean(axis=0), np.abs(mine).mean(axis=0)
         overall = a.sum() / max(b.sum(), 1e-12)
         return own * np.where(b > 1e-6 * max(b.max(), 1e-12), a / np.maximum(b, 1e-12), overall), own, other
@@ -498,15 +498,6 @@ class OtherEstimate:
                 tau = tau * corr.factor(features(y, body.theta, body.names, motion))
             return tau
         raise BadInput(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-
-
-def _on_frames(tau: np.ndarray, n: int) -> np.ndarray:
-    """Torques resampled (linearly in time) to ``n`` frames: the space answers on its own rate."""
-    if len(tau) == n:
-        return tau
-    src = np.linspace(0.0, 1.0, len(tau))
-    dst = np.linspace(0.0, 1.0, n)
-    return np.column_stack([np.interp(dst, src, tau[:, j]) for j in range(tau.shape[1])])
 
 
 class LocalPorts:

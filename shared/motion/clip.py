@@ -17,6 +17,16 @@ from shared.errors import BadInput
 from shared.motion.skeleton import Skeleton
 
 
+def time_normalised(x, n: int) -> np.ndarray:
+    """Frames ``x`` (frames x columns) resampled to ``n`` frames of normalised time (first to
+    first, last to last; linear)."""
+    x = np.asarray(x, float)
+    if len(x) == n:
+        return x.copy()
+    src, dst = np.linspace(0.0, 1.0, len(x)), np.linspace(0.0, 1.0, n)
+    return np.column_stack([np.interp(dst, src, x[:, c]) for c in range(x.shape[1])]).reshape(n, x.shape[1])
+
+
 @dataclass
 class Clip:
     data: np.ndarray

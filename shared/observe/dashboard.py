@@ -43,7 +43,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from shared.motion.clip import Clip
+from shared.motion.clip import Clip, time_normalised
 from shared.motion.skeleton import Skeleton
 from shared.observe import labels as lab
 from shared.observe import layout as lay
@@ -85,16 +85,6 @@ def _side(name: str, names: set[str]) -> str:
         if n.startswith(a) and (b + n[len(a):]) in names:
             return side
     return "centre"
-
-
-def _resample(clip: Clip, n: int) -> np.ndarray:
-    """The clip's frames resampled to ``n`` (time-normalised: start to start, end to end)."""
-    x = np.asarray(clip.data, float)
-    if len(x) == n:
-        return x
-    src = np.linspace(0.0, 1.0, len(x))
-    dst = np.linspace(0.0, 1.0, n)
-    return np.stack([np.interp(dst, src, x[:, j]) for j in range(x.shape[1])], axis=1)
 
 
 def face_the_camera(pos: np.ndarray, sides: list[str], up: int) -> np.ndarray:
@@ -262,7 +252,7 @@ class Dashboard:
         sk = clip.skeleton or self.targets[s].skeleton
         if sk is None:
             return None
-        data = _resample(clip, self.frames[s])
+        data = time_normalised(clip.data, self.frames[s])
         pos = sk.forward_kinematics(data, clip.channels, ends=False)
         ground = [a for a in range(3) if a != sk.up_axis]
         pos[..., ground] -= pos[:1, :1, ground]
