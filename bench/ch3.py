@@ -36,7 +36,7 @@ def main(argv=None) -> int:
         "| what | measured | target |", "|---|---|---|",
         f"| one conversation set through the bus (4 questions + 4 probes, associate, rebuild, body fit, save) | "
         f"{res['conversation_set']['median_ms']:.0f} ms (p95 {res['conversation_set']['p95_ms']:.0f}) | - |",
-        f"| full `reproduce ch3` (9 kinds x 10 others, 6 sets, identification, d = 4-8, rules, noise) | "
+        f"| full `reproduce ch3` (9 in-model and 6 outside kinds x 10 others, 6 sets, people-like answers, identification, d = 4-8, rules, noise) | "
         f"{res['reproduce_ch3_s']:.0f} s | < 180 s |",
     ])
     return 0
