@@ -28,7 +28,8 @@ INFO = Map({
     "last_set": F(AnyMap(), "k_other, k_self and ratio per shared motion of the last set", required=False),
     "notes": F(List(Str(max_len=1000), max_len=10_000), "rule identification, stops"),
     "body": F(AnyMap(), "the body estimate: columns of the self's regressor, theta, the proportional "
-                        "scale it is nearest to, answers fitted", required=False),
+                        "scale it is nearest to, answers fitted, model (rigid, or extended: springs and rotor "
+                        "inertia)", required=False),
 })
 
 START = Endpoint(

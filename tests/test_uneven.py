@@ -44,7 +44,7 @@ def _theta(mass: float, joints, shares=None, payload=0.0, damping=None, friction
     for j in joints:
         values[f"damping.{j}"] = (damping or {}).get(j, 0.0)
         values[f"friction.{j}"] = (friction or {}).get(j, 0.0)
-    return np.array([values[n] for n in column_names(joints)])
+    return np.array([values.get(n, 0.0) for n in column_names(joints)])  # no springs, no rotor inertia
 
 
 # ---------------------------------------------------------------------------- bodies
@@ -84,6 +84,27 @@ def test_the_regressor_reproduces_mujoco_on_uneven_bodies():
     # a joint the other lacks: the self holds it still and feels nothing there
     y = self_regressor(basic_motions(ARM)[1], ["shoulder_pitch", "shoulder_roll"], missing=["shoulder_roll"])
     assert np.all(y[:, 1] == 0.0)
+
+
+def test_the_extended_columns_reproduce_mujoco_springs_and_rotor_inertia():
+    """The extended model class (springs with a rest angle of either sign, rotor inertia) against
+    MuJoCo's ``stiffness``/``springref``/``armature`` on the other's own body."""
+    stiffness = {"shoulder_pitch": 0.2, "elbow": 0.1, "knee": 0.3}
+    rest = {"shoulder_pitch": 20.0, "elbow": -25.0, "knee": 10.0}
+    armature = {"shoulder_roll": 0.02, "elbow": 0.01}
+    body = small_humanoid(BodySpec(mass=2.4, stiffness=stiffness, rest=rest, armature=armature))
+    theta = _theta(2.4, ALL)
+    names = column_names(ALL)
+    for j, k in stiffness.items():
+        theta[names.index(f"spring.{j}")] = k
+        theta[names.index(f"rest_up.{j}" if rest[j] < 0 else f"rest_down.{j}")] = k * abs(np.radians(rest[j]))
+    for j, i in armature.items():
+        theta[names.index(f"armature.{j}")] = i
+    for m in basic_motions(ALL)[:3] + unknown_motions(2, joints=ALL):
+        truth = _tau(body, m, ALL)
+        assert np.abs(self_regressor(m, ALL) @ theta - truth).max() < 1e-7 * max(1.0, np.abs(truth).max())
+    plain = _tau(small_humanoid(BodySpec(mass=2.4)), basic_motions(ALL)[1], ALL)
+    assert np.abs(_tau(body, basic_motions(ALL)[1], ALL) - plain).max() > 0.01  # the columns are not idle
 
 
 @pytest.mark.parametrize("rule", RULES)
@@ -202,6 +223,34 @@ def _error(est, ports, other, lang, motions, method="body"):
     truth = [other.feel(m) for m in motions]
     keep = [i for i, t in enumerate(truth) if lang.g(t) > 1e-9]
     return evaluate(lang, [truth[i] for i in keep], [est.estimate(motions[i], ports, method) for i in keep])["error"]
+
+
+@pytest.mark.slow
+def test_the_extended_model_is_fit_only_when_the_answers_call_for_it(monkeypatch):
+    """An other with joint springs (tuning seed 13): the answers call for the extended model
+    class and it predicts unknown motions better than the rigid body, unless the other's own
+    inconsistency could explain what it saves; an in-model other keeps the rigid estimate."""
+    unknown = unknown_motions(6, joints=ARM)
+    springs = population("springs", 1, seed=13, d=6, g_max=0.6, joints=list(ARM))[0]
+    est, ports, other, lang = _converse(springs, 6)
+    body = est.body(ports)
+    assert body.model == "extended"
+    extended = _error(est, ports, other, lang, unknown)
+    theta = body.theta.copy()
+    body.inconsistency = 0.3  # the same answers from an other a third of whose repeated answers disagree:
+    body.fit()  # the saving no longer outweighs what its own noise could explain
+    assert body.model == "rigid"
+    body.inconsistency = 0.0
+    body.theta = theta
+    body.fit()
+    assert body.model == "extended"
+    monkeypatch.setattr(BodyEstimate, "EXTENSION_EVIDENCE", float("inf"))
+    est.forget_body()
+    assert est.body(ports).model == "rigid"
+    assert extended < _error(est, ports, other, lang, unknown)
+    monkeypatch.undo()
+    mass, ports, *_ = _converse(population("mass", 1, seed=13, d=6, g_max=0.6, joints=list(ARM))[0], 6)
+    assert mass.body(ports).model == "rigid"
 
 
 @pytest.mark.slow

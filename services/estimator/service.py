@@ -147,7 +147,7 @@ def info_of(name: str, est: OtherEstimate) -> dict:
         from shared.estimation.body import column_names
 
         out["body"] = {"columns": column_names(est.language.joints), "theta": body["theta"], "scale": body["s"],
-                       "answers": body["answers"]}
+                       "answers": body["answers"], "model": body.get("model", "rigid")}
     return out
 
 

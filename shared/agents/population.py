@@ -18,8 +18,11 @@ mixed       links, payload, shares, damping and friction at once
 ==========  =====================================================================================
 
 **Outside the estimator's model** (:data:`OUTSIDE_KINDS`): bodies and transmissions the
-body estimator's regressor has no column for. They are reported, never tuned on: the
-estimator's settings were chosen on the kinds above only.
+body estimator's rigid-body regressor has no column for. They are reported, never tuned on: the
+estimator's settings were chosen on the kinds above only. Joint springs and rotor inertia have
+columns in its extended model class (:data:`shared.estimation.body.EXTENSIONS`, fit only when
+the answers call for it, chosen on the kinds above and the development kinds), and stay outside
+the thesis's and the space estimator's model.
 
 ==========  =====================================================================================
 springs     a joint spring at every felt joint, 0.05-0.3 N m/rad, rest angle -30..30 degrees

@@ -269,10 +269,13 @@ class OtherEstimate:
                 for key, k in self.body_answers[:saved["answers"]]:
                     b.add(key, self.regressor(ports, key), k)
                 b.theta, b.s = np.asarray(saved["theta"], float), float(saved["s"])
+                b.model = saved.get("model", "rigid")  # (estimates saved before the extended model: rigid)
+                b.prior_sd = b.priors[b.model]
             self._body = b
         if len(b.answers) != len(self.body_answers):  # new answers: refit from the last estimate
             for key, k in self.body_answers[len(b.answers):]:
                 b.add(key, self.regressor(ports, key), k)
+            b.inconsistency = self.repeat_disagreement()
             b.fit()
         return b
 
@@ -462,7 +465,8 @@ class OtherEstimate:
 
     def body_state(self) -> dict | None:
         if self._body is not None:
-            return {"theta": self._body.theta.tolist(), "s": self._body.s, "answers": len(self._body.answers)}
+            return {"theta": self._body.theta.tolist(), "s": self._body.s, "answers": len(self._body.answers),
+                    "model": self._body.model}
         return self._saved_body
 
     # ------------------------------------------------------------------ the interval method

@@ -47,7 +47,7 @@ LENGTHS = (0.5, 1.0, 2.0)  # the RBF's length scale, in units of sqrt(dimensions
 DRIFTS = (0.0, 0.1, 0.3)  # b: the residual's drift over the whole conversation, relative to g
 FACTOR = (0.2, 5.0)  # the correction's factor 1 + r is kept within these
 EVIDENCE = 1.5  # the log marginal likelihood a correction must gain over none (strong evidence)
-COLUMN_KINDS = ("gravity", "inertial", "mass", "damping", "friction")
+COLUMN_KINDS = ("gravity", "inertial", "mass", "damping", "friction", "spring", "rest", "armature")
 
 
 def _kind(name: str) -> str:

@@ -145,7 +145,10 @@ def outside_lines(outside: dict | None) -> list[str]:
              "Bodies and transmissions none of the estimators has a term for (`shared/agents/population.py`, "
              "`OUTSIDE_KINDS`): joint springs with rest angles, rotor inertia, gears with transmission losses, "
              "tendon-like coupling, Stribeck friction, fatigue over the conversation (a tiring other's error is "
-             "against what it feels after the last question). Same conversations and errors as above. The last column "
+             "against what it feels after the last question). The body estimator's extended model class has columns "
+             "for the first two (springs with a rest angle, rotor inertia: `shared.estimation.body.EXTENSIONS`), fit "
+             "only when the answers call for it; its settings were chosen on seed 13's in-model and development "
+             "kinds, never on these. Same conversations and errors as above. The last column "
              "is the estimator's model check (`OtherEstimate.model_check`): answers its best body misses beyond what "
              "the other's own inconsistency explains.", "",
              f"| kind | {method_columns()} | body unknown at {FAST:g}x speed | questions per other | conversations "
