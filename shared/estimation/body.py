@@ -279,8 +279,7 @@ class BodyEstimate:
         # the rigid body (the extension all but shut) and the extended model class (fit when the answers call for it)
         self.priors = {"rigid": np.where(extension, base / self.EXTENSION_PRIOR, base),
                        "extended": np.where(extension, base / self.EXTENDED_PRIOR, base)}
-        self.model = "rigid"
-        self.prior_sd = self.priors["rigid"]
+        self.model = "rigid"  # which of the two the estimate is (fit)
         self.theta = self.theta_self.copy()
         self.s = 1.0
         # (gravity, inertial) column pairs of one link: one mass, one length
@@ -289,6 +288,11 @@ class BodyEstimate:
         self.coupling = np.zeros((len(self.pairs), len(self.names)))
         for r, (i, j) in enumerate(self.pairs):
             self.coupling[r, i], self.coupling[r, j] = -1.0 / self.COUPLING, 1.0 / self.COUPLING
+
+    @property
+    def prior_sd(self) -> np.ndarray:
+        """The prior's standard deviation per column, of the model the estimate is."""
+        return self.priors[self.model]
 
     @property
     def bin_sd(self) -> float:
@@ -380,7 +384,6 @@ class BodyEstimate:
         need = self.EXTENSION_EVIDENCE + self.NOISE_EVIDENCE * self.inconsistency * len(self._distinct())
         extended = fits["rigid"][1] - fits["extended"][1] > need
         self.model = "extended" if extended else "rigid"
-        self.prior_sd = self.priors[self.model]
         x = fits[self.model][0]
         self.theta, self.s = x[:n_p].copy(), float(x[n_p])
         return self.theta

@@ -270,7 +270,6 @@ class OtherEstimate:
                     b.add(key, self.regressor(ports, key), k)
                 b.theta, b.s = np.asarray(saved["theta"], float), float(saved["s"])
                 b.model = saved.get("model", "rigid")  # (estimates saved before the extended model: rigid)
-                b.prior_sd = b.priors[b.model]
             self._body = b
         if len(b.answers) != len(self.body_answers):  # new answers: refit from the last estimate
             for key, k in self.body_answers[len(b.answers):]:
