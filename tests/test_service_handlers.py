@@ -78,3 +78,37 @@ def test_the_simulator_creates_asks_and_reveals_an_other_on_its_own(tmp_path):
     assert revealed["params"]["mass"] == 4.8
     assert _call(simulator_contract, sim, "delete", {"other": "o1"})["deleted"] == "o1"
     assert _call(simulator_contract, sim, "list", {})["others"] == []
+
+
+def test_what_the_selfs_body_gives_is_computed_once_and_a_failure_is_asked_again():
+    """The estimator's cache of the self's regressors and torques (``Once``): requests for one
+    key at once wait for one computation; a failed one is not kept; the table is bounded."""
+    import threading
+    import time
+
+    from services.estimator.service import Once
+
+    once, calls = Once(limit=3), []
+
+    def slow():
+        calls.append(1)
+        time.sleep(0.2)
+        return np.arange(3.0)
+
+    out: list = []
+    threads = [threading.Thread(target=lambda: out.append(once.once("k", slow, 10.0))) for _ in range(4)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert len(calls) == 1 and len(out) == 4 and all(np.array_equal(o, np.arange(3.0)) for o in out)
+
+    def broken():
+        raise RuntimeError("simulator away")
+
+    with pytest.raises(RuntimeError):
+        once.once("bad", broken, 10.0)
+    assert once.once("bad", lambda: 7, 10.0) == 7  # asked again, not the kept failure
+    for i in range(5):
+        once.once(i, lambda i=i: i, 10.0)
+    assert len(once.table) == 3

@@ -61,33 +61,20 @@ class BusPorts:
         return clip.select([TORQUE_PREFIX + j for j in self.language.joints])
 
     def perform_self(self, motion):
+        """The self's torques of a motion (its body never changes: performed once per motion for
+        every estimate, like :meth:`regressor`)."""
         motion = hold(motion, self.language.missing)
-        return self._taus(self.c.request("simulator", "perform", {"body": "self", "clip": clip_to_wire(motion)})["clip"])
+        key = (motion.fps, tuple(motion.channels), motion.data.tobytes(), tuple(self.language.joints))
+        return _PERFORMED.once(key, lambda: self._taus(self.c.request("simulator", "perform", {
+            "body": "self", "clip": clip_to_wire(motion)})["clip"]), self.timeout + 60).copy()
 
     def regressor(self, motion) -> np.ndarray:
         """The self's regressor of a motion (the self's body never changes: one per motion for
-        every estimate; requests asking for the same motion at once wait for one answer)."""
-        from concurrent.futures import Future
-
+        every estimate)."""
         key = (motion.name, motion.fps, motion.data.tobytes(), tuple(self.language.joints), tuple(self.language.missing))
-        with _REGRESSORS_LOCK:
-            fut = _REGRESSORS.get(key)
-            mine = fut is None
-            if mine:
-                fut = _REGRESSORS[key] = Future()
-                while len(_REGRESSORS) > 4096:
-                    _REGRESSORS.pop(next(iter(_REGRESSORS)))
-        if mine:
-            try:
-                r = self.c.request("simulator", "regressor", {"clip": clip_to_wire(motion), "joints": self.language.joints,
-                                                              "missing": self.language.missing})
-                fut.set_result(r["y"])
-            except BaseException as e:
-                with _REGRESSORS_LOCK:
-                    _REGRESSORS.pop(key, None)
-                fut.set_exception(e)
-                raise
-        return fut.result(timeout=self.timeout + 60)
+        return _REGRESSORS.once(key, lambda: self.c.request("simulator", "regressor", {
+            "clip": clip_to_wire(motion), "joints": self.language.joints, "missing": self.language.missing})["y"],
+            self.timeout + 60)
 
     def ask_open(self, motion) -> int | None:
         try:
@@ -165,8 +152,39 @@ def model_reply(check: dict) -> dict:
     return {**check, "verdict": verdict}
 
 
-_REGRESSORS: dict = {}  # (motion, joints, missing) -> a future of the self's regressor Y
-_REGRESSORS_LOCK = threading.Lock()
+class Once:
+    """What the self's fixed body gives for a motion, computed once for every estimate: requests
+    asking for the same key at once wait for one answer; a failed one is asked again next time;
+    the oldest ``limit`` keys and beyond are forgotten."""
+
+    def __init__(self, limit: int = 4096):
+        self.table: dict = {}
+        self.lock = threading.Lock()
+        self.limit = limit
+
+    def once(self, key, compute, timeout: float):
+        from concurrent.futures import Future
+
+        with self.lock:
+            fut = self.table.get(key)
+            mine = fut is None
+            if mine:
+                fut = self.table[key] = Future()
+                while len(self.table) > self.limit:
+                    self.table.pop(next(iter(self.table)))
+        if mine:
+            try:
+                fut.set_result(compute())
+            except BaseException as e:
+                with self.lock:
+                    self.table.pop(key, None)
+                fut.set_exception(e)
+                raise
+        return fut.result(timeout=timeout)
+
+
+_REGRESSORS = Once()  # (motion, joints, missing) -> the self's regressor Y
+_PERFORMED = Once()  # (motion, joints) -> the self's torques (perform on the simulator's "self" body)
 _DESIGN: dict = {}  # the self's designed pairs: they depend on the self's body only
 
 
@@ -211,18 +229,32 @@ class EstimatorHandlers:
         return self.root / f"{check_name(name)}.npz"
 
     def load(self, name: str) -> OtherEstimate:
+        return self._load(name)[1]
+
+    def _load(self, name: str) -> tuple[tuple, OtherEstimate]:
+        """The saved estimate (a copy of the last one loaded while its file is unchanged) and
+        the file's stamp."""
         if not self.path(name).exists():
             raise NotFound(f"no estimate named {name!r}", estimate=name)
         st = self.path(name).stat()
         stamp = (st.st_mtime_ns, st.st_size, st.st_ino)
         hit = self.loaded.get(name)
         if hit is not None and hit[0] == stamp:
-            return copy.deepcopy(hit[1])  # a copy: a handler may change it and then fail before saving
+            return stamp, copy.deepcopy(hit[1])  # a copy: a handler may change it and then fail before saving
         est = OtherEstimate.load(self.path(name))
         self.loaded[name] = (stamp, est)
         while len(self.loaded) > 64:
             self.loaded.pop(next(iter(self.loaded)))
-        return copy.deepcopy(est)
+        return stamp, copy.deepcopy(est)
+
+    def keep(self, name: str, stamp: tuple, est: OtherEstimate) -> None:
+        """Keep what a request that changes nothing computed on its copy (the body fit from the
+        saved answers, the residual correction) for the next request on the same saved
+        estimate: both follow from the saved state alone, so every ``estimate`` request after
+        the first reuses them instead of fitting them again."""
+        hit = self.loaded.get(name)
+        if hit is not None and hit[0] == stamp:
+            self.loaded[name] = (stamp, est)
 
     def start(self, req):
         name = req["estimate"]
@@ -297,7 +329,7 @@ class EstimatorHandlers:
 
     def estimate(self, req):
         name = req["estimate"]
-        est = self.load(name)
+        stamp, est = self._load(name)
         motion = clip_from_wire(req["clip"])
         ports = BusPorts(self.bus(), name, est.other, est.language)
         missing = [j for j in est.language.joints if j not in motion.channels]
@@ -327,6 +359,7 @@ class EstimatorHandlers:
         if len(tau) != motion.n_frames:  # the space's estimate is on its own frame rate
             motion = motion.resample(len(tau) / max(motion.duration, 1e-9) if motion.duration > 0 else motion.fps)
         out = with_torques(motion.frames(0, len(tau)), tau[: motion.n_frames], est.language.joints)
+        self.keep(name, stamp, est)  # (this request changes it no more)
         return {"estimate": name, "method": req["method"], "clip": clip_to_wire(out), "g": float(g), "k": int(k),
                 "word": word(k, est.language.d)}
 

@@ -22,6 +22,7 @@ replays identically.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -173,6 +174,9 @@ def transmitted(tau: np.ndarray, motion: Clip, joints, t: dict | None, asked: in
     return felt * (1.0 + float(t.get("fatigue", 0.0)) * asked)
 
 
+KEPT_MOTIONS = 64  # motions an other keeps its body's torques of (SimulatedOther._torques)
+
+
 class SimulatedOther:
     """An other agent with hidden parameters (see module docstring)."""
 
@@ -181,13 +185,26 @@ class SimulatedOther:
         self.params = (params or OtherParams()).check()
         self.body = small_humanoid(self.params.body_spec(), name=f"other:{name}")
         self.asked = asked
+        self._kept: dict = {}  # the body's torques of the latest motions (_torques)
 
     def feel(self, motion: Clip) -> np.ndarray:
         """The torques (T x joints) this other's body produces performing ``motion``, as it
         feels them (:func:`transmitted`, after ``asked`` questions so far)."""
-        performed, _ = perform(self.body, motion)
-        tau = performed.select([f"tau.{j}" for j in self.params.joints])
-        return transmitted(tau, motion, self.params.joints, self.params.transmission, self.asked)
+        return transmitted(self._torques(motion), motion, self.params.joints, self.params.transmission, self.asked)
+
+    def _torques(self, motion: Clip) -> np.ndarray:
+        """The body's torques of ``motion`` (a copy), kept for the last ``KEPT_MOTIONS`` motions:
+        its body never changes, and rule identification asks about pairs of the same 20 motions
+        again and again (two inverse dynamics a question before)."""
+        data = np.ascontiguousarray(motion.data, float)
+        key = (float(motion.fps), tuple(motion.channels), data.shape, hashlib.blake2b(data.tobytes()).digest())
+        tau = self._kept.get(key)
+        if tau is None:
+            performed, _ = perform(self.body, motion)
+            tau = self._kept[key] = performed.select([f"tau.{j}" for j in self.params.joints])
+            while len(self._kept) > KEPT_MOTIONS:
+                self._kept.pop(next(iter(self._kept)))
+        return tau.copy()
 
     def g(self, motion: Clip) -> float:
         p = self.params

@@ -39,7 +39,11 @@ evidence 30 + 10,000 per inconsistent answer (*)   **4.01**             11.6 / 1
 (*) the one value of ``NOISE_EVIDENCE`` tried (an answer a bin off costs the hinge about 10,000).
 The in-model kinds keep the rigid estimate (the same errors) but payload (3.0 -> 1.5 % unknown);
 a constant bias 9.1 -> 4.7 %, drag 6.0 -> 5.9 %. Reported on the population of seed 2026 (never
-tuned on; ``reports/ch3``). Both fits cost a conversation about a quarter more time.
+tuned on; ``reports/ch3``). Both fits cost a conversation about a quarter more time. (This
+table was measured with scipy's bvls as the Gauss-Newton step; :func:`nonnegative_least_squares`
+finds the same steps to about 1e-8, but a conversation asks its next probe where the estimate is
+least sure, so the same population takes other paths since: seed 2026's errors moved by up to a
+point or two either way.)
 
 **Answers as constraints.** Every open answer "word k" about motion ``m`` says
 ``g_max (k-1)/d <= F_conv(Y_m theta) < g_max k/d`` (eq. 3.4, 3.8). Every rule (eq. 3.8, f1-f4)
@@ -69,7 +73,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares, lsq_linear
+from scipy.optimize import least_squares, lsq_linear, nnls
 
 from shared.errors import BadInput
 from shared.motion.clip import Clip
@@ -182,11 +186,18 @@ def self_regressor(motion: Clip, joints, missing=()) -> np.ndarray:
     return np.stack(cols, axis=-1)
 
 
+def regressor_torques(y: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """``Y theta`` of a regressor (T, J, P): one matrix-vector product (``y @ theta`` on the 3-D
+    array is one small product per frame, 4 times slower)."""
+    y = np.asarray(y, float)
+    return (y.reshape(-1, y.shape[-1]) @ theta).reshape(y.shape[:-1])
+
+
 def g_and_gradient(y: np.ndarray, theta: np.ndarray, rule: str = "eq3.8", tau_max: float = 1.0,
                    weights=None) -> tuple[float, np.ndarray]:
     """``g = F_conv(Y theta)`` (eq. 3.8, 3.13-3.16) and its gradient in ``theta`` (exact where
     no torque changes sign and no maximum changes place; ``g = gradient . theta`` there)."""
-    tau = y @ theta
+    tau = regressor_torques(y, theta)
     w = np.ones(tau.shape[1]) if weights is None else np.asarray(weights, float)
     s = np.sign(tau) * w / tau_max  # d|tau_tj| w_j / tau_max
     a = np.abs(tau) * w / tau_max
@@ -211,6 +222,17 @@ def g_and_gradient(y: np.ndarray, theta: np.ndarray, rule: str = "eq3.8", tau_ma
     return float(g), grad
 
 
+def nonnegative_least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``argmin ||a x - b||`` with every ``x >= 0``: scipy's compiled NNLS (Lawson and Hanson),
+    the same solution as ``lsq_linear(..., method="bvls")`` (the reference it is tested against,
+    written in Python: 5-12 times slower on the fit's problems); bvls where NNLS runs out of
+    iterations."""
+    try:
+        return nnls(a, b, maxiter=10 * a.shape[1])[0]
+    except RuntimeError:
+        return lsq_linear(a, b, bounds=(0.0, np.inf), method="bvls").x
+
+
 class Batch:
     """Many motions' regressors stacked along time, so that ``g`` of all of them and their
     gradients come from one product (eq. 3.8 and f1 vectorised; f2-f4 one motion at a time)."""
@@ -223,19 +245,39 @@ class Batch:
         self.starts = np.r_[0, np.cumsum(self.lengths)[:-1]]
         w = np.ones(self.y.shape[1]) if language.weights is None else np.asarray(language.weights, float)
         self.w = w / language.tau_max
+        j = self.y.shape[1]  # each motion's rows in the (frames x joints) flattened regressor
+        self.spans = [(int(start) * j, int(start + n) * j) for start, n in zip(self.starts, self.lengths)]
+
+    def g(self, theta: np.ndarray) -> np.ndarray:
+        """``g`` of every motion (:meth:`g_and_gradient` without the gradient)."""
+        lang = self.language
+        if lang.rule not in ("eq3.8", "f1"):
+            return self.g_and_gradient(theta)[0]
+        a = (np.abs(self.torques(theta)) * self.w).sum(axis=1)
+        return np.add.reduceat(a, self.starts) / self._norm()
 
     def g_and_gradient(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lang = self.language
         if lang.rule not in ("eq3.8", "f1"):
             out = [g_and_gradient(y, theta, lang.rule, lang.tau_max, lang.weights) for y in self.ys]
             return np.array([o[0] for o in out]), np.array([o[1] for o in out])
-        tau = self.y @ theta  # (sum T, J)
+        tau = self.torques(theta)  # (sum T, J)
         a = (np.abs(tau) * self.w).sum(axis=1)
-        grad_t = np.einsum("tj,tjp->tp", np.sign(tau) * self.w, self.y)
-        norm = self.lengths * (1 if lang.rule == "eq3.8" else tau.shape[1])
+        norm = self._norm()
         g = np.add.reduceat(a, self.starts) / norm
-        grad = np.add.reduceat(grad_t, self.starts, axis=0) / norm[:, None]
+        # each motion's gradient one (T J) . (T J, P) product: BLAS, 2x faster than an einsum over
+        # every frame and a sum of its rows
+        s = (np.sign(tau) * self.w).reshape(-1)
+        flat = self.y.reshape(len(s), -1)
+        grad = np.stack([s[lo:hi] @ flat[lo:hi] for lo, hi in self.spans]) / norm[:, None]
         return g, grad
+
+    def torques(self, theta: np.ndarray) -> np.ndarray:
+        """``Y theta`` of every frame (sum T, J)."""
+        return regressor_torques(self.y, theta)
+
+    def _norm(self) -> np.ndarray:
+        return self.lengths * (1 if self.language.rule == "eq3.8" else self.y.shape[1])
 
 
 @dataclass
@@ -342,17 +384,27 @@ class BodyEstimate:
         prior_jac = np.hstack([np.diag(1 / prior_sd), (-self.theta_self / prior_sd)[:, None]])
         cache: dict = {}
 
-        def parts(x):
+        def residuals(x, g):
+            theta, s = x[:n_p], x[n_p]
+            over = np.where(bounded, np.maximum(0.0, g - hi_f), 0.0)
+            under = np.maximum(0.0, lo - g)
+            res = np.concatenate([(theta - s * self.theta_self) / prior_sd, self.coupling @ theta / max(s, 0.1),
+                                  self.HINGE * (over - under) / sd, np.where(bounded, (g - mid) / sd, 0.0)])
+            return res, over, under
+
+        def parts(x, jacobian: bool = True):
+            """(residuals, Jacobian) at ``x``; (residuals, None) when only the cost is needed (the
+            line search's trials: most are refused, and the gradient is most of the work)."""
             key = x.tobytes()
-            if key not in cache:
-                theta, s = x[:n_p], x[n_p]
-                g, grad = batch.g_and_gradient(theta)  # (A,), (A, P)
-                over = np.where(bounded, np.maximum(0.0, g - hi_f), 0.0)
-                under = np.maximum(0.0, lo - g)
+            if key not in cache or (jacobian and cache[key][1] is None):
+                if not jacobian:
+                    cache.clear()
+                    cache[key] = (residuals(x, batch.g(x[:n_p]))[0], None)
+                    return cache[key]
+                s = x[n_p]
+                g, grad = batch.g_and_gradient(x[:n_p])  # (A,), (A, P)
+                res, over, under = residuals(x, g)
                 violated = ((over > 0) | (under > 0)).astype(float)
-                res = np.concatenate([(theta - s * self.theta_self) / prior_sd,
-                                      self.coupling @ theta / max(s, 0.1),
-                                      self.HINGE * (over - under) / sd, np.where(bounded, (g - mid) / sd, 0.0)])
                 zero = np.zeros((len(g), 1))
                 jac = np.vstack([prior_jac, np.hstack([self.coupling / max(s, 0.1), np.zeros((len(self.pairs), 1))]),
                                  np.hstack([self.HINGE * grad / sd * violated[:, None], zero]),
@@ -365,8 +417,8 @@ class BodyEstimate:
 
     def fit(self) -> np.ndarray:
         """The estimate from every answer so far (``theta_self`` scaled, before any answer):
-        Gauss-Newton steps on the linearised problem (scipy ``lsq_linear`` keeps every
-        parameter >= 0), each halved until the cost falls. :meth:`fit_reference` solves the
+        Gauss-Newton steps on the linearised problem (:func:`nonnegative_least_squares` keeps
+        every parameter >= 0), each halved until the cost falls. :meth:`fit_reference` solves the
         same problem with scipy's ``least_squares``, about 5 times slower.
 
         The rigid body and the extended model class (springs, rotor inertia) are both fit from
@@ -391,12 +443,12 @@ class BodyEstimate:
     def _gauss_newton(self, parts, x: np.ndarray) -> tuple[np.ndarray, float]:
         """Gauss-Newton steps from ``x`` (see :meth:`fit`): the solution and its cost."""
         def cost(x):
-            return float(np.sum(parts(x)[0] ** 2))
+            return float(np.sum(parts(x, jacobian=False)[0] ** 2))
 
         c = cost(x)
         for _ in range(self.ITERATIONS):
             res, jac = parts(x)
-            step = lsq_linear(jac, jac @ x - res, bounds=(0.0, np.inf), method="bvls").x
+            step = nonnegative_least_squares(jac, jac @ x - res)
             t, trial, ct = 1.0, x, c
             while t > 1e-3:
                 trial = x + t * (step - x)
@@ -436,7 +488,7 @@ class BodyEstimate:
 
     def torques(self, y: np.ndarray) -> np.ndarray:
         """The other's estimated torques (T, joints) for a motion's regressor."""
-        return np.asarray(y, float) @ self.theta
+        return regressor_torques(y, self.theta)
 
     # ------------------------------------------------------------------ probes
     def covariance(self) -> np.ndarray:

@@ -41,6 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from shared.estimation.body import regressor_torques
+
 #: the grid of hyperparameters (type-II maximum likelihood over it)
 AMPLITUDES = (0.0, 0.03, 0.1, 0.3)  # a: the residual's typical size, relative to g
 LENGTHS = (0.5, 1.0, 2.0)  # the RBF's length scale, in units of sqrt(dimensions) of standardised features
@@ -60,14 +62,13 @@ def _kind(name: str) -> str:
 def features(y: np.ndarray, theta: np.ndarray, names: list[str], motion) -> np.ndarray:
     """``x_m`` of one motion (module docstring): its regressor ``y`` (T, J, P) under the body
     ``theta`` (column ``names``) and its clip (degrees, the felt joints' channels first)."""
-    tau = y @ theta
+    y = np.asarray(y, float)
+    tau = regressor_torques(y, theta)
     per_joint = np.abs(tau).mean(axis=0)
     joint_share = per_joint / max(per_joint.sum(), 1e-12)
-    kinds = np.zeros(len(COLUMN_KINDS))
-    for i, kind in enumerate(COLUMN_KINDS):
-        cols = [p for p, n in enumerate(names) if _kind(n) == kind]
-        if cols:
-            kinds[i] = np.abs(y[..., cols] @ theta[cols]).sum(axis=1).mean()
+    # every kind's torques at once: theta with the other kinds' columns zeroed, one product
+    of_kind = np.array([[_kind(n) == kind for kind in COLUMN_KINDS] for n in names], float) * np.asarray(theta)[:, None]
+    kinds = np.abs(y.reshape(-1, y.shape[-1]) @ of_kind).reshape(*y.shape[:2], -1).sum(axis=1).mean(axis=0)
     kind_share = kinds / max(kinds.sum(), 1e-12)
     q = np.radians(np.asarray(motion.data, float))
     dt = 1.0 / motion.fps
