@@ -164,16 +164,21 @@ class Ch3:
         (``WORKERS`` others at a time: the services are separate processes). ``kinds``: these
         instead of the run's (the kinds outside the estimator's model)."""
         res = {}
-        for kind in self.kinds if kinds is None else kinds:
-            # heavier legs matter only to a conversation about the knee
-            joints = list(ALL) if kind == "legs" else list(ARM)
-            pop = population(kind, self.others, seed=self.population_seed, d=6, g_max=G_MAX, joints=joints)
-            with ThreadPoolExecutor(WORKERS) as pool:
-                rows = list(pool.map(lambda ip, kind=kind: self.one_other(kind, *ip), enumerate(pop)))
-            res[kind] = rows
-            e = {m: (np.mean([r[f"{m}_known"]["error"] for r in rows]), np.mean([r[f"{m}_unknown"]["error"] for r in rows]))
-                 for m in METHODS}
-            self.echo(f"  {kind}: " + ", ".join(f"{m} {k:.1%} / {u:.1%}" for m, (k, u) in e.items()) + " (known / unknown)")
+        kinds = self.kinds if kinds is None else kinds
+        # heavier legs matter only to a conversation about the knee
+        tasks = [(kind, i, p) for kind in kinds for i, p in enumerate(population(
+            kind, self.others, seed=self.population_seed, d=6, g_max=G_MAX, joints=list(ALL) if kind == "legs" else list(ARM)))]
+        # every kind's others in one pool: WORKERS conversations always in flight (a pool per kind
+        # waited for its slowest other before the next kind began); each kind said once it is done
+        with ThreadPoolExecutor(WORKERS) as pool:
+            futures = [(task[0], pool.submit(self.one_other, *task)) for task in tasks]
+            for kind in kinds:
+                rows = [f.result() for k, f in futures if k == kind]
+                res[kind] = rows
+                e = {m: (np.mean([r[f"{m}_known"]["error"] for r in rows]),
+                         np.mean([r[f"{m}_unknown"]["error"] for r in rows])) for m in METHODS}
+                self.echo(f"  {kind}: " + ", ".join(f"{m} {k:.1%} / {u:.1%}" for m, (k, u) in e.items())
+                          + " (known / unknown)")
         return res
 
     def people(self, kinds=("mass", "mixed")) -> dict:
@@ -181,17 +186,21 @@ class Ch3:
         drifting word boundaries, 10-30 % inconsistent answers, "I don't know"); the conversation
         goes on through all of it."""
         res = {}
+        pops = {}
         for kind in kinds:
             pop = population(kind, self.others, seed=self.population_seed, d=6, g_max=G_MAX, joints=list(ARM))
-            pop = [{**p, **a, "seed": p["seed"] + 500} for p, a in zip(pop, people_answers(self.others,
-                                                                                           self.population_seed))]
-            with ThreadPoolExecutor(WORKERS) as pool:
-                rows = list(pool.map(lambda ip, kind=kind: self.one_other(f"people-{kind}", *ip), enumerate(pop)))
-            for row, p in zip(rows, pop):
-                row["answering"] = {k: p[k] for k in ("gamma", "drift", "noise", "dont_know")}
-            res[kind] = rows
-            self.echo(f"  people-like answers, {kind}: " + ", ".join(
-                f"{m} {np.mean([r[f'{m}_unknown']['error'] for r in rows]):.1%}" for m in METHODS) + " (unknown)")
+            pops[kind] = [{**p, **a, "seed": p["seed"] + 500} for p, a in zip(pop, people_answers(self.others,
+                                                                                                  self.population_seed))]
+        with ThreadPoolExecutor(WORKERS) as pool:  # both kinds in one pool (see uneven)
+            futures = {kind: [pool.submit(self.one_other, f"people-{kind}", i, p) for i, p in enumerate(pop)]
+                       for kind, pop in pops.items()}
+            for kind, pop in pops.items():
+                rows = [f.result() for f in futures[kind]]
+                for row, p in zip(rows, pop):
+                    row["answering"] = {k: p[k] for k in ("gamma", "drift", "noise", "dont_know")}
+                res[kind] = rows
+                self.echo(f"  people-like answers, {kind}: " + ", ".join(
+                    f"{m} {np.mean([r[f'{m}_unknown']['error'] for r in rows]):.1%}" for m in METHODS) + " (unknown)")
         return res
 
     def identification(self, kinds=None) -> dict:
@@ -204,29 +213,37 @@ class Ch3:
         table = {}
         plans = [(kind, "thesis", THESIS_CANDIDATES) for kind in (self.kinds if kinds is None else kinds)]
         plans += [(kind, "weighted", weighted_candidates()) for kind in ("mass",) if kind in self.kinds]
-        for kind, cset, cands in plans:
-            # the weighted rules without noise only: a doubled joint weight and a doubled link feel alike
-            # 20 % inconsistent answers (answers like people's): the auto method only
-            for noise in (0.0, 0.1, 0.2) if cset == "thesis" else (0.0,):
-                for method in ("thesis", "auto") if cset == "thesis" and noise < 0.2 else ("auto",):
-                    n_others = max(self.others, len(cands))
-                    pop = population(kind, n_others, seed=self.population_seed, joints=list(ALL), g_max=G_MAX_RULES)
+        # the weighted rules without noise only: a doubled joint weight and a doubled link feel alike;
+        # 20 % inconsistent answers (answers like people's): the auto method only
+        configs = [(kind, cset, cands, noise, method) for kind, cset, cands in plans
+                   for noise in ((0.0, 0.1, 0.2) if cset == "thesis" else (0.0,))
+                   for method in (("thesis", "auto") if cset == "thesis" and noise < 0.2 else ("auto",))]
 
-                    def one(ip, cands=cands, noise=noise, method=method, cset=cset):
-                        i, p = ip
-                        c = cands[i % len(cands)]
-                        name = f"ch3-id-{i}"
-                        p = {**p, "rule": c.rule, "weights": None if c.weights is None else list(c.weights),
-                             "noise": noise, "seed": 1000 * int(100 * noise) + i}
-                        self.new_other(name, **p)
-                        self.start(name, name, joints=p["joints"], missing=p["body"].get("missing", []),
-                                   g_max=G_MAX_RULES, probes=0)
-                        r = self.c.request("estimator", "identify_rule", {"estimate": name, "method": method,
-                                                                          "apply": False, "candidates": cset})
-                        return r.get("rule") == c.name, len(r["questions"]), r["reason"]
+        def one(config, i, p):
+            kind, cset, cands, noise, method = config
+            c = cands[i % len(cands)]
+            name = f"ch3-id-{kind}-{cset}-{method}-{int(100 * noise)}-{i}"
+            p = {**p, "rule": c.rule, "weights": None if c.weights is None else list(c.weights),
+                 "noise": noise, "seed": 1000 * int(100 * noise) + i}
+            self.new_other(name, **p)
+            self.start(name, name, joints=p["joints"], missing=p["body"].get("missing", []),
+                       g_max=G_MAX_RULES, probes=0)
+            r = self.c.request("estimator", "identify_rule", {"estimate": name, "method": method,
+                                                              "apply": False, "candidates": cset})
+            self.c.request("estimator", "delete", {"estimate": name})
+            self.c.request("simulator", "delete", {"other": name})
+            return r.get("rule") == c.name, len(r["questions"]), r["reason"]
 
-                    with ThreadPoolExecutor(WORKERS) as pool:
-                        results = list(pool.map(one, enumerate(pop)))
+        # every configuration's others in one pool (see uneven); each kind said once it is done
+        with ThreadPoolExecutor(WORKERS) as pool:
+            futures = [(config, [pool.submit(one, config, i, p) for i, p in enumerate(population(
+                config[0], max(self.others, len(config[2])), seed=self.population_seed, joints=list(ALL),
+                g_max=G_MAX_RULES))]) for config in configs]
+            for kind, cset, _ in plans:
+                for (k, cs, _, noise, method), fs in futures:
+                    if (k, cs) != (kind, cset):
+                        continue
+                    results = [f.result() for f in fs]
                     ok, n = sum(h for h, _, _ in results), len(results)
                     questions = sum(q for _, q, _ in results)
                     reasons: dict = {}
@@ -235,23 +252,28 @@ class Ch3:
                             why = "a wrong rule identified" if reason == "identified" else reason
                             reasons[why] = reasons.get(why, 0) + 1
                     table[f"{kind}|{cset}|{method}|{noise:g}"] = {
-                        "kind": kind, "candidates": cset, "method": method, "noise": noise, "rate": ok / n, "trials": n,
-                        "questions": questions / n, "failures": reasons}
-            self.echo(f"  {kind} ({cset}): " + ", ".join(
-                f"{v['method']} noise {v['noise']:.0%} {v['rate']:.0%} ({v['questions']:.1f} q)"
-                for k, v in table.items() if k.startswith(f"{kind}|{cset}|")))
+                        "kind": kind, "candidates": cset, "method": method, "noise": noise, "rate": ok / n,
+                        "trials": n, "questions": questions / n, "failures": reasons}
+                self.echo(f"  {kind} ({cset}): " + ", ".join(
+                    f"{v['method']} noise {v['noise']:.0%} {v['rate']:.0%} ({v['questions']:.1f} q)"
+                    for k, v in table.items() if k.startswith(f"{kind}|{cset}|")))
         return table
 
     def open_questions(self) -> dict:
         """Fig. 3.6-3.8: error, match ratio, symbol distance against sets; d = 4, 6, 8."""
         res = {}
         known, unknown = basic_motions(ARM), unknown_motions(10, joints=ARM)
-        for d in (4, 6, 8):
+
+        def one(d):
             name = f"ch3-d{d}"
             params = self.new_other(name, mass=4.8, d=d, g_max=G_MAX)
             self.start(name, name, d=d, g_max=G_MAX)
-            lang = Language(d=d, g_max=G_MAX)
-            res[d] = self.curve(name, params, lang, {"known": known, "unknown": unknown})
+            return self.curve(name, params, Language(d=d, g_max=G_MAX), {"known": known, "unknown": unknown})
+
+        with ThreadPoolExecutor(3) as pool:  # three others of their own: at once
+            curves = dict(zip((4, 6, 8), pool.map(one, (4, 6, 8))))
+        for d in (4, 6, 8):
+            res[d] = curves[d]
             last = res[d]["rows"][-1]
             self.echo(f"  d={d}: after {last['set']} sets " + ", ".join(
                 f"{m} {last[f'{m}_known']['error']:.1%} / {last[f'{m}_unknown']['error']:.1%}" for m in METHODS))
@@ -262,7 +284,8 @@ class Ch3:
         (the self keeps eq. 3.8: wrong); d = 5 with f4 and d = 7 with f2."""
         unknown = unknown_motions(10, joints=ALL)
         out = {}
-        for d, rule in ((5, "f4"), (7, "f2")):
+
+        def one(d, rule):  # the estimates of one d ask the same other in turn (its answers follow its questions)
             other = f"ch3-{rule}"
             params = self.new_other(other, mass=4.8, d=d, g_max=G_MAX_RULES, rule=rule, joints=list(ALL))
             # right: identified; wrong: the self keeps eq. 3.8 (the caption's f0); at d = 5 also the
@@ -278,6 +301,13 @@ class Ch3:
                                        "identified": ident and ident.get("rule"),
                                        "questions": ident and ident["questions"], "design": ident and ident.get("design"),
                                        **self.curve(name, params, lang, {"unknown": unknown})}
+
+        with ThreadPoolExecutor(2) as pool:  # the two d's: two others of their own, at once
+            list(pool.map(one, (5, 7), ("f4", "f2")))
+        # the same order of keys as one d after the other
+        out = {f"{label}|{d}": out[f"{label}|{d}"] for d in (5, 7) for label in ("right", "wrong", "wrong-f2")
+               if f"{label}|{d}" in out}
+        for d, rule in ((5, "f4"), (7, "f2")):
             r, w = out[f"right|{d}"]["rows"][-1], out[f"wrong|{d}"]["rows"][-1]
             self.echo(f"  d={d}, other uses {rule}: identified {out[f'right|{d}']['identified']}; unknown-motion error "
                       f"right rule {r['thesis_unknown']['error']:.1%} (body {r['body_unknown']['error']:.1%}), wrong rule "
@@ -287,14 +317,16 @@ class Ch3:
     def robustness(self) -> dict:
         """Error after the sets under answer noise (d = 6, the proportional other)."""
         known, unknown = basic_motions(ARM), unknown_motions(10, joints=ARM)
-        res = {}
         lang = Language(d=6, g_max=G_MAX)
-        for noise in (0.1, 0.2):
+
+        def one(noise):
             name = f"ch3-noise{int(noise * 100)}"
             params = self.new_other(name, mass=4.8, d=6, g_max=G_MAX, noise=noise, seed=7)
             self.start(name, name, d=6, g_max=G_MAX)
-            res[noise] = self.curve(name, params, lang, {"known": known, "unknown": unknown})
-        return res
+            return self.curve(name, params, lang, {"known": known, "unknown": unknown})
+
+        with ThreadPoolExecutor(2) as pool:  # two others of their own: at once
+            return dict(zip((0.1, 0.2), pool.map(one, (0.1, 0.2))))
 
 
 def run(client, out: Path, sets: int = SETS, echo=print, others: int = OTHERS, kinds=KINDS, outside: bool = True) -> Path:
