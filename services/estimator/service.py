@@ -155,7 +155,7 @@ def model_reply(check: dict) -> dict:
 class Once:
     """What the self's fixed body gives for a motion, computed once for every estimate: requests
     asking for the same key at once wait for one answer; a failed one is asked again next time;
-    the oldest ``limit`` keys and beyond are forgotten."""
+    past ``limit`` keys the oldest are forgotten."""
 
     def __init__(self, limit: int = 4096):
         self.table: dict = {}
