@@ -162,6 +162,19 @@ def test_missing_and_unknown_files(tmp_path):
         load_clip(tmp_path / "x.npz")
 
 
+def test_a_clips_fingerprint_is_its_frames_not_its_name():
+    """The key of what is computed from a motion alone: one motion under two names is one
+    key; a changed frame, another frame rate or other channels are another."""
+    data = np.arange(12.0).reshape(4, 3)
+    clip = Clip(data, ["a", "b", "c"], 30.0, name="first")
+    assert clip.fingerprint() == Clip(data.copy(), ["a", "b", "c"], 30.0, name="second").fingerprint()
+    changed = data.copy()
+    changed[2, 1] += 1e-9
+    for other in (Clip(changed, ["a", "b", "c"], 30.0), Clip(data, ["a", "b", "c"], 60.0),
+                  Clip(data, ["a", "c", "b"], 30.0), Clip(data[:3], ["a", "b", "c"], 30.0)):
+        assert other.fingerprint() != clip.fingerprint()
+
+
 def test_clip_rejects_inconsistent_shapes():
     with pytest.raises(BadInput):
         Clip(np.zeros((3, 2)), ["a"], 30)

@@ -64,14 +64,14 @@ class BusPorts:
         """The self's torques of a motion (its body never changes: performed once per motion for
         every estimate, like :meth:`regressor`)."""
         motion = hold(motion, self.language.missing)
-        key = (motion.fps, tuple(motion.channels), motion.data.tobytes(), tuple(self.language.joints))
+        key = (motion.fingerprint(), tuple(self.language.joints))
         return _PERFORMED.once(key, lambda: self._taus(self.c.request("simulator", "perform", {
             "body": "self", "clip": clip_to_wire(motion)})["clip"]), self.timeout + 60).copy()
 
     def regressor(self, motion) -> np.ndarray:
         """The self's regressor of a motion (the self's body never changes: one per motion for
         every estimate)."""
-        key = (motion.name, motion.fps, motion.data.tobytes(), tuple(self.language.joints), tuple(self.language.missing))
+        key = (motion.fingerprint(), tuple(self.language.joints), tuple(self.language.missing))
         return _REGRESSORS.once(key, lambda: self.c.request("simulator", "regressor", {
             "clip": clip_to_wire(motion), "joints": self.language.joints, "missing": self.language.missing})["y"],
             self.timeout + 60)

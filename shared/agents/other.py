@@ -22,7 +22,6 @@ replays identically.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -196,8 +195,7 @@ class SimulatedOther:
         """The body's torques of ``motion`` (a copy), kept for the last ``KEPT_MOTIONS`` motions:
         its body never changes, and rule identification asks about pairs of the same 20 motions
         again and again (two inverse dynamics a question before)."""
-        data = np.ascontiguousarray(motion.data, float)
-        key = (float(motion.fps), tuple(motion.channels), data.shape, hashlib.blake2b(data.tobytes()).digest())
+        key = motion.fingerprint()
         tau = self._kept.get(key)
         if tau is None:
             performed, _ = perform(self.body, motion)

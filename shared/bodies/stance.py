@@ -84,7 +84,7 @@ _REFERENCES_LOCK = threading.Lock()  # the simulator answers requests in threads
 def _reference(body: Body, reference: Clip, fps: float, n: int):
     """The reference on the motion's ``n`` frames: the support points (``foot_anchors``), their
     positions (n, points, 3) and the centre of gravity (n, 3); kept for the last 4 references."""
-    key = (id(body.model), hash(reference.data.tobytes()), reference.fps, fps, n)
+    key = (id(body.model), reference.fingerprint(), fps, n)
     with _REFERENCES_LOCK:
         hit = _REFERENCES.get(key)
     if hit is not None and hit[0] is body.model:

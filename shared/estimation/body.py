@@ -250,31 +250,26 @@ class Batch:
 
     def g(self, theta: np.ndarray) -> np.ndarray:
         """``g`` of every motion (:meth:`g_and_gradient` without the gradient)."""
-        lang = self.language
-        if lang.rule not in ("eq3.8", "f1"):
+        if self.language.rule not in ("eq3.8", "f1"):
             return self.g_and_gradient(theta)[0]
-        a = (np.abs(self.torques(theta)) * self.w).sum(axis=1)
-        return np.add.reduceat(a, self.starts) / self._norm()
+        return self._g_of(regressor_torques(self.y, theta))
 
     def g_and_gradient(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lang = self.language
         if lang.rule not in ("eq3.8", "f1"):
             out = [g_and_gradient(y, theta, lang.rule, lang.tau_max, lang.weights) for y in self.ys]
             return np.array([o[0] for o in out]), np.array([o[1] for o in out])
-        tau = self.torques(theta)  # (sum T, J)
-        a = (np.abs(tau) * self.w).sum(axis=1)
-        norm = self._norm()
-        g = np.add.reduceat(a, self.starts) / norm
+        tau = regressor_torques(self.y, theta)  # (sum T, J)
         # each motion's gradient one (T J) . (T J, P) product: BLAS, 2x faster than an einsum over
         # every frame and a sum of its rows
         s = (np.sign(tau) * self.w).reshape(-1)
         flat = self.y.reshape(len(s), -1)
-        grad = np.stack([s[lo:hi] @ flat[lo:hi] for lo, hi in self.spans]) / norm[:, None]
-        return g, grad
+        grad = np.stack([s[lo:hi] @ flat[lo:hi] for lo, hi in self.spans]) / self._norm()[:, None]
+        return self._g_of(tau), grad
 
-    def torques(self, theta: np.ndarray) -> np.ndarray:
-        """``Y theta`` of every frame (sum T, J)."""
-        return regressor_torques(self.y, theta)
+    def _g_of(self, tau: np.ndarray) -> np.ndarray:
+        """eq. 3.8 (or f1) of every motion from the stacked torques (sum T, J)."""
+        return np.add.reduceat((np.abs(tau) * self.w).sum(axis=1), self.starts) / self._norm()
 
     def _norm(self) -> np.ndarray:
         return self.lengths * (1 if self.language.rule == "eq3.8" else self.y.shape[1])
@@ -393,14 +388,16 @@ class BodyEstimate:
             return res, over, under
 
         def parts(x, jacobian: bool = True):
-            """(residuals, Jacobian) at ``x``; (residuals, None) when only the cost is needed (the
-            line search's trials: most are refused, and the gradient is most of the work)."""
+            """(residuals, Jacobian) at ``x``, the last point's kept; (residuals, None) when only
+            the cost is needed (the line search's trials: most are refused, and the gradient is
+            most of the work)."""
             key = x.tobytes()
-            if key not in cache or (jacobian and cache[key][1] is None):
-                if not jacobian:
-                    cache.clear()
-                    cache[key] = (residuals(x, batch.g(x[:n_p]))[0], None)
-                    return cache[key]
+            hit = cache.get(key)
+            if hit is not None and (hit[1] is not None or not jacobian):
+                return hit
+            if not jacobian:
+                out: tuple[np.ndarray, np.ndarray | None] = (residuals(x, batch.g(x[:n_p]))[0], None)
+            else:
                 s = x[n_p]
                 g, grad = batch.g_and_gradient(x[:n_p])  # (A,), (A, P)
                 res, over, under = residuals(x, g)
@@ -409,9 +406,10 @@ class BodyEstimate:
                 jac = np.vstack([prior_jac, np.hstack([self.coupling / max(s, 0.1), np.zeros((len(self.pairs), 1))]),
                                  np.hstack([self.HINGE * grad / sd * violated[:, None], zero]),
                                  np.hstack([grad / sd * bounded[:, None], zero])])
-                cache.clear()
-                cache[key] = (res, jac)
-            return cache[key]
+                out = (res, jac)
+            cache.clear()
+            cache[key] = out
+            return out
 
         return parts, n_p
 

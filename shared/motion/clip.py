@@ -9,6 +9,7 @@ Angles are continuous (never wrapped frame by frame) and in degrees.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -68,6 +69,13 @@ class Clip:
     @property
     def duration(self) -> float:
         return (self.n_frames - 1) / self.fps if self.n_frames else 0.0
+
+    def fingerprint(self) -> tuple:
+        """What the motion is, as the key of anything computed from its frames alone (the frame
+        rate, the channels and a digest of the frames; not its name): small and the same for
+        one motion under two names."""
+        data = np.ascontiguousarray(self.data)
+        return float(self.fps), tuple(self.channels), data.shape, hashlib.blake2b(data.tobytes(), digest_size=16).digest()
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.channels.index(name)]
