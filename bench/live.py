@@ -5,8 +5,10 @@ file; the takes go through the capture service like a capture suit's stream, tol
 every other motion class (``--background``, a third performer). Measures the whole study
 and, per trial, the time from the take's last frame to the next demonstration written and the
 adverb said, and how much of it passed before the take ended (the replay source closes after
-its take; a source that keeps streaming is ended by ``--idle`` or ``--seconds``). Writes
-``bench/results/live.*``.
+its take; a source that keeps streaming is ended by ``--idle`` or ``--seconds``), and from the
+end of the fifth repetition to the next demonstration with a source that keeps streaming, with
+``--background`` and with ``--space`` (a space of the pss service of two other performers'
+motions naming the repetitions). Writes ``bench/results/live.*``.
 
     python -m bench.live --hdm05 ../shared/data/hdm05
 """
@@ -54,28 +56,21 @@ def main(argv=None) -> int:
         if r.returncode != 0:
             print(r.stdout, r.stderr)
             return 1
-        # latency: a source that keeps streaming (the person standing still after the take), real
-        # speed; from the end of the fifth repetition to the next demonstration written and the adverb said
-        quick = work / "latency"
-        subprocess.run(cmd + ["study", "init", str(quick), "--target", str(target), "--participants", "1", "--cases",
-                              "2", "--trials", "5", "--seed", "1"], check=True, capture_output=True)
-        joined = [join(reps, seed=100 + k) for k in range(4)]
-        with ReplaySource([j[0].resample(30.0) for j in joined], speed=1.0, connections=4, hold=True) as src:
-            q = subprocess.run(cmd + ["study", "run", str(quick), "--source", src.address, "--steps", "4", *background],
-                               capture_output=True, text=True, timeout=900)
-            started = list(src.started)
-    if q.returncode != 0:
-        print(q.stdout, q.stderr)
+        after_fifth = _latency(cmd, work / "latency", target, reps, background)
+        # the same with a space of the pss service naming the repetitions (two other performers' motions)
+        spaced = [f for d in sorted((args.hdm05 / "amc").iterdir()) if d.is_dir() for p in ("bd", "bk")
+                  for f in sorted(d.glob(f"HDM_{p}_*.amc"))]
+        subprocess.run(cmd + ["space", "build", "moves", *map(str, spaced)], check=True, capture_output=True)
+        with_space = _latency(cmd, work / "latency-space", target, reps, ["--space", "moves"])
+    if after_fifth is None or with_space is None:
         return 1
-    ready_at = [float(x) for x in re.findall(r"ready at ([0-9.]+)\)", q.stderr)]
-    after_fifth = [t - (t0 + j[1][-1][1]) for t, t0, j in zip(ready_at, started, joined)]
     ready = [float(x) for x in re.findall(r"ready ([0-9.]+) s after the take's last frame", r.stderr)]
     waited = [float(x) for x in re.findall(r"\(([0-9.]+) s of it until the take ended", r.stderr)]
     found = re.findall(r"frames, (\d+) repetition\(s\) found|fewer repetitions than expected: (\d+) found", r.stderr)
     trials = r.stdout.count("recording from")
-    res = {"after_fifth_repetition_s": {"median": float(np.median(after_fifth)), "max": float(np.max(after_fifth)),
-                                        "n": len(after_fifth), "each": [round(x, 3) for x in after_fifth]}
-           if after_fifth else None,
+    res = {"after_fifth_repetition_s": _summary(after_fifth),
+           "after_fifth_repetition_with_a_space_s": _summary(with_space),
+           "space": f"{len(spaced)} clips of performers bd and bk (every class)",
            "trials": trials, "seconds": seconds, "idle_s": IDLE, "takes_speed": 4.0,
            "ready_after_last_frame_s": {"median": float(np.median(ready)), "max": float(np.max(ready))} if ready else None,
            "until_the_take_ended_s": {"median": float(np.median(waited))} if waited else None,
@@ -91,10 +86,37 @@ def main(argv=None) -> int:
           f"Takes cut into 5 repetitions: {res['takes_with_5_found']} of {res['takes']}.",
           f"A source that keeps streaming, real speed ({len(after_fifth)} trials): the take ends once 5 repetitions "
           f"are seen, and the next demonstration and adverb are ready {np.median(after_fifth):.2f} s (median; longest "
-          f"{np.max(after_fifth):.2f} s) after the end of the fifth repetition (goal 1 s)." if after_fifth else ""]
+          f"{np.max(after_fifth):.2f} s) after the end of the fifth repetition (goal 1 s)." if after_fifth else "",
+          f"The same with `--space` (a space of the pss service names each repetition: {res['space']}): "
+          f"{np.median(with_space):.2f} s (median; longest {np.max(with_space):.2f} s)." if with_space else ""]
     write_results(args.out, "live", res, md)
     print("\n".join(md[2:]))
     return 0
+
+
+def _latency(cmd: list[str], quick: Path, target: Path, reps: list, extra: list[str]) -> list[float] | None:
+    """A source that keeps streaming (the person standing still after the take), real speed: per
+    trial, seconds from the end of the fifth repetition to the next demonstration written and the
+    adverb said (None: the run failed, its output printed)."""
+    from shared.capture.stream import ReplaySource
+    from shared.capture.takes import join
+
+    subprocess.run(cmd + ["study", "init", str(quick), "--target", str(target), "--participants", "1", "--cases",
+                          "2", "--trials", "5", "--seed", "1"], check=True, capture_output=True)
+    joined = [join(reps, seed=100 + k) for k in range(4)]
+    with ReplaySource([j[0].resample(30.0) for j in joined], speed=1.0, connections=4, hold=True) as src:
+        q = subprocess.run(cmd + ["study", "run", str(quick), "--source", src.address, "--steps", "4", *extra],
+                           capture_output=True, text=True, timeout=900)
+        started = list(src.started)
+    if q.returncode != 0:
+        print(q.stdout, q.stderr)
+        return None
+    ready_at = [float(x) for x in re.findall(r"ready at ([0-9.]+)\)", q.stderr)]
+    return [t - (t0 + j[1][-1][1]) for t, t0, j in zip(ready_at, started, joined)]
+
+
+def _summary(x: list[float]) -> dict | None:
+    return {"median": float(np.median(x)), "max": float(np.max(x)), "n": len(x), "each": [round(v, 3) for v in x]} if x else None
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ change of a take's state on ``<prefix>/events/capture/take``.
 
 from __future__ import annotations
 
-from schemas.base import Array, Bool, Endpoint, F, Float, Int, List, Map, Message, Str
+from schemas.base import NAME_PATTERN, Array, Bool, Endpoint, F, Float, Int, List, Map, Message, Str
 from schemas.common import CLIP, name
 
 SERVICE = "capture"
@@ -34,6 +34,13 @@ TAKE_INFO = Map({
     "ended_at": F(Float(0.0), "unix time the take ended", required=False),
 })
 
+SPACE = F(Str(pattern=NAME_PATTERN, max_len=64), "a space of the pss service holding the target's motion and "
+          "others: a repetition is a stretch the space names the target's motion (instead of the background check; "
+          "each stretch recognised through the pss service; a take's `segment` for the same target uses the space it "
+          "was recorded with when given none)", required=False)
+LABEL = F(Str(max_len=64), "with space: the target's motion in it (default: the target's own label, else what the "
+          "space recognises the target as)", required=False)
+
 SEGMENT_REPLY = Map({
     "take": TAKE,
     "verdict": F(Str(max_len=500), "the expected repetitions found, fewer, more, or not the target"),
@@ -42,9 +49,13 @@ SEGMENT_REPLY = Map({
         "start": F(Float(0.0), "seconds from the take's start"),
         "end": F(Float(0.0), "seconds from the take's start"),
         "cost": F(Float(0.0), "distance from the target, as shapes"),
-        "confidence": F(Float(0.0, 1.0), "how far the cohort ratio is below its limit"),
-        "cohort": F(Float(0.0), "cost against the target / against the nearest other motion", required=False),
+        "confidence": F(Float(0.0, 1.0), "how far its ratio (the cohort's, or with a space the space's) is below "
+                        "its limit"),
+        "cohort": F(Float(0.0), "cost against the target / against the nearest other motion; with a space, the "
+                    "recognition distance to the target's motion / to the nearest other", required=False),
     }), max_len=1000)),
+    "notes": F(List(Str(max_len=500), max_len=20), "what the segmentation noticed (the target's motion as the space "
+               "recognised it)", required=False, default=list),
     "clips": F(List(CLIP, max_len=1000), "the repetitions cut from the take, in order"),
 })
 
@@ -73,6 +84,8 @@ RECORD = Endpoint(
                         default=list),
         "check_every": F(Float(0.05, 60.0), "seconds of take between looks for the expected repetitions",
                          required=False, default=0.1),
+        "space": SPACE,
+        "label": LABEL,
         "replace": F(Bool(), "record over a finished take of that name", required=False, default=False),
     })),
     Message("capture.record.reply", TAKE_INFO),
@@ -109,6 +122,8 @@ SEGMENT = Endpoint(
         "expected": F(Int(1, 1000), "repetitions expected", required=False, default=5),
         "background": F(List(CLIP, max_len=200), "other motions a repetition must be nearer the target than",
                         required=False, default=list),
+        "space": SPACE,
+        "label": LABEL,
     })),
     Message("capture.segment.reply", SEGMENT_REPLY),
     "A finished take's repetitions of the target (shared/capture/segment.py), each with its confidence and "

@@ -285,8 +285,9 @@ def coach_services(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def capture_service(tmp_path_factory):
-    """A real router and a real capture service process; yields (env, Processes)."""
-    yield from _serve(tmp_path_factory, "capture")
+    """A real router, a real capture service process and the pss service it asks for a space's word;
+    yields (env, Processes)."""
+    yield from _serve(tmp_path_factory, "capture", "pss")
 
 
 @pytest.fixture

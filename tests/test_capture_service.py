@@ -110,6 +110,49 @@ def test_a_take_recorded_with_other_motions_is_cut_with_them(capture_service, cl
     assert len(other["repetitions"]) == 2, other["verdict"]
 
 
+@pytest.mark.slow
+def test_a_space_of_the_pss_service_names_another_performers_repetitions(capture_service, client_of, bundled):
+    """bk's kicks against bd's kick: the cohort check finds none (their closest stretch costs more
+    than its largest first cost: tests/test_segmentation.py), a space the pss service holds (bd's
+    and dg's motions) names each a kick through the bus: the take ends once its four are seen, and
+    its cut (the space it was recorded with, by default) finds them where they are; a take of
+    squats holds none. A space or label the service cannot use is refused before recording."""
+    env, _ = capture_service
+    c = client_of(env)
+    classes = ["elbowToKnee1RepsLelbowStart", "kickLFront1Reps", "rotateArmsBothBackward1Reps", "squat1Reps"]
+
+    def clips(performer, cls):
+        return [load_clip(f) for f in sorted((bundled / "amc" / cls).glob(f"HDM_{performer}_*.amc"))]
+
+    space = [clip_to_wire(x) for p in ("bd", "dg") for k in classes for x in clips(p, k)]
+    c.request("pss", "build", {"space": "moves", "clips": space, "replace": True}, timeout=120)
+    target = clip_to_wire(clips("bd", "kickLFront1Reps")[0])
+    take, truth = join(clips("bk", "kickLFront1Reps") * 2, seed=7)
+    with ReplaySource(take, connections=1, hold=True) as src:  # a source that goes on after the take (a suit)
+        c.request("capture", "record", {"take": "kicks", "source": src.address, "seconds": 120, "target": target,
+                                        "expected": 4, "space": "moves"})
+        info = _wait_done(c, "kicks", timeout=120)
+    assert info["state"] == "done" and info["ended"] == "4 repetitions seen", info
+    cut = c.request("capture", "segment", {"take": "kicks", "target": target, "expected": 4}, timeout=120)
+    assert score([(r["start"], r["end"]) for r in cut["repetitions"]], truth)["f1"] == 1.0, cut["verdict"]
+    assert all(r["cohort"] < 1.0 for r in cut["repetitions"])
+    plain = c.request("capture", "segment", {"take": "kicks", "target": target, "expected": 4,
+                                             "background": [clip_to_wire(clips("dg", "squat1Reps")[0])]}, timeout=120)
+    assert len(plain["repetitions"]) == 4  # the space it was recorded with still decides
+    squats, _ = join(clips("bk", "squat1Reps") * 2, seed=8)
+    c.request("capture", "record", {"take": "squats", "replay": [clip_to_wire(squats)], "idle": 0.5})
+    _wait_done(c, "squats")
+    none = c.request("capture", "segment", {"take": "squats", "target": target, "space": "moves"}, timeout=120)
+    assert none["repetitions"] == [] and none["verdict"].startswith("not the target"), none["verdict"]
+    for msg, want in (({"space": "nowhere"}, "not_found"), ({"space": "moves", "label": "jump"}, "bad_request")):
+        with pytest.raises(RemoteError) as e:
+            c.request("capture", "record", {"take": "refused", "replay": [clip_to_wire(take)], "target": target,
+                                            "expected": 4, **msg})
+        assert e.value.code == want, e.value.message
+    with pytest.raises(RemoteError, match="holds no motion 'jump'"):
+        c.request("capture", "segment", {"take": "kicks", "target": target, "space": "moves", "label": "jump"})
+
+
 def test_refusals_are_coded_errors(capture_service, client_of, squats, tmp_path):
     env, _ = capture_service
     c = client_of(env)

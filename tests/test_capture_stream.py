@@ -177,6 +177,36 @@ def test_capture_segment_says_which_test_failed_and_takes_a_larger_first_cost(bu
     assert r.returncode == 2 and "Traceback" not in r.stderr
 
 
+def test_capture_segment_with_a_space_file_finds_what_the_cohort_cannot(bundled, tmp_path):
+    """bk's kicks against bd's kick (the cohort finds none: tests/test_segmentation.py) with a space
+    file of bd's and dg's motions: every repetition cut, the space's motion in the answer (exit 0);
+    a label the space does not hold, or a label without a space, is refused in a sentence (exit 2)."""
+    import json
+    import subprocess
+    import sys
+
+    from shared.capture.takes import join
+    from shared.pss.space import ProtoSymbolSpace
+
+    classes = ["elbowToKnee1RepsLelbowStart", "kickLFront1Reps", "rotateArmsBothBackward1Reps", "squat1Reps"]
+    files = {p: [f for k in classes for f in sorted((bundled / "amc" / k).glob(f"HDM_{p}_*.amc"))] for p in ("bd", "bk", "dg")}
+    space = ProtoSymbolSpace.build([load_clip(f) for f in files["bd"] + files["dg"]], sensor=False).save(tmp_path / "moves")
+    take, truth = join([load_clip(f) for f in files["bk"] if "kick" in f.name] * 2, seed=7)
+    save_clip(take, tmp_path / "kicks.bvh")
+    target = next(f for f in files["bd"] if "kick" in f.name)
+    cmd = [sys.executable, "-m", "shared.cli", "capture", "segment", str(tmp_path / "kicks.bvh"), "--target", str(target),
+           "--expected", "4"]
+    r = subprocess.run(cmd + ["--space", str(space), "--json"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    found = json.loads(r.stdout)
+    assert found["space"] == "kickLFront1Reps" and found["verdict"] == "4 repetition(s) found"
+    assert score([(x["start"], x["end"]) for x in found["repetitions"]], truth)["f1"] == 1.0
+    for extra, said in ((["--space", str(space), "--label", "jump"], "holds no motion 'jump'"),
+                        (["--label", "kickLFront1Reps"], "give the space too")):
+        r = subprocess.run(cmd + extra, capture_output=True, text=True, timeout=300)
+        assert r.returncode == 2 and said in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
 def test_the_adverb_is_said_into_a_file_of_its_length_and_not_silent(tmp_path):
     from shared.capture import speech
 

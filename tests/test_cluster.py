@@ -932,6 +932,31 @@ def test_coach_live_runs_trials_from_a_live_source(cluster, bundled, tmp_path):
     assert r.returncode != 0 and "no live source" in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
+def test_coach_live_with_a_space_naming_the_repetitions(cluster, bundled, tmp_path):
+    """`coach live --space`: a space built on the pss service from two other performers' motions
+    names the person's repetitions (bk's kicks against bd's kick, which the cohort check misses:
+    tests/test_segmentation.py); the trial's take ends once its four are seen. A space the
+    cluster does not hold is refused in a sentence before any take is recorded."""
+    from shared.capture.stream import ReplaySource
+    from shared.capture.takes import join
+    from shared.io import load_clip
+
+    env = cluster
+    amc = sorted((bundled / "amc").glob("*/*.amc"))
+    r = cli(env, "space", "build", "live-moves", *[f for f in amc if "_bk_" not in f.name], "--replace", timeout=300)
+    assert r.returncode == 0, r.stderr
+    kick = next(f for f in amc if "_bd_kick" in f.name)
+    bk = [load_clip(f).resample(30.0) for f in amc if "_bk_kick" in f.name]
+    with ReplaySource([join(bk * 2, seed=7)[0]], connections=1, hold=True, speed=4.0) as src:
+        r = cli(env, "coach", "live", "live2", "--target", kick, "--source", src.address, "--trials", "1",
+                "--expected", "4", "--space", "live-moves", "--out", tmp_path / "live", timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "4 repetitions seen" in r.stderr and "trial 1: d_p" in r.stdout, r.stderr
+    r = cli(env, "coach", "live", "live3", "--target", kick, "--source", "tcp://127.0.0.1:9", "--trials", "1",
+            "--space", "nowhere", "--out", tmp_path / "x")
+    assert r.returncode != 0 and "nowhere" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
 @pytest.mark.slow
 def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_path):
     """Thesis 5.4.1 with people: `--cases sweep` plans each participant's alpha sweep (without

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from shared.capture import naming
 from shared.capture import segment as seg
 from shared.capture.takes import join, score
 from shared.errors import BadInput
@@ -228,3 +229,77 @@ def test_not_the_target_names_the_test_every_movement_failed(bundled):
     still = squats.with_data(np.repeat(squats.data[:1], squats.n_frames, axis=0))
     nothing = seg.segment(still, target)
     assert nothing.closest is None and "no movement in the take is as long and as large" in nothing.verdict
+
+
+def _space(bundled, performers):
+    from shared.pss.space import ProtoSymbolSpace
+
+    classes = ["elbowToKnee1RepsLelbowStart", "kickLFront1Reps", "rotateArmsBothBackward1Reps", "squat1Reps"]
+    return ProtoSymbolSpace.build([c for p in performers for k in classes for c in _clips(bundled, p, k)], sensor=False)
+
+
+def test_with_a_space_another_performers_kicks_are_found_and_other_motions_never_cut(bundled):
+    """bk's kicks against bd's: the cohort check finds none (the closest stretch costs more than
+    the cohort's largest first cost), a proto-symbol space of bd's and dg's motions names each of
+    them a kick: every repetition found, each with the space's ratio below 1. bk's takes of the
+    three other motions hold none against the kick, and the take of kicks none against bd's squat."""
+    space = _space(bundled, ["bd", "dg"])
+    target = _clips(bundled, "bd", "kickLFront1Reps")[0]
+    take, truth = join(_clips(bundled, "bk", "kickLFront1Reps") * 2, seed=7)
+    others = [_clips(bundled, "dg", o)[0] for o in ("elbowToKnee1RepsLelbowStart", "rotateArmsBothBackward1Reps", "squat1Reps")]
+    cohort = seg.segment(take, target, expected=4, background=others)
+    assert cohort.repetitions == [] and cohort.space is None and cohort.closest > seg.MAX_COST
+    found = seg.segment(take, target, expected=4, space=space)
+    assert score([(r.start, r.end) for r in found.repetitions], truth)["f1"] == 1.0, found.to_dict()
+    assert found.space == "kickLFront1Reps" and all(r.cohort < 1.0 and 0.0 < r.confidence <= 1.0 for r in found.repetitions)
+    for o in ("elbowToKnee1RepsLelbowStart", "rotateArmsBothBackward1Reps", "squat1Reps"):
+        assert seg.segment(join(_clips(bundled, "bk", o) * 2, seed=8)[0], target, space=space).repetitions == [], o
+    squat = seg.segment(take, _clips(bundled, "bd", "squat1Reps")[0], space=space)
+    assert squat.repetitions == [] and squat.verdict.startswith("not the target")
+    from dataclasses import replace
+
+    anything = replace(seg.Settings(), space_cost=10.0, second_cost=10.0)  # the space alone decides
+    squats = seg.segment(join(_clips(bundled, "bk", "squat1Reps") * 2, seed=8)[0], target, space=space, settings=anything)
+    assert squats.repetitions == [] and squats.refused > 1.0
+    assert squats.verdict.startswith("not the target: the space names every movement like it another motion than "
+                                     "'kickLFront1Reps'")
+
+
+def test_the_targets_motion_in_a_space_is_named_recognised_or_refused(bundled):
+    """The target's label when the space holds it, else ``label``, else what the space recognises
+    it as (said in a note); a label the space does not hold, or a space with no other motion to
+    tell it from, is refused with what the space holds."""
+    from dataclasses import replace
+
+    space = _space(bundled, ["bk", "dg"])
+    squat = _clips(bundled, "bd", "squat1Reps")[0]
+    space = naming.SpaceNamer(space)
+    assert naming.target_label(space, squat) == ("squat1Reps", None)
+    unnamed = replace(squat, label=None)
+    name, note = naming.target_label(space, unnamed)
+    assert name == "squat1Reps" and "recognises the target as 'squat1Reps'" in note
+    assert naming.target_label(space, unnamed, label="kickLFront1Reps") == ("kickLFront1Reps", None)
+    with pytest.raises(BadInput, match="holds no motion 'jump'.*kickLFront1Reps"):
+        naming.target_label(space, squat, label="jump")
+    take, _ = join([squat] * 2, seed=1)
+    with pytest.raises(BadInput, match="at least one other"):
+        seg.segment(take, squat, space=_space_of_one(bundled))
+    assert seg.segment(take, unnamed, expected=2, space=space).notes == [note]
+
+
+def _space_of_one(bundled):
+    from shared.pss.space import ProtoSymbolSpace
+
+    return ProtoSymbolSpace.build(_clips(bundled, "bk", "squat1Reps") + _clips(bundled, "dg", "squat1Reps"), sensor=False)
+
+
+def test_the_spaces_ratio_from_its_nearest_proto_symbols_alone():
+    """From the nearest few proto-symbols (what the pss service replies): the target's nearest
+    over the nearest other's; none of the target's listed: infinite (not named); no other listed:
+    the farthest listed stands in, so the ratio is at most the true one and still below 1."""
+    labels = np.array(["kick", "squat", "kick", "reach"])
+    d = np.array([2.0, 4.0, 3.0, 5.0])
+    assert naming.distance_ratio(labels, d, "kick") == pytest.approx(0.5)
+    assert naming.distance_ratio(labels, d, "squat") == pytest.approx(2.0)
+    assert naming.distance_ratio(labels, d, "jump") == np.inf
+    assert naming.distance_ratio(np.array(["kick", "kick"]), np.array([1.0, 4.0]), "kick") == pytest.approx(0.25)

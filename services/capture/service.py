@@ -44,6 +44,35 @@ class _Recording:
         self.thread: threading.Thread | None = None
 
 
+class _SpaceOnBus:
+    """A space of the pss service, as segmentation asks it (:class:`shared.capture.naming.SpaceNamer`
+    over the bus): its labels and shortest readable clip once, each stretch recognised by a
+    ``pss/recognize`` request (its nearest ``TOP`` proto-symbols: enough to tell whether the
+    nearest is the target's)."""
+
+    TOP = 100
+
+    def __init__(self, client, space: str):
+        from shared.capture.naming import shortest
+
+        self.client, self.space = client, space
+        info = client.request("pss", "info", {"space": space}, timeout=30)
+        self.labels = [row["label"] for row in info["proto_symbols"]]
+        self.shortest = shortest(info["params"]["n_states"], info["params"]["fps"])
+
+    def _recognize(self, clip) -> dict:
+        return self.client.request("pss", "recognize", {"space": self.space, "clips": [clip_to_wire(clip)],
+                                                        "top": self.TOP}, timeout=30)
+
+    def nearest(self, clip):
+        near = self._recognize(clip)["nearest"]
+        return np.asarray([n["label"] for n in near]), np.asarray([n["distance"] for n in near], float)
+
+    def recognise(self, clip):
+        r = self._recognize(clip)
+        return r.get("label"), r.get("nearest_label", ""), float(r.get("confidence", 0.0))
+
+
 def _warm() -> None:
     """Load the segmentation's compiled kernels and the feature code once at start, so that the
     first take's checks do not pay for it (a person waits on the first trial as on any other)."""
@@ -68,8 +97,9 @@ def make_service(settings: Settings | None = None) -> Service:
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)
     lock = threading.Lock()
     live: dict[str, _Recording] = {}
-    cut: dict[str, tuple] = {}  # take -> (target, expected, clip, segmentation) found while recording it
-    grounds: dict[str, tuple] = {}  # take -> (target, the other motions it was recorded with): its segment's default cohort
+    cut: dict[str, tuple] = {}  # take -> (target, expected, clip, segmentation, (space, label)) found while recording it
+    # take -> (target, the other motions and (space, label) it was recorded with): its segment's defaults
+    grounds: dict[str, tuple] = {}
 
     def save(info: dict) -> None:
         atomic_write(root / f"{info['take']}.json", lambda f: f.write(json.dumps(info).encode()))
@@ -90,6 +120,10 @@ def make_service(settings: Settings | None = None) -> Service:
         except (OSError, ValueError):
             continue
 
+    def space_of(req: dict):
+        """The pss service's space a request names (None: the cohort decides)."""
+        return None if not req.get("space") else _SpaceOnBus(svc.client(), req["space"])
+
     def info_of(take: str) -> dict:
         with lock:
             rec = live.get(take)
@@ -105,7 +139,7 @@ def make_service(settings: Settings | None = None) -> Service:
             rec.block = []
         rec.sent_at = time.monotonic()
 
-    def run(rec: _Recording, req: dict, source: str, server) -> None:
+    def run(rec: _Recording, req: dict, source: str, server, namer) -> None:
         from shared.capture.segment import until_repeated
         from shared.capture.stream import record
 
@@ -127,10 +161,10 @@ def make_service(settings: Settings | None = None) -> Service:
                 target = clip_from_wire(req["target"])
                 background = [clip_from_wire(c) for c in req.get("background") or []]
                 with lock:
-                    grounds[take] = (target, background)
+                    grounds[take] = (target, background, (req.get("space"), req.get("label")))
                     while len(grounds) > 16:
                         grounds.pop(next(iter(grounds)))
-                until = until_repeated(target, req["expected"], background=background)
+                until = until_repeated(target, req["expected"], background=background, space=namer, label=req.get("label"))
             if req.get("skeleton"):
                 fd, name = tempfile.mkstemp(prefix=".header-", suffix=".bvh", dir=root)
                 os.close(fd)
@@ -142,7 +176,7 @@ def make_service(settings: Settings | None = None) -> Service:
             flush(rec, frame_rate[0])
             if until is not None and until.last is not None and until.last[0].n_frames == result.frames:
                 with lock:  # the check that ended the take saw all of it: its cut is the take's
-                    cut[take] = (target, req["expected"], *until.last)
+                    cut[take] = (target, req["expected"], *until.last, (req.get("space"), req.get("label")))
                     while len(cut) > 16:
                         cut.pop(next(iter(cut)))
             d = result.to_dict()
@@ -181,6 +215,14 @@ def make_service(settings: Settings | None = None) -> Service:
             raise BadInput("expected repetitions end a take only with the target to find", field="target")
         if req.get("target") is not None and clip_from_wire(req["target"]).skeleton is None:
             raise BadInput("the target needs its skeleton to find its repetitions", field="target")
+        namer = None
+        if req.get("space"):  # asked now, so that a space or label it cannot use is refused before recording
+            from shared.capture.naming import target_label
+
+            if req.get("target") is None:
+                raise BadInput("a space tells the target's repetitions: give the target too", field="space")
+            namer = space_of(req)
+            req = {**req, "label": target_label(namer, clip_from_wire(req["target"]), req.get("label"))[0]}
         server = None
         if req.get("source") is not None:
             parse_source(req["source"])
@@ -208,7 +250,7 @@ def make_service(settings: Settings | None = None) -> Service:
                               "events": [], "dropped": 0, "skipped": 0, "reconnects": 0, "ended": ""})
             live[take] = rec
             save(rec.info)
-        rec.thread = threading.Thread(target=run, args=(rec, req, source, server), daemon=True,
+        rec.thread = threading.Thread(target=run, args=(rec, req, source, server, namer), daemon=True,
                                       name=f"capture-{take}")
         rec.thread.start()
         svc.publish("take", rec.info)
@@ -264,15 +306,18 @@ def make_service(settings: Settings | None = None) -> Service:
         with lock:
             known = cut.get(req["take"])
             ground = grounds.get(req["take"])
-        recorded_with = ground[1] if ground is not None and _same(ground[0], target) else []
+        recorded_with, named = (ground[1], ground[2]) if ground is not None and _same(ground[0], target) else ([], (None, None))
+        if req.get("space"):
+            named = (req["space"], req.get("label"))
         if (known is not None and not req["background"] and known[1] == req["expected"] and _same(known[0], target)
-                and info_of(req["take"])["state"] == "done"):
-            take, result = known[2], known[3]  # found while recording: the same take, target, count and cohort
+                and known[4] == named and info_of(req["take"])["state"] == "done"):
+            take, result = known[2], known[3]  # found while recording: the same take, target, count, cohort and space
         else:
             take = finished(req["take"])
             background = [clip_from_wire(c) for c in req["background"]] or recorded_with
-            result = segment(take, target, expected=req["expected"], background=background)
-        return {"take": req["take"], "verdict": result.verdict, "expected": req["expected"],
+            result = segment(take, target, expected=req["expected"], background=background,
+                             space=space_of({"space": named[0]}), label=named[1])
+        return {"take": req["take"], "verdict": result.verdict, "expected": req["expected"], "notes": result.notes,
                 "repetitions": [{k: v for k, v in r.to_dict().items() if v is not None} for r in result.repetitions],
                 "clips": [clip_to_wire(c) for c in result.cut(take)]}
 

@@ -43,6 +43,19 @@ motion, which differs from the demonstration's). Each repetition's **confidence*
 cohort ratio is below ``COHORT``. The result says whether the take holds the expected number of
 repetitions, fewer, more, or none: a different motion. The settings are a :class:`Settings`.
 
+**With a proto-symbol space** (``space``: a space holding the target's motion and others, read
+here or asked through the pss service; thesis eq. 2.6): the space decides instead of the cohort.
+A stretch is a repetition when its cost against the target is at most ``SPACE_COST`` (the own
+repetitions' limits as above) and the space, abstracting the stretch into an HMM, finds the
+target's motion nearer than any other (:class:`shared.capture.naming.Named`: the recognition
+distance (eq. 2.4) to the target's nearest proto-symbol over that to the nearest other's, at
+most ``SPACE_RATIO``); a repetition's confidence is how far that ratio is below its limit. The
+target's motion in the space is its label, a given one, or what the space recognises the target
+as (said in a note). Another performer's hops and kicks, whose first repetitions cost more than
+``MAX_COST`` against the target (1.08 and 1.14) and which a larger one would not tell from other
+motions by the cohort (the hops' cohort ratios 0.90-0.99; larger costs cut 4-8 stretches of other
+motions on the tuning takes), are named by a space of two other performers' motions.
+
 The settings were chosen by ``bench.segmentation`` on tuning takes only (HDM05 performers bd and
 bk, each one's takes against the other's targets, the other motions of the target's performer;
 performer dg never seen there; ``REST_SHARE`` 0.1-0.25 and ``SLACK`` 0.4-0.9 s were tried there
@@ -58,6 +71,16 @@ conventions F1 1.00 (17 ms); a game studio's styles of one gesture against its '
 F1 0.19 (517 ms: styles as far apart as 'feminine' and 'giant', not one person's repetitions).
 Goals (F1 0.95, 100 ms, no other motion cut): met on the same performer's and the CMU takes; the
 F1 across performers and styles is not.
+
+With a space, chosen on the same tuning takes each with a space of its targets' performer
+(``SPACE_GRID`` of ``bench.segmentation``; ``SPACE_COST`` 1.1 and 1.15 tie there, F1 0.926 with no
+cut, and the tie goes to the larger: a rule written after both were reported, below) and reported
+on dg's takes: with a space of bd and bk F1 1.00, median boundary error 92 ms, no other motion cut
+(with bk's space alone, as tuned: the same); the same performer 0.99; the game studio's styles
+0.14 (the studio's space: its 'normal' clips and two styles of each content); CMU's windows 1.00
+but 4 stretches of other windows cut (a space of one 2-second clip per window, all of one dance,
+tells them apart no better than the cohort). At ``SPACE_COST`` 1.1 dg's kicks (costs 1.13-1.14)
+are not found: F1 0.91 across performers.
 """
 
 from __future__ import annotations
@@ -67,6 +90,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.spatial.distance import cdist
 
+from shared.capture.naming import SPACE_RATIO, Named, SpaceNamer, target_label
 from shared.compiled import kernel
 from shared.deadline import check_time
 from shared.errors import BadInput
@@ -90,6 +114,7 @@ MIN_AMPLITUDE = 0.4  # a stretch smaller than this share of the target's spread 
 POSTURE = 0.25  # the weight of the mean poses' distance in a comparison (Settings.posture)
 OWN = 1.5  # the person's own repetitions find the others (Settings.own; 0: off)
 SECOND_COST = 1.4  # once the take holds the target, a stretch's cost against it, at most (with OWN on)
+SPACE_COST = 1.15  # with a proto-symbol space, a first repetition's cost against the target, at most (Settings.space_cost)
 REST_AFTER = 0.2  # seconds of take after the last expected repetition before a live take ends (until_repeated)
 
 
@@ -162,7 +187,8 @@ class Repetition:
     end: float
     cost: float  # DTW cost against the target, both as shapes (a mean distance per frame, in spreads)
     confidence: float
-    cohort: float | None = None  # the cost against the target / against the nearest other motion or standing still
+    cohort: float | None = None  # the ratio it passed: its cost against the target / against the nearest other
+    # motion, or with a proto-symbol space its recognition distance to the target's motion / to the nearest other
 
     def to_dict(self) -> dict:
         return {k: None if v is None else round(v, 4) for k, v in asdict(self).items()}
@@ -177,6 +203,7 @@ class Segmentation:
     notes: list[str] = field(default_factory=list)
     closest: float | None = None  # the lowest cost of a stretch against the target (None: no stretch to compare)
     max_cost: float = MAX_COST  # the largest cost of a first repetition
+    space: str | None = None  # the target's motion in the proto-symbol space that decided (None: the cohort did)
 
     @property
     def verdict(self) -> str:
@@ -188,6 +215,9 @@ class Segmentation:
             if self.closest > self.max_cost:
                 return (f"not the target: the movement most like it differs from it by {self.closest:.2f}, more than a "
                         f"first repetition may ({self.max_cost:g})")
+            if self.space is not None:
+                return (f"not the target: the space names every movement like it another motion than {self.space!r} "
+                        f"(at best {self.refused or 0.0:.2f} of the distance to the nearest other, at most {self.cohort:g})")
             return (f"not the target: every movement like it is nearer to another motion (at best "
                     f"{self.refused or 0.0:.2f} of the distance, at most {self.cohort:g})")
         if self.expected is None or n == self.expected:
@@ -204,7 +234,7 @@ class Segmentation:
 
     def to_dict(self) -> dict:
         return {"repetitions": [r.to_dict() for r in self.repetitions], "expected": self.expected,
-                "cohort": self.cohort, "verdict": self.verdict, "notes": list(self.notes),
+                "cohort": self.cohort, "verdict": self.verdict, "notes": list(self.notes), "space": self.space,
                 "refused": None if self.refused is None else round(self.refused, 4),
                 "closest": None if self.closest is None else round(self.closest, 4)}
 
@@ -340,6 +370,8 @@ class Settings:
     own: float = OWN  # the person's own repetitions find the others within this many times their mutual cost (0: off)
     second_cost: float = SECOND_COST  # with ``own`` on, the others' cost against the target, at most
     min_amplitude: float = MIN_AMPLITUDE  # a stretch smaller than this share of the target's spread is no repetition
+    space_cost: float = SPACE_COST  # with a proto-symbol space, the first repetition's cost against the target, at most
+    space_ratio: float = SPACE_RATIO  # with a space, its distance ratio (target's motion / nearest other), at most
 
 
 class _Template:
@@ -362,10 +394,13 @@ class _Template:
         return c + self.posture * float(np.linalg.norm(self.mean - stretch.mean)) / self.spread if self.posture else c
 
 
-def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings, fps: float):
+def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings, fps: float,
+          by_space: Named | None = None):
     """Repetitions of the target ``a`` among the movements of the take ``b`` (module docstring):
-    (start, end exclusive, cost, cohort ratio) in frames, the lowest ratio refused and the lowest
-    cost of any stretch."""
+    (start, end exclusive, cost, ratio) in frames, the lowest ratio refused and the lowest cost of
+    any stretch. The ratio is the cohort's (cost against the target / against the nearest other
+    motion, at most ``how.cohort``) or, with a proto-symbol space (``by_space``), the space's
+    (:class:`shared.capture.naming.Named`, below 1), which then decides instead of the cohort."""
     spread = _spread(a)
     floor = AMPLITUDE_FLOOR * spread
     moves = movements(b, REST_SHARE * float(np.mean(speed(a, fps))), fps)
@@ -401,41 +436,48 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings,
             near[s, e] = max(min((o.cost(stretch) for o in cohort_templates), default=np.inf), 1e-12)
         return near[s, e]
 
-    cands = []  # (cost, start, end, cohort ratio, template)
+    def ratio(s: int, e: int, stretch: _Template, c: float) -> float:
+        """The stretch's ratio when its cost against the target (or the person's own repetition) is ``c``."""
+        return by_space.ratio(s, e) if by_space is not None else c / nearest(s, e, stretch)
+
+    limit = how.cohort if by_space is None else by_space.limit
+    first = how.max_cost if by_space is None else how.space_cost
+    cands = []  # (cost, start, end, ratio, template)
     for c, s, e, stretch in scored:
-        if not c <= how.max_cost:
+        if not c <= first:
             break
-        cands.append((c, s, e, c / nearest(s, e, stretch), stretch))
-    taken = _greedy(cands, [x[0] for x in cands], lambda x: x[3] <= how.cohort)
+        cands.append((c, s, e, ratio(s, e, stretch, c), stretch))
+    taken = _greedy(cands, [x[0] for x in cands], lambda x: x[3] <= limit)
     if taken and how.own:
-        taken += _own(taken, scored, nearest, how)
-    refused = min((x[3] for x in cands if x[3] > how.cohort), default=None)
+        taken += _own(taken, scored, ratio, limit, how)
+    refused = min((x[3] for x in cands if x[3] > limit), default=None)
     return sorted((x[1], x[2], x[0], x[3]) for x in taken), refused, (scored[0][0] if scored else None)
 
 
-def _own(taken: list, scored: list, nearest, how: Settings) -> list:
+def _own(taken: list, scored: list, ratio, limit: float, how: Settings) -> list:
     """Once the take holds the target (a repetition taken), the others are looked for more widely
     among the ``scored`` stretches (bounded: ``MAX_CHECKS``): one not yet taken is a repetition
     when it is nearer to the target than to any other motion (by the cohort ratio) with a cost up
     to ``second_cost``, or when it is at most ``own`` times as far from the person's repetition
     most like the target as the other taken ones are on average (as ``max_cost`` when there are
-    none) and nearer to that one than to any other motion. Its cohort ratio is the one it passed.
-    The repetitions found this way, none overlapping another or a taken one."""
+    none) and nearer to that one than to any other motion (with a space: and the space names it
+    the target's motion). Its ratio (``ratio(s, e, stretch, cost)``, at most ``limit``) is the one
+    it passed. The repetitions found this way, none overlapping another or a taken one."""
     anchor = min(taken, key=lambda x: x[3])
     own = anchor[4]
     ref = [own.cost(x[4]) for x in taken if x is not anchor]
-    limit = how.own * (float(np.mean(ref)) if ref else how.max_cost)
+    own_limit = how.own * (float(np.mean(ref)) if ref else how.max_cost)
     extra = []
     for c, s, e, stretch in scored:
         if any(min(e, y[2]) - max(s, y[1]) > OVERLAP * (e - s) for y in taken):
             continue
         d = own.cost(stretch)
-        if c > how.second_cost and d > limit:
+        if c > how.second_cost and d > own_limit:
             continue
-        other = nearest(s, e, stretch)
-        ratio = min(c / other if c <= how.second_cost else np.inf, d / other if d <= limit else np.inf)
-        if ratio <= how.cohort:
-            extra.append((c, s, e, ratio, stretch, min(c, d)))
+        passed = min(ratio(s, e, stretch, c) if c <= how.second_cost else np.inf,
+                     ratio(s, e, stretch, d) if d <= own_limit else np.inf)
+        if passed <= limit:
+            extra.append((c, s, e, passed, stretch, min(c, d)))
     return [x[:5] for x in _greedy(extra, [x[5] for x in extra], lambda x: True)]
 
 
@@ -455,11 +497,16 @@ def _greedy(cands: list, key: list[float], accept) -> list:
 
 
 def segment(take: Clip, target: Clip, expected: int | None = 5, background: list[Clip] | None = None,
-            settings: Settings | None = None, fps: float = FPS, reader: Reader | None = None) -> Segmentation:
+            settings: Settings | None = None, fps: float = FPS, reader: Reader | None = None,
+            space=None, label: str | None = None, named: dict | None = None) -> Segmentation:
     """The repetitions of ``target`` in ``take`` (module docstring); ``background``: other
     motions a stretch must be nearer to the target than (the cohort check); ``settings``: the
     defaults (:class:`Settings`) unless given; ``reader``: the target's :class:`Reader` when the
-    caller has one (checks of a growing take)."""
+    caller has one (checks of a growing take). ``space``: a proto-symbol space (or a namer like
+    :class:`shared.capture.naming.SpaceNamer`) holding the target's motion (``label``, or :func:`target_label`) and
+    others: a stretch is a repetition when the space's nearest motion for it is the target's
+    (instead of the cohort check; the ``background`` is then not used); ``named``: the space's
+    ratios of the take's stretches kept by the caller across checks of a growing take."""
     how = settings or Settings()
     if take.n_frames < 2 or target.n_frames < 2:
         raise BadInput("the take and the target need at least two frames each")
@@ -470,22 +517,33 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
     if _spread(a) < 1e-6:
         raise BadInput("the target does not move: nothing to find", field="target")
     others = [o for o in others if len(o) > 1 and _spread(o) > 1e-6]
-    taken, best_refused, closest = _find(a, b, others, how, fps)
-    reps = [Repetition(float(s / fps), float(e / fps), float(c), max(0.0, 1.0 - float(ratio) / how.cohort), float(ratio))
+    by_space, notes = None, []
+    if space is not None:
+        namer = space if hasattr(space, "nearest") else SpaceNamer(space)
+        name, note = target_label(namer, target, label)
+        by_space, others = Named(namer, name, take, fps, how.space_ratio, named), []
+        notes += [note] if note else []
+    taken, best_refused, closest = _find(a, b, others, how, fps, by_space)
+    limit = how.cohort if by_space is None else by_space.limit
+    reps = [Repetition(float(s / fps), float(e / fps), float(c), max(0.0, 1.0 - float(ratio) / limit), float(ratio))
             for s, e, c, ratio in taken]
-    return Segmentation(reps, expected, how.cohort, best_refused, closest=closest, max_cost=how.max_cost)
+    return Segmentation(reps, expected, limit, best_refused, notes=notes, closest=closest,
+                        max_cost=how.max_cost if by_space is None else how.space_cost,
+                        space=None if by_space is None else by_space.label)
 
 
-def until_repeated(target: Clip, expected: int, rest_after: float = REST_AFTER, background: list[Clip] | None = None):
+def until_repeated(target: Clip, expected: int, rest_after: float = REST_AFTER, background: list[Clip] | None = None,
+                   space=None, label: str | None = None):
     """A check for :func:`shared.capture.stream.record`'s ``until``: the take ends once the
     ``expected`` repetitions of ``target`` are seen, with ``rest_after`` seconds of take after the
     last (a person done repeating, on a source that never stops). While the take's last
     ``rest_after`` seconds move (the person is still repeating) the check costs only their
     speed; the take is cut only once its end rests. The check keeps the take it last cut and what
     it found as ``enough.last`` (clip, segmentation): when it ends the take, that is the whole take,
-    already cut."""
+    already cut. ``space``, ``label``: as :func:`segment`'s."""
     reader = Reader(target)
     level = REST_SHARE * float(np.mean(speed(reader.target, FPS)))
+    named: dict = {}  # the space's ratios of the take's stretches, kept from check to check
 
     def enough(clip: Clip) -> str | None:
         if clip.duration < 1.0:
@@ -495,7 +553,8 @@ def until_repeated(target: Clip, expected: int, rest_after: float = REST_AFTER, 
         # a frame's speed spans SMOOTH / 2 either side: the last rest_after - SMOOTH / 2 of it rest
         if len(v) and v[-max(int(round((rest_after - SMOOTH / 2) * FPS)), 1):].max() >= level:
             return None
-        seen = segment(clip, target, expected=expected, background=background, reader=reader)
+        seen = segment(clip, target, expected=expected, background=background, reader=reader, space=space, label=label,
+                       named=named)
         enough.last = (clip, seen)  # type: ignore[attr-defined]  # what the check saw last, for the caller
         if len(seen.repetitions) >= expected and clip.duration - seen.repetitions[-1].end >= rest_after:
             return f"{len(seen.repetitions)} repetitions seen"

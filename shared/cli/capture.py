@@ -13,7 +13,7 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import BACKGROUND_HELP, SKELETON_HELP, app, fail, read_clip
+from shared.cli.common import BACKGROUND_HELP, LABEL_HELP, SKELETON_HELP, SPACE_HELP, app, fail, read_clip, space_fields
 
 capture_app = typer.Typer(help="Live motion capture: a clip served as a live BVH stream, a take recorded from one, a "
                                "take cut into the repetitions of a target.", no_args_is_help=True)
@@ -92,6 +92,13 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
                                                           "first repetition may be from the target; the default was "
                                                           "chosen so that no other motion is cut (a person far from "
                                                           "the demonstration's way of moving may need more)."),
+                    space: Path | None = typer.Option(None, help="A proto-symbol space file (`offline build`) holding "
+                                                      "the target's motion and others: a movement is a repetition "
+                                                      "when the space names it the target's motion (instead of the "
+                                                      "--background check; it finds more of another performer's "
+                                                      "repetitions: bench.segmentation). With it, --max-cost is the "
+                                                      "space's first cost (default 1.15)."),
+                    label: str | None = typer.Option(None, help=LABEL_HELP),
                     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON.")):
     """Find the repetitions of a target in one continuous take (each with a confidence), and say
     when the take holds fewer or more than expected, or not the target at all (and which test
@@ -104,8 +111,17 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
     t = read_clip(take, skeleton=skeleton)
     tgt = read_clip(target, skeleton=skeleton)
     bg = [read_clip(b, skeleton=skeleton) for b in background]
-    how = Settings() if max_cost is None else replace(Settings(), max_cost=max_cost)
-    result = segment(t, tgt, expected=expected, background=bg, settings=how)
+    how = Settings()
+    if max_cost is not None:
+        how = replace(how, **({"max_cost": max_cost} if space is None else {"space_cost": max_cost}))
+    sp = None
+    if space is not None:
+        from shared.pss.space import ProtoSymbolSpace
+
+        sp = ProtoSymbolSpace.load(space)
+    else:
+        space_fields(None, label)
+    result = segment(t, tgt, expected=expected, background=bg, settings=how, space=sp, label=label)
     files = []
     if out is not None and result.repetitions:
         out.mkdir(parents=True, exist_ok=True)
@@ -119,6 +135,8 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
         for k, r in enumerate(result.repetitions, 1):
             typer.echo(f"rep {k}: {r.start:.2f}-{r.end:.2f} s, confidence {r.confidence:.2f}"
                        + (f" -> {files[k - 1]}" if files else ""))
+        for note in result.notes:
+            typer.echo(note)
         typer.echo(result.verdict)
     if not result.repetitions:
         raise typer.Exit(1)
@@ -151,6 +169,8 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
                  skeleton: Path | None = typer.Option(None, help="A BVH file whose skeleton the stream follows (a "
                                                                      "stream without a header)."),
                  replace: bool = typer.Option(False, "--replace", help="Record over a finished take of that name."),
+                 space: str | None = typer.Option(None, help=SPACE_HELP + " With --target; kept with the take."),
+                 label: str | None = typer.Option(None, help=LABEL_HELP),
                  wait: bool = typer.Option(True, "--wait/--no-wait", help="Wait for the take to end, showing its frames."),
                  as_json: bool = typer.Option(False, "--json", help="Print the take's state as JSON.")):
     """Record a take on the capture service (needs `make up`): its frames are published on the bus
@@ -170,8 +190,9 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
     if target is not None:
         msg["target"], msg["expected"] = wire(read_clip(target)), expected
         msg["background"] = [wire(read_clip(b)) for b in background]
-    elif background:
-        fail("--background goes with --target and --expected (the other motions the target's repetitions are told from)")
+        msg.update(space_fields(space, label))
+    elif background or space:
+        fail("--background and --space go with --target and --expected (what the target's repetitions are told from)")
     if skeleton is not None:
         try:
             msg["skeleton"] = skeleton.read_text(encoding="latin-1")
@@ -235,6 +256,9 @@ def capture_cut(name: str = typer.Argument(..., help="A finished take on the cap
                                                                 "was recorded with."),
                 out: Path | None = typer.Option(None, help="Write the take as take.bvh and each repetition as "
                                                               "rep1.bvh, rep2.bvh, ... here."),
+                space: str | None = typer.Option(None, help=SPACE_HELP + " Without one, the space the take was "
+                                                 "recorded with, if any."),
+                label: str | None = typer.Option(None, help=LABEL_HELP),
                 as_json: bool = typer.Option(False, "--json", help="Print the result as JSON.")):
     """Find the repetitions of a target in a take the capture service recorded (each with a
     confidence) and, with --out, write the take and the repetitions as files."""
@@ -243,7 +267,7 @@ def capture_cut(name: str = typer.Argument(..., help="A finished take on the cap
     from shared.io import save_clip
 
     msg = {"take": name, "target": wire(read_clip(target)), "expected": expected,
-           "background": [wire(read_clip(b)) for b in background]}
+           "background": [wire(read_clip(b)) for b in background], **space_fields(space, label)}
     with client() as c:
         r = c.request("capture", "segment", msg)
         whole = c.request("capture", "clip", {"take": name})["clip"] if out is not None else None
@@ -261,6 +285,8 @@ def capture_cut(name: str = typer.Argument(..., help="A finished take on the cap
         for k, rep in enumerate(r["repetitions"], 1):
             typer.echo(f"rep {k}: {rep['start']:.2f}-{rep['end']:.2f} s, confidence {rep['confidence']:.2f}"
                        + (f" -> {files[k - 1]}" if files else ""))
+        for note in r["notes"]:
+            typer.echo(note)
         typer.echo(r["verdict"])
     if not r["repetitions"]:
         raise typer.Exit(1)

@@ -8,7 +8,19 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import BACKGROUND_HELP, SKELETON_HELP, app, client, fail, jsonable, read_clip, wire
+from shared.cli.common import (
+    BACKGROUND_HELP,
+    LABEL_HELP,
+    SKELETON_HELP,
+    SPACE_HELP,
+    app,
+    client,
+    fail,
+    jsonable,
+    read_clip,
+    space_fields,
+    wire,
+)
 
 coach_app = typer.Typer(help="Coaching sessions with emphatic motions and adverbs (coach service, thesis ch. 4-6).",
                         no_args_is_help=True)
@@ -202,6 +214,8 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
                trials: int = typer.Option(4, min=1, max=50, help="Trials to run."),
                expected: int = typer.Option(5, min=1, max=50, help="Repetitions in each take."),
                background: list[Path] = typer.Option([], help=BACKGROUND_HELP),
+               space: str | None = typer.Option(None, help=SPACE_HELP),
+               label: str | None = typer.Option(None, help=LABEL_HELP),
                idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
                seconds: float = typer.Option(120.0, help="A take's longest duration."),
                retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
@@ -239,7 +253,8 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
         fail(f"session {session} coaches the simulated learner {info['learner']}; start one with --person")
     controls = Controls(folder)
     msg = {"source": source, "seconds": seconds, "idle": idle, "target": wire(tgt), "expected": expected,
-           "check_every": 0.1, "background": [wire(read_clip(b, skeleton=skeleton)) for b in background]}
+           "check_every": 0.1, "background": [wire(read_clip(b, skeleton=skeleton)) for b in background],
+           **space_fields(space, label)}
     for _ in range(trials):
         trial = len(info.get("trials", [])) + 1
         typer.echo(f"trial {trial}: recording from {source}")

@@ -25,6 +25,19 @@ app.add_typer(offline_app, name="offline")
 SKELETON_HELP = "ASF skeleton for AMC files (default: found beside the file or in a sibling asf/ folder)."
 BACKGROUND_HELP = ("Other motions (clips) a repetition must be nearer to the target than, so that a person doing "
                    "one of them is not cut into repetitions of the target; repeat the option.")
+SPACE_HELP = ("A space of the cluster's pss service (`space build`) holding the target's motion and others: a movement "
+              "is a repetition when the space names it the target's motion, instead of the --background check (it "
+              "finds more of another performer's repetitions: bench.segmentation).")
+LABEL_HELP = "With --space: the target's motion in it (default: the target's own label, else what the space recognises it as)."
+
+
+def space_fields(space: str | None, label: str | None) -> dict:
+    """A capture request's ``space`` and ``label`` fields from the command's options."""
+    if label is not None and space is None:
+        fail("--label names the target's motion in a --space: give the space too")
+    return {**({"space": space} if space else {}), **({"label": label} if label else {})}
+
+
 #: how this command reads motion files (the root options; docs/files.md)
 READING: dict[str, str | None] = {"units": None, "up": None, "translations": None}
 

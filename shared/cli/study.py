@@ -9,7 +9,18 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import BACKGROUND_HELP, SKELETON_HELP, app, client, fail, read_clip, wire
+from shared.cli.common import (
+    BACKGROUND_HELP,
+    LABEL_HELP,
+    SKELETON_HELP,
+    SPACE_HELP,
+    app,
+    client,
+    fail,
+    read_clip,
+    space_fields,
+    wire,
+)
 
 study_app = typer.Typer(help="Run the thesis's studies with people: participants send their own attempts (fig. 4.3, "
                              "Table 4.2) and human coaches name adverbs from a coach seat (chapter 5).",
@@ -329,6 +340,8 @@ def study_run(folder: Path = FOLDER,
               steps: int | None = typer.Option(None, help="Run this many trials, then stop (default: all)."),
               expected: int = typer.Option(5, help="Repetitions in each take."),
               background: list[Path] = typer.Option([], help=BACKGROUND_HELP),
+              space: str | None = typer.Option(None, help=SPACE_HELP),
+              label: str | None = typer.Option(None, help=LABEL_HELP),
               idle: float = typer.Option(2.0, help="Seconds without a frame that end a take."),
               seconds: float = typer.Option(120.0, help="A take's longest duration."),
               retries: int = typer.Option(2, help="Takes recorded again when one holds no repetition."),
@@ -352,6 +365,7 @@ def study_run(folder: Path = FOLDER,
     warm(target_clip)
     target = wire(target_clip)
     others = [wire(read_clip(b)) for b in background]
+    named = space_fields(space, label)
     controls = Controls(folder)
     skipped: set[str] = set()
     done = 0
@@ -368,7 +382,7 @@ def study_run(folder: Path = FOLDER,
         who, case, n = step["participant"], step["case"], step["trial"]
         typer.echo(f"{who}, case {case}, trial {n}: recording from {source}")
         msg = {"source": source, "seconds": seconds, "idle": idle, "target": target, "expected": expected,
-               "check_every": check_every, "background": others}
+               "check_every": check_every, "background": others, **named}
         with client() as c:
             if n == 1:  # the coach is ready before the person has finished the take
                 _start_session(c, folder, p, who, case)
