@@ -296,7 +296,8 @@ def _space_of_one(bundled):
 def test_the_spaces_ratio_from_its_nearest_proto_symbols_alone():
     """From the nearest few proto-symbols (what the pss service replies): the target's nearest
     over the nearest other's; none of the target's listed: infinite (not named); no other listed:
-    the farthest listed stands in, so the ratio is at most the true one and still below 1."""
+    the farthest listed stands in (the true nearest other is farther still), so the ratio given is
+    at least the true one and still below 1."""
     labels = np.array(["kick", "squat", "kick", "reach"])
     d = np.array([2.0, 4.0, 3.0, 5.0])
     assert naming.distance_ratio(labels, d, "kick") == pytest.approx(0.5)

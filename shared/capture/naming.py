@@ -24,10 +24,10 @@ def shortest(n_states: int, fps: float) -> float:
 
 
 class SpaceNamer:
-    """A proto-symbol space read in this process, as segmentation asks it (``namer`` of
-    :func:`segment`; the capture service asks the pss service the same over the bus): the
-    space's labels, a clip's recognition distances (eq. 2.4) to the nearest proto-symbols and
-    their labels, and a clip's open-set answer (eq. 2.6)."""
+    """A proto-symbol space read in this process, as segmentation asks it (the ``space`` of
+    :func:`shared.capture.segment.segment`; the capture service asks the pss service the same
+    over the bus): the space's labels, a clip's recognition distances (eq. 2.4) to the nearest
+    proto-symbols and their labels, and a clip's open-set answer (eq. 2.6)."""
 
     def __init__(self, space):
         self.space, self.labels = space, list(space.labels)
@@ -74,7 +74,8 @@ def distance_ratio(labels: np.ndarray, d: np.ndarray, label: str) -> float:
     """The nearest proto-symbol of ``label``'s distance over the nearest other's, from the
     ``labels`` and distances ``d`` of the nearest proto-symbols (all of them, or the nearest few:
     with none of ``label`` among them the ratio is infinite; with no other, the farthest listed
-    stands for the nearest other, so the ratio is at most what it is)."""
+    stands for the nearest other, which is farther still: the ratio given is at least the true
+    one, and below 1 exactly when the true one is)."""
     mine = labels == label
     if not mine.any():
         return float("inf")

@@ -503,10 +503,11 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
     motions a stretch must be nearer to the target than (the cohort check); ``settings``: the
     defaults (:class:`Settings`) unless given; ``reader``: the target's :class:`Reader` when the
     caller has one (checks of a growing take). ``space``: a proto-symbol space (or a namer like
-    :class:`shared.capture.naming.SpaceNamer`) holding the target's motion (``label``, or :func:`target_label`) and
-    others: a stretch is a repetition when the space's nearest motion for it is the target's
-    (instead of the cohort check; the ``background`` is then not used); ``named``: the space's
-    ratios of the take's stretches kept by the caller across checks of a growing take."""
+    :class:`shared.capture.naming.SpaceNamer`) holding the target's motion (``label``, or
+    :func:`shared.capture.naming.target_label`) and others: a stretch is a repetition when the
+    space's nearest motion for it is the target's (instead of the cohort check; the
+    ``background`` is then not used); ``named``: the space's ratios of the take's stretches kept
+    by the caller across checks of a growing take."""
     how = settings or Settings()
     if take.n_frames < 2 or target.n_frames < 2:
         raise BadInput("the take and the target need at least two frames each")
