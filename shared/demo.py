@@ -14,8 +14,9 @@ Starts the local cluster if it is not running (``mirrorcoach up``: router + serv
    trial's alpha, adverb and d_p;
 5. runs a short estimator conversation with a simulated other (chapter 3);
 6. coaches a person's take live: four squats of actor bd joined with rests, replayed through
-   the capture service like a capture suit's stream, cut into repetitions automatically, one
-   trial on the coach, the next demonstration written and its adverb said into a .wav;
+   the capture service like a capture suit's stream, cut into repetitions automatically (and
+   again with each repetition named by a space of the motions alone, ``demo-moves``), one trial
+   on the coach, the next demonstration written and its adverb said into a .wav;
 
 says what it did, and stops the cluster again if it started it (``--keep-running`` leaves it up).
 With ``MIRRORCOACH_DEPLOY`` set (a cluster across hosts) it runs the same steps on that
@@ -90,7 +91,7 @@ def run(client: Client, data: Path, out: Path) -> None:
     coach_learner(client, next(c for c in train if c.label == "squat1Reps"), out)
     estimate_other(client)
     coach_live_take(client, next(c for c in train if c.label == "squat1Reps"),
-                    [c for c in train if c.label == "squat1Reps" and "_bd_" in c.name], out)
+                    [c for c in train if c.label == "squat1Reps" and "_bd_" in c.name], train, out)
     home = Settings().home
     print(f"done in {time.perf_counter() - t0:.1f} s. Outputs: BVH files in {out} (open in Blender or any BVH viewer); "
           f"the services' state (spaces, sessions, transcripts) in {home / 'data'}; the dashboard recording "
@@ -112,7 +113,7 @@ def coach_learner(client: Client, target, out: Path, trials: int = 4) -> None:
               f"\"{t['adverb'] or 'no adverb'}\"{note}")
 
 
-def coach_live_take(client: Client, target, reps: list, out: Path) -> None:
+def coach_live_take(client: Client, target, reps: list, train: list, out: Path) -> None:
     """A person's repetitions as one take through the capture service (a replay: the stand-in for
     a capture suit), cut automatically and coached for one trial; the adverb said into a .wav."""
     from shared.capture.speech import NoSpeech, speak
@@ -135,6 +136,12 @@ def coach_live_take(client: Client, target, reps: list, out: Path) -> None:
     cut = client.request("capture", "segment", {"take": "demo-live", "target": clip_to_wire(target), "expected": 4})
     print(f"live take 'demo-live' ({info['frames']} frames from {info['source']}, played 4x): {cut['verdict']}, "
           + ", ".join(f"{r['start']:.1f}-{r['end']:.1f} s" for r in cut["repetitions"]))
+    # a space of the motions alone (the space 'demo' models the arm's torques, which a take does not have)
+    client.request("pss", "build", {"space": "demo-moves", "replace": True, "clips": [clip_to_wire(c) for c in train]})
+    named = client.request("capture", "segment", {"take": "demo-live", "target": clip_to_wire(target), "expected": 4,
+                                                  "space": "demo-moves"})
+    print(f"  the same take, each repetition named by the space 'demo-moves' (eq. 2.6): {named['verdict']}, "
+          + ", ".join(f"{r['start']:.1f}-{r['end']:.1f} s (ratio {r['cohort']:.2f})" for r in named["repetitions"]))
     if not cut["repetitions"]:
         return
     client.request("coach", "start", {"session": "demo-person", "target": clip_to_wire(target), "replace": True,

@@ -116,7 +116,8 @@ def test_a_space_of_the_pss_service_names_another_performers_repetitions(capture
     than its largest first cost: tests/test_segmentation.py), a space the pss service holds (bd's
     and dg's motions) names each a kick through the bus: the take ends once its four are seen, and
     its cut (the space it was recorded with, by default) finds them where they are; a take of
-    squats holds none. A space or label the service cannot use is refused before recording."""
+    squats holds none. A space or label the service cannot use (one that models torques a take
+    does not have) is refused before recording."""
     env, _ = capture_service
     c = client_of(env)
     classes = ["elbowToKnee1RepsLelbowStart", "kickLFront1Reps", "rotateArmsBothBackward1Reps", "squat1Reps"]
@@ -144,7 +145,12 @@ def test_a_space_of_the_pss_service_names_another_performers_repetitions(capture
     _wait_done(c, "squats")
     none = c.request("capture", "segment", {"take": "squats", "target": target, "space": "moves"}, timeout=120)
     assert none["repetitions"] == [] and none["verdict"].startswith("not the target"), none["verdict"]
-    for msg, want in (({"space": "nowhere"}, "not_found"), ({"space": "moves", "label": "jump"}, "bad_request")):
+    from shared.bodies.arm import with_arm_torques
+
+    felt = [clip_to_wire(with_arm_torques(x)) for k in classes[:2] for x in clips("bd", k)]
+    c.request("pss", "build", {"space": "felt", "clips": felt, "replace": True}, timeout=120)
+    for msg, want in (({"space": "nowhere"}, "not_found"), ({"space": "moves", "label": "jump"}, "bad_request"),
+                      ({"space": "felt"}, "bad_request")):  # a space of torques no take has
         with pytest.raises(RemoteError) as e:
             c.request("capture", "record", {"take": "refused", "replay": [clip_to_wire(take)], "target": target,
                                             "expected": 4, **msg})

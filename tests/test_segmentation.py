@@ -267,8 +267,8 @@ def test_with_a_space_another_performers_kicks_are_found_and_other_motions_never
 
 def test_the_targets_motion_in_a_space_is_named_recognised_or_refused(bundled):
     """The target's label when the space holds it, else ``label``, else what the space recognises
-    it as (said in a note); a label the space does not hold, or a space with no other motion to
-    tell it from, is refused with what the space holds."""
+    it as (said in a note); a label the space does not hold, a space with no other motion to tell
+    it from, or one that models torques a take does not have, is refused in a sentence."""
     from dataclasses import replace
 
     space = _space(bundled, ["bk", "dg"])
@@ -282,6 +282,13 @@ def test_the_targets_motion_in_a_space_is_named_recognised_or_refused(bundled):
     with pytest.raises(BadInput, match="holds no motion 'jump'.*kickLFront1Reps"):
         naming.target_label(space, squat, label="jump")
     take, _ = join([squat] * 2, seed=1)
+    from shared.bodies.arm import with_arm_torques
+    from shared.pss.space import ProtoSymbolSpace
+
+    classes = ["kickLFront1Reps", "squat1Reps"]
+    felt = ProtoSymbolSpace.build([with_arm_torques(c) for k in classes for c in _clips(bundled, "bk", k)])
+    with pytest.raises(BadInput, match="sensor channels a take from motion capture does not have .*motion clips alone"):
+        seg.segment(take, squat, space=felt)  # it could recognise only clips with the arm's torques
     with pytest.raises(BadInput, match="at least one other"):
         seg.segment(take, squat, space=_space_of_one(bundled))
     assert seg.segment(take, unnamed, expected=2, space=space).notes == [note]

@@ -59,6 +59,7 @@ class _SpaceOnBus:
         info = client.request("pss", "info", {"space": space}, timeout=30)
         self.labels = [row["label"] for row in info["proto_symbols"]]
         self.shortest = shortest(info["params"]["n_states"], info["params"]["fps"])
+        self.sensor_channels = list(info["sensor_channels"])
 
     def _recognize(self, clip) -> dict:
         return self.client.request("pss", "recognize", {"space": self.space, "clips": [clip_to_wire(clip)],
@@ -217,12 +218,14 @@ def make_service(settings: Settings | None = None) -> Service:
             raise BadInput("the target needs its skeleton to find its repetitions", field="target")
         namer = None
         if req.get("space"):  # asked now, so that a space or label it cannot use is refused before recording
-            from shared.capture.naming import target_label
+            from shared.capture.naming import readable, target_label
 
             if req.get("target") is None:
                 raise BadInput("a space tells the target's repetitions: give the target too", field="space")
             namer = space_of(req)
-            req = {**req, "label": target_label(namer, clip_from_wire(req["target"]), req.get("label"))[0]}
+            target = clip_from_wire(req["target"])
+            readable(namer, target)  # the take has the target's channels
+            req = {**req, "label": target_label(namer, target, req.get("label"))[0]}
         server = None
         if req.get("source") is not None:
             parse_source(req["source"])

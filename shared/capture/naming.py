@@ -32,6 +32,7 @@ class SpaceNamer:
     def __init__(self, space):
         self.space, self.labels = space, list(space.labels)
         self.shortest = shortest(space.params.n_states, space.params.fps)
+        self.sensor_channels = list(space.features.sensor_channels)
 
     def nearest(self, clip: Clip) -> tuple[np.ndarray, np.ndarray]:
         """(labels, distances) of the space's proto-symbols for ``clip`` (here all of them)."""
@@ -53,6 +54,7 @@ class Named:
 
     def __init__(self, namer, label: str, take: Clip, fps: float, limit: float = SPACE_RATIO, seen: dict | None = None):
         self.namer, self.label, self.take, self.step, self.limit = namer, label, take, take.fps / fps, limit
+        readable(namer, take)
         labels = np.asarray(namer.labels)
         if not (labels == label).any() or (labels == label).all():
             raise BadInput(f"the space must hold the target's motion {label!r} and at least one other "
@@ -68,6 +70,16 @@ class Named:
                 labels, d = self.namer.nearest(part.with_data(part.data, name="stretch"))
                 self.seen[s, e] = distance_ratio(np.asarray(labels), np.asarray(d, float), self.label)
         return self.seen[s, e]
+
+
+def readable(namer, clip: Clip) -> None:
+    """Refuse a space that models sensor channels (torques, a centre of gravity) the clip does not
+    have: it recognises only clips that have them (a take from motion capture has none)."""
+    missing = [c for c in namer.sensor_channels if c not in clip.channels]
+    if missing:
+        raise BadInput(f"the space models sensor channels a take from motion capture does not have "
+                       f"({', '.join(missing[:4])}{', ...' if len(missing) > 4 else ''}): give a space built from "
+                       "motion clips alone", field="space")
 
 
 def distance_ratio(labels: np.ndarray, d: np.ndarray, label: str) -> float:
