@@ -129,7 +129,7 @@ def test_a_space_of_the_pss_service_names_another_performers_repetitions(capture
     c.request("pss", "build", {"space": "moves", "clips": space, "replace": True}, timeout=120)
     target = clip_to_wire(clips("bd", "kickLFront1Reps")[0])
     take, truth = join(clips("bk", "kickLFront1Reps") * 2, seed=7)
-    with ReplaySource(take, connections=1, hold=True) as src:  # a source that goes on after the take (a suit)
+    with ReplaySource(take, connections=1, hold=True, speed=4.0) as src:  # a source that goes on after the take
         c.request("capture", "record", {"take": "kicks", "source": src.address, "seconds": 120, "target": target,
                                         "expected": 4, "space": "moves"})
         info = _wait_done(c, "kicks", timeout=120)

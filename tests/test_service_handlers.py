@@ -84,19 +84,23 @@ def test_what_the_selfs_body_gives_is_computed_once_and_a_failure_is_asked_again
     """The estimator's cache of the self's regressors and torques (``Once``): requests for one
     key at once wait for one computation; a failed one is not kept; the table is bounded."""
     import threading
-    import time
 
     from services.estimator.service import Once
 
-    once, calls = Once(limit=3), []
+    once, calls, asked = Once(limit=3), [], threading.Semaphore(0)
 
-    def slow():
+    def slow():  # the computation ends only once every request has come (no clock: the machine may be slow)
         calls.append(1)
-        time.sleep(0.2)
+        for _ in range(4):
+            assert asked.acquire(timeout=30)
         return np.arange(3.0)
 
+    def ask():
+        asked.release()
+        out.append(once.once("k", slow, 60.0))
+
     out: list = []
-    threads = [threading.Thread(target=lambda: out.append(once.once("k", slow, 10.0))) for _ in range(4)]
+    threads = [threading.Thread(target=ask) for _ in range(4)]
     for th in threads:
         th.start()
     for th in threads:

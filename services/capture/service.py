@@ -121,9 +121,9 @@ def make_service(settings: Settings | None = None) -> Service:
         except (OSError, ValueError):
             continue
 
-    def space_of(req: dict):
-        """The pss service's space a request names (None: the cohort decides)."""
-        return None if not req.get("space") else _SpaceOnBus(svc.client(), req["space"])
+    def space_of(space: str | None):
+        """The pss service's space of that name, as segmentation asks it (None: the cohort decides)."""
+        return None if not space else _SpaceOnBus(svc.client(), space)
 
     def info_of(take: str) -> dict:
         with lock:
@@ -222,7 +222,7 @@ def make_service(settings: Settings | None = None) -> Service:
 
             if req.get("target") is None:
                 raise BadInput("a space tells the target's repetitions: give the target too", field="space")
-            namer = space_of(req)
+            namer = space_of(req["space"])
             target = clip_from_wire(req["target"])
             readable(namer, target)  # the take has the target's channels
             req = {**req, "label": target_label(namer, target, req.get("label"))[0]}
@@ -310,8 +310,8 @@ def make_service(settings: Settings | None = None) -> Service:
             known = cut.get(req["take"])
             ground = grounds.get(req["take"])
         recorded_with, named = (ground[1], ground[2]) if ground is not None and _same(ground[0], target) else ([], (None, None))
-        if req.get("space"):
-            named = (req["space"], req.get("label"))
+        if req.get("space") and (req["space"] != named[0] or req.get("label") is not None):
+            named = (req["space"], req.get("label"))  # (the same space without a label: the label recorded with)
         if (known is not None and not req["background"] and known[1] == req["expected"] and _same(known[0], target)
                 and known[4] == named and info_of(req["take"])["state"] == "done"):
             take, result = known[2], known[3]  # found while recording: the same take, target, count, cohort and space
@@ -319,7 +319,7 @@ def make_service(settings: Settings | None = None) -> Service:
             take = finished(req["take"])
             background = [clip_from_wire(c) for c in req["background"]] or recorded_with
             result = segment(take, target, expected=req["expected"], background=background,
-                             space=space_of({"space": named[0]}), label=named[1])
+                             space=space_of(named[0]), label=named[1])
         return {"take": req["take"], "verdict": result.verdict, "expected": req["expected"], "notes": result.notes,
                 "repetitions": [{k: v for k, v in r.to_dict().items() if v is not None} for r in result.repetitions],
                 "clips": [clip_to_wire(c) for c in result.cut(take)]}

@@ -108,6 +108,7 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
     from shared.capture.segment import Settings, segment
     from shared.io import save_clip
 
+    space_fields(None if space is None else str(space), label)  # --label needs --space: said before any file is read
     t = read_clip(take, skeleton=skeleton)
     tgt = read_clip(target, skeleton=skeleton)
     bg = [read_clip(b, skeleton=skeleton) for b in background]
@@ -119,8 +120,6 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
         from shared.pss.space import ProtoSymbolSpace
 
         sp = ProtoSymbolSpace.load(space)
-    else:
-        space_fields(None, label)
     result = segment(t, tgt, expected=expected, background=bg, settings=how, space=sp, label=label)
     files = []
     if out is not None and result.repetitions:
