@@ -66,6 +66,7 @@ bench: bytecode
 	$(BIN)/python -m bench.ch3 --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.coach --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.balance --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.tracking --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.emphasis --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.memory --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.load --hdm05 $(HDM05) --out bench/results

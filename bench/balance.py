@@ -1,7 +1,7 @@
 """How far real people are from one another by the balance tests (``python -m bench.balance``).
 
 The coach calls an emphatic motion less balanced than its target when more of its frames are
-off balance where the target is not (``shared.coaching.feasibility.off_balance_share``) than a
+off balance (by the static, the centre-of-pressure or the simulated tracking test) where the target is not (``shared.coaching.feasibility.off_balance_share``) than a
 tolerance. This chooses that tolerance on performances we know were feasible: real takes of
 one motion by one person (HDM05 actors bd and bk, every class, up to 4 takes each, resampled to
 the coach's 30 fps), each judged against each other take as if it were the target, frames
@@ -22,7 +22,8 @@ from bench.common import parse_args, write_results
 
 ACTORS = ("bd", "bk")
 TAKES = 4
-KINDS = {"outside_runs": "centre of gravity (static)", "dynamic_runs": "centre of pressure (dynamic)"}
+KINDS = {"outside_runs": "centre of gravity (static)", "dynamic_runs": "centre of pressure (dynamic)",
+         "tracking_runs": "a helping hand in a simulation (tracking controller)"}
 
 
 def _features(clip) -> np.ndarray:
@@ -61,7 +62,7 @@ def main(argv=None) -> int:
         for f in files:
             clip = load_clip(f).resample(30.0)
             body = bodies.setdefault(clip.skeleton.to_json(), human_body(clip.skeleton))
-            takes.append((clip, perform(body, clip)[1], _features(clip)))
+            takes.append((clip, perform(body, clip, track=True)[1], _features(clip)))
         for (_, t_rep, t_x), (m_clip, m_rep, m_x) in itertools.permutations(takes, 2):
             path, _ = dtw_alignment_path(t_x, m_x)
             match = _match(path, m_clip.n_frames)

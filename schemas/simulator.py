@@ -52,6 +52,9 @@ PERFORM = Endpoint(
         "skeleton": F(Str(max_len=2_000_000), "skeleton JSON: build a human body from it", required=False),
         "mass": F(Float(0.1, 500.0), "body mass in kg (robots: their own by default; humans: 70)", required=False),
         "clip": F(CLIP, "the motion, with the body's joint channels"),
+        "track": F(Bool(), "a human body also follows the motion in a simulation with a floor: the report's support "
+                   "gains tracking_runs, the frames it needs a helping hand in (shared/bodies/tracking.py)",
+                   required=False, default=False),
     }, checks=[_body_or_skeleton]), doc="inverse dynamics, centre of gravity and feasibility of a motion"),
     Message("simulator.perform.reply", Map({
         "clip": F(CLIP, "the motion with sensor channels tau.<joint> (N m) and cog.x|y|z (m)"),

@@ -165,6 +165,48 @@ def test_the_dynamic_balance_check_sees_what_the_static_one_cannot(bundled):
     assert counts[1] > counts[0] and counts[1] > 20, counts
 
 
+def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_motion_is_too_fast(bundled):
+    """The simulated test (shared/bodies/tracking.py): the body stands on a MuJoCo floor and a
+    tracking controller follows the motion, the floor pushing where the soles touch; a pose
+    held still needs no helping hand and is followed to the millimetre, arms swung slowly need
+    none either, swung fast (the centre of gravity over the feet throughout) they need one in
+    many frames; a squat played three times as fast needs one in more frames than at its speed.
+    A robot with no feet to stand on says the test was not run."""
+    from copy import deepcopy
+
+    from shared.coaching.feasibility import worse_than_target
+    from shared.io import load_clip
+
+    clip = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc").resample(30)
+    body = human_body(clip.skeleton)
+    still = clip.with_data(np.repeat(clip.data[10:11], 60, axis=0))
+    held = perform(body, still, track=True)[1]
+    s = held["support"]
+    assert s["tracking_checked"] and s["frames_tracking_helped"] == 0 and s["max_root_error_m"] < 0.01, s
+    helped = []
+    for hz in (0.5, 2.5):
+        data = still.data.copy()
+        for arm in ("lhumerus.rx", "rhumerus.rx"):
+            data[:, clip.channels.index(arm)] += 40.0 * np.sin(2 * np.pi * hz * np.arange(60) / 30.0)
+        s = perform(body, still.with_data(data), track=True)[1]["support"]
+        assert s["frames_outside_support"] == 0
+        helped.append(s["frames_tracking_helped"])
+    assert helped[0] == 0 and helped[1] > 20, helped
+    own, fast = (perform(body, clip.with_data(clip.data, fps=30.0 * k), track=True)[1]["support"] for k in (1, 3))
+    assert fast["frames_tracking_helped"] / clip.n_frames > own["frames_tracking_helped"] / clip.n_frames + 0.3
+    assert "tracking_checked" not in perform(body, still)[1]["support"]  # only when asked
+    # the coach's check names the test: a demonstration helped in every frame where the target is not
+    shown = deepcopy(held)
+    shown["support"]["tracking_runs"] = [[0, held["frames"]]]
+    why = worse_than_target(shown, held, still)
+    assert why is not None and "tracking controller" in why and "100%" in why
+    assert worse_than_target(shown, held, still, dynamic=False) is None
+    arm = small_humanoid()
+    t = np.linspace(0, 2, 60)
+    robot_clip = Clip(np.column_stack([30 * np.sin(t)] * 4), ["shoulder_pitch", "shoulder_roll", "elbow", "knee"], 30.0)
+    assert any("tracking" in n for n in perform(arm, robot_clip, track=True)[1]["not_checked"])
+
+
 def test_the_support_area_has_heels_so_a_person_standing_still_is_balanced(hdm05):
     """Every foot bone gives its origin and the far end of its segment (the ball, the toe tips);
     a bone that starts at the ankle gives the heel too, under the ankle at the sole's height in

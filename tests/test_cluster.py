@@ -227,6 +227,8 @@ def test_simulator_cli_on_the_cluster(cluster, bundled, tmp_path):
     assert np.abs(b.positions()[:, rows] - a.positions()[:, :len(rows)]).max() < 1e-4
     r = cli(env, "sim", "perform", "self", amc, "--out", tmp_path / "k.bvh")
     assert r.returncode == 2 and ".npz" in r.stderr
+    r = cli(env, "sim", "perform", bundled / "asf/HDM_bd.asf", amc, "--out", tmp_path / "k.npz", "--track")
+    assert r.returncode == 0 and "tracked on a simulated floor: a helping hand" in r.stdout, r.stdout + r.stderr
 
     # a person in the other's seat: one CLI asks, another answers
     motion = tmp_path / "raise.npz"

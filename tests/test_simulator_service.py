@@ -46,9 +46,13 @@ def test_every_simulator_verb_answers_within_its_contract(simulator_service, cli
     np.testing.assert_allclose(r_other["clip"]["data"][:, i], 2 * r_self["clip"]["data"][:, i], rtol=1e-9, atol=1e-12)
     assert r_self["clip"]["sensor"][-3:] == ["cog.x", "cog.y", "cog.z"]
     h = _ok(contract.PERFORM, c.request("simulator", "perform", {"skeleton": squat.skeleton.to_json(), "mass": 80.0,
-                                                                "clip": clip_to_wire(squat, with_skeleton=False)}))
+                                                                "clip": clip_to_wire(squat, with_skeleton=False),
+                                                                "track": True}))
     assert h["body"]["kind"] == "human" and h["body"]["mass"] == pytest.approx(80.0, rel=1e-3)
     assert h["report"]["support"]["checked"] and "joint_limit_violations" in h["report"]
+    # the simulated test, asked for: the squat followed on a floor, the frames it needed a hand in said
+    s = h["report"]["support"]
+    assert s["tracking_checked"] and 0 <= s["frames_tracking_helped"] <= squat.n_frames and s["max_root_error_m"] < 0.1
     # plant: a squat whose hips float 10 cm gets its feet back on the floor (the root's height mostly)
     lifted = squat.data.copy()
     lifted[:, squat.channels.index("root.ty")] += 0.10 / squat.skeleton.unit_m

@@ -64,11 +64,12 @@ class BusCoachPorts:
     def generate(self, space, mix):
         return clip_from_wire(self.c.request("pss", "generate", {"space": space, "mix": mix})["clip"])
 
-    def perform(self, clip):
+    def perform(self, clip, track=True):
         if self.skeleton is None:
             return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames,
                     "not_checked": ["joint limits and balance (the target has no skeleton)"], "feasible": None}, None
-        r = self.c.request("simulator", "perform", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False)})
+        r = self.c.request("simulator", "perform", {"skeleton": self.skeleton, "clip": clip_to_wire(clip, False),
+                                                    "track": track})
         out = clip_from_wire(r["clip"])
         self._last = (clip, performed_effort(out))  # the check and the effort policy ask about the same clip
         return r["report"], out.select(["cog.x", "cog.y", "cog.z"])
@@ -370,8 +371,8 @@ class _Renamed:
     def generate(self, space, mix):
         return self.p.generate(space, {self._n(k): v for k, v in mix.items()})
 
-    def perform(self, clip):
-        return self.p.perform(clip)
+    def perform(self, clip, track=True):
+        return self.p.perform(clip, track)
 
     def plant(self, clip, reference):
         return self.p.plant(clip, reference)

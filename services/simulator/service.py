@@ -94,7 +94,7 @@ class SimulatorHandlers:
     def do_perform(self, req):
         b = self.bodies.get(req["body"], req["skeleton"], req["mass"])
         clip = clip_from_wire(req["clip"], getattr(b, "skeleton", None))
-        out, report = perform(b, clip)
+        out, report = perform(b, clip, track=req["track"])
         self.publish("performed", {"body": b.name, "frames": out.n_frames, "feasible": report["feasible"] is True,
                                   "checked": report["feasible"] is not None})
         return {"clip": clip_to_wire(out, with_skeleton=False), "report": report, "body": b.describe()}

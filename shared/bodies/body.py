@@ -81,6 +81,8 @@ class Body:
     unmapped: list[str] = field(default_factory=list)  # unusual bones: a limb no person has (human bodies)
     missing_segments: list[str] = field(default_factory=list)  # de Leva segments the skeleton lacks
     friction: dict[str, float] = field(default_factory=dict)  # channel -> Coulomb friction, N m (robots)
+    #: the tracking test's model with a floor and its sole points (shared.bodies.tracking), built when first asked
+    tracking: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def channels(self) -> list[str]:
@@ -334,8 +336,10 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
     return out
 
 
-def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
-    """The clip performed by ``body``: torques, centre of gravity and a feasibility report."""
+def perform(body: Body, clip: Clip, track: bool = False) -> tuple[Clip, dict]:
+    """The clip performed by ``body``: torques, centre of gravity and a feasibility report; with
+    ``track``, a person's body (free root and feet) also follows it in a simulation with a floor
+    (:func:`shared.bodies.tracking.track`: the frames it needs a helping hand in)."""
     q = qpos_trajectory(body, clip)
     warned: dict = {}
     v, _, tau, cog = inverse_dynamics(body, q, clip.fps, warned)
@@ -351,6 +355,10 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
             limits[d.channel] = {"frames": bad, "min": float(x.min()), "max": float(x.max()), "limits": [lo, hi]}
     support = _support_report(body, q, cog, wrench=_root_wrench(body, q, tau))
     not_checked = []
+    if track:
+        why = _tracked(body, q, clip.fps, support)
+        if why:
+            not_checked.append(why)
     if not limited:
         not_checked.append("joint limits (the body has none for this clip's channels)")
     if not support.get("checked"):
@@ -370,6 +378,27 @@ def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
     motion = clip.with_data(base, channels=clip.group("motion") or list(clip.channels),
                             groups={"motion": clip.group("motion") or list(clip.channels)})
     return motion.add_channels(names, values, "sensor"), report
+
+
+def _tracked(body: Body, q: np.ndarray, fps: float, support: dict) -> str | None:
+    """The tracking test's numbers added to ``support``; or why it was not run."""
+    if not (support.get("checked") and support.get("dynamic_checked")) or body.skeleton is None:
+        return "tracking in a simulation (the body has no free root and feet to stand on)"
+    from shared.bodies.tracking import track
+
+    if body.tracking is None:
+        from shared.bodies.tracking import tracking_model
+
+        try:
+            body.tracking = tracking_model(body)
+        except ValueError as e:  # a skeleton MuJoCo cannot simulate with contacts: said, not raised
+            return f"tracking in a simulation (its model could not be built: {e})"
+    r = track(body, q, fps, body.tracking)
+    if not np.all(np.isfinite(r["help"])):
+        return "tracking in a simulation (the simulation diverged)"
+    support.update(tracking_checked=True, tracking_runs=r["tracking_runs"], frames_tracking_helped=r["frames_helped"],
+                   mean_help=r["mean_help"], help_limit=r["help_limit"], max_root_error_m=r["max_root_error_m"])
+    return None
 
 
 def check_mass(mass: float) -> float:

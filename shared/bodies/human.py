@@ -40,6 +40,19 @@ MAX_BODY_JOINTS = 200
 
 def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) -> Body:
     """A MuJoCo body of ``mass`` kg from a mocap skeleton (see module docstring)."""
+    spec, seg_of, unmapped, missing = human_spec(skeleton, mass, name)
+    sk = skeleton
+    try:
+        model = spec.compile()
+    except ValueError as e:
+        raise BadInput(f"cannot build a MuJoCo body from skeleton {sk.name!r}: {e}") from None
+    return _body_of(model, sk, seg_of, unmapped, missing, name)
+
+
+def human_spec(skeleton: Skeleton, mass: float = 70.0, name: str | None = None):
+    """The ``mujoco.MjSpec`` of :func:`human_body` before it is compiled (contacts off; a caller
+    that simulates the body adds a floor and turns them on), with the bones' segments, the
+    unusual bones and the segments the skeleton lacks."""
     mass = check_mass(mass)
     if skeleton is None or not skeleton.joints:
         raise BadInput("a human body needs a skeleton with joints")
@@ -102,10 +115,11 @@ def human_body(skeleton: Skeleton, mass: float = 70.0, name: str | None = None) 
             else:
                 b.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[radius, 0, 0], mass=m)
         bodies[i] = b
-    try:
-        model = spec.compile()
-    except ValueError as e:
-        raise BadInput(f"cannot build a MuJoCo body from skeleton {sk.name!r}: {e}") from None
+    return spec, seg_of, unmapped, missing
+
+
+def _body_of(model: mujoco.MjModel, sk: Skeleton, seg_of: dict, unmapped: list, missing: list,
+             name: str | None) -> Body:
     dofs = []
     for j in sk.joints[1:]:
         for a in "xyz":

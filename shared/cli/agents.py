@@ -41,6 +41,8 @@ def sim_perform(body: str = typer.Argument(..., help="A robot's name (self, othe
                 out: Path = typer.Option(..., "--out", help="Output .npz: the motion plus tau.<joint> and cog.x|y|z channels."),
                 mass: float | None = typer.Option(None, help="Body mass in kg (robots: their own; humans: 70)."),
                 skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
+                track: bool = typer.Option(False, "--track", help="A human body also follows the motion on a simulated "
+                                           "floor with a tracking controller: the frames it needs a helping hand in."),
                 as_json: bool = typer.Option(False, "--json", help="Print the feasibility report as JSON.")):
     """Perform a motion with a body: joint torques (inverse dynamics), centre of gravity, feasibility."""
     from schemas.common import clip_from_wire
@@ -49,7 +51,7 @@ def sim_perform(body: str = typer.Argument(..., help="A robot's name (self, othe
     if out.suffix.lower() != ".npz":
         fail("--out must be a .npz file (BVH and AMC hold motion only; NPZ keeps the torque channels' names)")
     motion = read_clip(clip, skeleton=skeleton)
-    req = {**_body_request(body), "clip": wire(motion, with_skeleton=False)}
+    req = {**_body_request(body), "clip": wire(motion, with_skeleton=False), "track": track}
     if mass is not None:
         req["mass"] = mass
     with client() as c:
@@ -69,6 +71,10 @@ def sim_perform(body: str = typer.Argument(..., help="A robot's name (self, othe
                + (f" ({', '.join(list(lim)[:4])})" if lim else "")
                + (f"; centre of gravity outside the support on {rep['support']['frames_outside_support']} frame(s)"
                   if rep["support"].get("checked") else ""))
+    s = rep["support"]
+    if s.get("tracking_checked"):
+        typer.echo(f"tracked on a simulated floor: a helping hand of more than {s['help_limit']:.0%} of the weight needed on "
+                   f"{s['frames_tracking_helped']} of {rep['frames']} frame(s) (mean help {s['mean_help']:.0%})")
     for what in rep.get("not_checked", []):
         typer.echo(f"  not checked: {what}")
 

@@ -40,11 +40,11 @@ class LocalCoachPorts:
         sp = self.spaces[space]
         return sp.generate(weights=sp.mix_weights(mix))
 
-    def perform(self, clip):
+    def perform(self, clip, track=True):
         if self.body is None:
             return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames,
                     "not_checked": ["joint limits and balance (no body for this target)"], "feasible": None}, None
-        out, report = perform(self.body, clip)
+        out, report = perform(self.body, clip, track=track)
         self._last = (clip, performed_effort(out))  # the check and the effort policy ask about the same clip
         return report, out.select(["cog.x", "cog.y", "cog.z"])
 

@@ -65,7 +65,7 @@ class CoachPorts(Protocol):
     def distance(self, space: str, a: str, b: str) -> float: ...
     def points(self, space: str) -> dict[str, np.ndarray]: ...
     def generate(self, space: str, mix: dict[str, float]) -> Clip: ...
-    def perform(self, clip: Clip) -> tuple[dict, np.ndarray]: ...
+    def perform(self, clip: Clip, track: bool = True) -> tuple[dict, np.ndarray]: ...
     def plant(self, clip: Clip, reference: Clip) -> tuple[Clip, dict]: ...
     def effort(self, clip: Clip) -> float | None: ...
 
@@ -285,7 +285,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
     d_p = ports.distance(session.space, "target", name)
     d_cop = None
     if session.target_cog is not None:
-        _, cog = ports.perform(attempts[0])
+        _, cog = ports.perform(attempts[0], track=False)  # its centre of gravity only
         d_cop = _d_cop(session.target_cog, cog)
     alpha, adverb = session.policy.choose(d_p, d_cop, session.learner)
     shares = error_shares(session.target, attempts)
@@ -304,6 +304,12 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
         return demo
 
     efforts: dict[int, tuple[Clip, float]] = {}  # the clip is kept with its effort: its id cannot be reused
+    reports: dict[int, tuple[Clip, dict]] = {}  # the same for the simulator's reports (a clip checked, then repaired)
+
+    def report_of(demo: Clip) -> dict:
+        if id(demo) not in reports:
+            reports[id(demo)] = (demo, ports.perform(demo)[0])
+        return reports[id(demo)][1]
 
     def effort_of(demo: Clip) -> float:
         if id(demo) not in efforts:
@@ -315,8 +321,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
 
     def why_not(demo: Clip) -> str | None:
         if session.check and session.target_report:
-            report, _ = ports.perform(demo)
-            worse = worse_than_target(report, session.target_report, session.target)
+            worse = worse_than_target(report_of(demo), session.target_report, session.target)
             if worse is not None:
                 return worse
         return session.effort.beyond(effort_of(demo)) if session.effort is not None else None
@@ -326,8 +331,8 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
         what changed, or None when it still fails or keeps less than ``MIN_KEPT``."""
         if not session.check or not session.target_report:
             return None  # only the simulator's check is repaired; felt effort is met by a lower alpha
-        fixed, changes = make_feasible(base, demo, ports.perform(demo)[0], session.target_report, session.target,
-                                       lambda c: ports.perform(c)[0], lambda c: ports.plant(c, base))
+        fixed, changes = make_feasible(base, demo, report_of(demo), session.target_report, session.target,
+                                       report_of, lambda c: ports.plant(c, base))
         share = emphasis_kept(base, demo, fixed) if changes else 0.0
         return (fixed, share, changes) if share >= MIN_KEPT and why_not(fixed) is None else None
 
