@@ -45,8 +45,8 @@ def main(argv=None) -> int:
     args = parse_args(__doc__, argv)
     from aeon.distances import dtw_alignment_path
 
-    from shared.bodies.body import perform
     from shared.bodies.human import human_body
+    from shared.bodies.tracking import perform_tracked
     from shared.coaching.feasibility import off_balance_share
     from shared.io import load_clip
 
@@ -62,7 +62,7 @@ def main(argv=None) -> int:
         for f in files:
             clip = load_clip(f).resample(30.0)
             body = bodies.setdefault(clip.skeleton.to_json(), human_body(clip.skeleton))
-            takes.append((clip, perform(body, clip, track=True)[1], _features(clip)))
+            takes.append((clip, perform_tracked(body, clip)[1], _features(clip)))
         for (_, t_rep, t_x), (m_clip, m_rep, m_x) in itertools.permutations(takes, 2):
             path, _ = dtw_alignment_path(t_x, m_x)
             match = _match(path, m_clip.n_frames)

@@ -174,13 +174,14 @@ def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_
     A robot with no feet to stand on says the test was not run."""
     from copy import deepcopy
 
+    from shared.bodies.tracking import perform_tracked
     from shared.coaching.feasibility import worse_than_target
     from shared.io import load_clip
 
     clip = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc").resample(30)
     body = human_body(clip.skeleton)
     still = clip.with_data(np.repeat(clip.data[10:11], 60, axis=0))
-    held = perform(body, still, track=True)[1]
+    held = perform_tracked(body, still)[1]
     s = held["support"]
     assert s["tracking_checked"] and s["frames_tracking_helped"] == 0 and s["max_root_error_m"] < 0.01, s
     helped = []
@@ -188,11 +189,11 @@ def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_
         data = still.data.copy()
         for arm in ("lhumerus.rx", "rhumerus.rx"):
             data[:, clip.channels.index(arm)] += 40.0 * np.sin(2 * np.pi * hz * np.arange(60) / 30.0)
-        s = perform(body, still.with_data(data), track=True)[1]["support"]
+        s = perform_tracked(body, still.with_data(data))[1]["support"]
         assert s["frames_outside_support"] == 0
         helped.append(s["frames_tracking_helped"])
     assert helped[0] == 0 and helped[1] > 20, helped
-    own, fast = (perform(body, clip.with_data(clip.data, fps=30.0 * k), track=True)[1]["support"] for k in (1, 3))
+    own, fast = (perform_tracked(body, clip.with_data(clip.data, fps=30.0 * k))[1]["support"] for k in (1, 3))
     assert fast["frames_tracking_helped"] / clip.n_frames > own["frames_tracking_helped"] / clip.n_frames + 0.3
     assert "tracking_checked" not in perform(body, still)[1]["support"]  # only when asked
     # the coach's check names the test: a demonstration helped in every frame where the target is not
@@ -204,7 +205,7 @@ def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_
     arm = small_humanoid()
     t = np.linspace(0, 2, 60)
     robot_clip = Clip(np.column_stack([30 * np.sin(t)] * 4), ["shoulder_pitch", "shoulder_roll", "elbow", "knee"], 30.0)
-    assert any("tracking" in n for n in perform(arm, robot_clip, track=True)[1]["not_checked"])
+    assert any("tracking" in n for n in perform_tracked(arm, robot_clip)[1]["not_checked"])
 
 
 def test_the_support_area_has_heels_so_a_person_standing_still_is_balanced(hdm05):

@@ -19,9 +19,9 @@ from schemas import simulator as contract
 from schemas.common import clip_from_wire, clip_to_wire
 from shared.agents.learner import LearnerParams, SimulatedLearner, population
 from shared.agents.store import AgentStore, PersonOther
-from shared.bodies.body import perform
 from shared.bodies.human import human_body
 from shared.bodies.robot import ROBOTS, robot
+from shared.bodies.tracking import perform_tracked
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
 from shared.errors import BadInput, NotFound, Unavailable
@@ -94,7 +94,7 @@ class SimulatorHandlers:
     def do_perform(self, req):
         b = self.bodies.get(req["body"], req["skeleton"], req["mass"])
         clip = clip_from_wire(req["clip"], getattr(b, "skeleton", None))
-        out, report = perform(b, clip, track=req["track"])
+        out, report = perform_tracked(b, clip, track=req["track"])
         self.publish("performed", {"body": b.name, "frames": out.n_frames, "feasible": report["feasible"] is True,
                                   "checked": report["feasible"] is not None})
         return {"clip": clip_to_wire(out, with_skeleton=False), "report": report, "body": b.describe()}

@@ -242,7 +242,8 @@ def _hull_distance(contact: np.ndarray, c: np.ndarray) -> float:
         return float(np.linalg.norm(c - (a + s * ab)))
 
 
-def _runs(flags: np.ndarray) -> list[list[int]]:
+def runs_of(flags: np.ndarray) -> list[list[int]]:
+    """The [start, stop) runs of the frames ``flags`` marks."""
     edges = np.flatnonzero(np.diff(np.r_[0, flags.astype(int), 0]))
     return [[int(a), int(b)] for a, b in zip(edges[::2], edges[1::2])]
 
@@ -330,16 +331,15 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
     out = {"checked": True, "frames_outside_support": outside, "frames_airborne": airborne,
            "max_distance_outside_m": worst, "margin_m": margin,
            # which frames, as [start, stop) runs: where a demonstration must keep its balance
-           "outside_runs": _runs(flags)}
+           "outside_runs": runs_of(flags)}
     if wrench is not None:
-        out.update(dynamic_checked=True, frames_dynamic_outside=int(dyn.sum()), dynamic_runs=_runs(dyn))
+        out.update(dynamic_checked=True, frames_dynamic_outside=int(dyn.sum()), dynamic_runs=runs_of(dyn))
     return out
 
 
-def perform(body: Body, clip: Clip, track: bool = False) -> tuple[Clip, dict]:
-    """The clip performed by ``body``: torques, centre of gravity and a feasibility report; with
-    ``track``, a person's body (free root and feet) also follows it in a simulation with a floor
-    (:func:`shared.bodies.tracking.track`: the frames it needs a helping hand in)."""
+def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
+    """The clip performed by ``body``: torques, centre of gravity and a feasibility report
+    (:func:`shared.bodies.tracking.perform_tracked` adds the simulated test)."""
     q = qpos_trajectory(body, clip)
     warned: dict = {}
     v, _, tau, cog = inverse_dynamics(body, q, clip.fps, warned)
@@ -355,10 +355,6 @@ def perform(body: Body, clip: Clip, track: bool = False) -> tuple[Clip, dict]:
             limits[d.channel] = {"frames": bad, "min": float(x.min()), "max": float(x.max()), "limits": [lo, hi]}
     support = _support_report(body, q, cog, wrench=_root_wrench(body, q, tau))
     not_checked = []
-    if track:
-        why = _tracked(body, q, clip.fps, support)
-        if why:
-            not_checked.append(why)
     if not limited:
         not_checked.append("joint limits (the body has none for this clip's channels)")
     if not support.get("checked"):
@@ -378,27 +374,6 @@ def perform(body: Body, clip: Clip, track: bool = False) -> tuple[Clip, dict]:
     motion = clip.with_data(base, channels=clip.group("motion") or list(clip.channels),
                             groups={"motion": clip.group("motion") or list(clip.channels)})
     return motion.add_channels(names, values, "sensor"), report
-
-
-def _tracked(body: Body, q: np.ndarray, fps: float, support: dict) -> str | None:
-    """The tracking test's numbers added to ``support``; or why it was not run."""
-    if not (support.get("checked") and support.get("dynamic_checked")) or body.skeleton is None:
-        return "tracking in a simulation (the body has no free root and feet to stand on)"
-    from shared.bodies.tracking import track
-
-    if body.tracking is None:
-        from shared.bodies.tracking import tracking_model
-
-        try:
-            body.tracking = tracking_model(body)
-        except ValueError as e:  # a skeleton MuJoCo cannot simulate with contacts: said, not raised
-            return f"tracking in a simulation (its model could not be built: {e})"
-    r = track(body, q, fps, body.tracking)
-    if not np.all(np.isfinite(r["help"])):
-        return "tracking in a simulation (the simulation diverged)"
-    support.update(tracking_checked=True, tracking_runs=r["tracking_runs"], frames_tracking_helped=r["frames_helped"],
-                   mean_help=r["mean_help"], help_limit=r["help_limit"], max_root_error_m=r["max_root_error_m"])
-    return None
 
 
 def check_mass(mass: float) -> float:

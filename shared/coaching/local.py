@@ -9,6 +9,7 @@ import numpy as np
 from shared.bodies.body import perform
 from shared.bodies.human import human_body
 from shared.bodies.stance import plant_feet
+from shared.bodies.tracking import perform_tracked
 from shared.coaching.effort import performed_effort
 from shared.motion.clip import Clip
 from shared.pss.space import ProtoSymbolSpace
@@ -44,7 +45,7 @@ class LocalCoachPorts:
         if self.body is None:
             return {"joint_limit_violations": {}, "support": {"checked": False}, "frames": clip.n_frames,
                     "not_checked": ["joint limits and balance (no body for this target)"], "feasible": None}, None
-        out, report = perform(self.body, clip, track=track)
+        out, report = perform_tracked(self.body, clip, track=track)
         self._last = (clip, performed_effort(out))  # the check and the effort policy ask about the same clip
         return report, out.select(["cog.x", "cog.y", "cog.z"])
 
