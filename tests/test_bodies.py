@@ -171,7 +171,7 @@ def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_
     held still needs no helping hand and is followed to the millimetre, arms swung slowly need
     none either, swung fast (the centre of gravity over the feet throughout) they need one in
     many frames; a squat played three times as fast needs one in more frames than at its speed.
-    A robot with no feet to stand on says the test was not run."""
+    A robot with no feet to stand on, or a motion longer than it simulates, says the test was not run."""
     from copy import deepcopy
 
     from shared.bodies.tracking import perform_tracked
@@ -206,6 +206,10 @@ def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_
     t = np.linspace(0, 2, 60)
     robot_clip = Clip(np.column_stack([30 * np.sin(t)] * 4), ["shoulder_pitch", "shoulder_roll", "elbow", "knee"], 30.0)
     assert any("tracking" in n for n in perform_tracked(arm, robot_clip)[1]["not_checked"])
+    # a request never runs for minutes: a motion longer than the simulation follows says so
+    long = still.with_data(np.repeat(clip.data[10:11], 130, axis=0), fps=1.0)
+    report = perform_tracked(body, long)[1]
+    assert "tracking_checked" not in report["support"] and any("at most 120 s" in n for n in report["not_checked"])
 
 
 def test_the_support_area_has_heels_so_a_person_standing_still_is_balanced(hdm05):

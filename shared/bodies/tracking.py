@@ -43,6 +43,7 @@ SOLE_RADIUS = 0.015  # m
 SOLE_HALF_WIDTH = 0.04  # m to either side of the heel, ball and toe points (the anchors lie on the foot's centre line)
 GROUND_SMOOTH_S = 0.25
 FALL_M, FALL_DEG = 0.25, 45.0  # with a limited hand: fallen when the root is this far from the motion's
+MAX_SECONDS = 120.0  # of motion simulated at most: a demonstration lasts seconds, and a request must not run for minutes
 ARMATURE = 0.01  # kg m^2 on every hinge: keeps the explicit integration of light bones stable
 
 
@@ -198,6 +199,8 @@ def perform_tracked(body: Body, clip: Clip, track: bool = True) -> tuple[Clip, d
 def _track_report(body: Body, clip: Clip, support: dict) -> str | None:
     if not (support.get("checked") and support.get("dynamic_checked")) or body.skeleton is None:
         return "the body has no free root and feet to stand on"
+    if clip.duration > MAX_SECONDS:
+        return f"the motion lasts {clip.duration:.0f} s; the simulation follows at most {MAX_SECONDS:.0f} s (about 1 s of work)"
     if body.tracking is None:
         try:
             body.tracking = tracking_model(body)
