@@ -296,6 +296,10 @@ def test_coaching_from_the_cli(cluster, bundled, tmp_path):
     mine = sorted((bundled / "amc/squat1Reps").glob("HDM_bk_*.amc"))
     r = cli(env, "coach", "run", "--learner", "sim1", "--target", squat, "--trials", "4", "--index", "2")
     assert r.returncode == 0 and "trial 4:" in r.stdout, r.stdout + r.stderr
+    # what each trial changed and why, whole (a long one under its trial's line)
+    state = json.loads(cli(env, "coach", "show", r.stdout.split()[1].rstrip(":"), "--json").stdout)
+    assert len(state["trials"]) == 4 and all(" ".join(t["feasibility"].split()) in " ".join(r.stdout.split())
+                                             for t in state["trials"]), r.stdout
     r = cli(env, "coach", "start", "--target", squat, "--person")
     assert r.returncode == 0, r.stderr
     session = r.stdout.strip()

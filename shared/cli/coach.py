@@ -151,9 +151,14 @@ def _print_session(info: dict) -> None:
     p = info["policy"]
     typer.echo(f"session {info['session']}: target {info['target']}, {who}, policy {p['kind']} (alpha {p['alpha']:g}), "
                f"mode {info['mode']}, {len(info['trials'])} trial(s)")
+    import textwrap
+
     for t, r in zip(info["trials"], info["R"]):
+        why = t["feasibility"]
         typer.echo(f"  trial {t['number']}: d_p {t['d_p']:7.1f}  R {r:.3f}  alpha {t['alpha_shown']:<5g} "
-                   f"{(t['adverb'] or '-'):<14} {t['feasibility'][:70]}")
+                   f"{(t['adverb'] or '-'):<14} {why if len(why) <= 70 else ''}".rstrip())
+        if len(why) > 70:  # what was changed and why, whole: under its trial
+            typer.echo(textwrap.fill(why, 100, initial_indent="    ", subsequent_indent="    "))
 
 
 @coach_app.command("show")

@@ -98,11 +98,13 @@ def make_feasible(base: Clip, demo: Clip, report: dict, target_report: dict, tar
     2. the stance: ``plant(clip) -> (clip, what changed)``, if given, puts the feet where the
        target stands on them, under the body as the target's are, by the root's height and the
        legs' angles (:func:`shared.bodies.stance.plant_feet`); after every later change too;
-    3. the tempo: where only the centre of pressure fails (the pose is balanced, its speed is
-       not), the motion is shown slower, at the fastest of ``TEMPOS`` that passes (or the slowest);
+    3. the tempo: where only the dynamic tests fail (the centre of pressure, the simulated body's
+       helping hand: the pose is balanced, its speed is not), the motion is shown slower, at the
+       fastest of ``TEMPOS`` that passes (or the slowest);
     4. per phase: where the balance fails and the target's does not (the centre of gravity, or
-       the centre of pressure the motion needs, outside the support), the demonstration blends back to the base motion (the target, or the sub-goal), with 0.2 s
-       ramps; widened twice if that is not enough.
+       the centre of pressure the motion needs, outside the support; the simulated body needing a
+       hand), the demonstration blends back to the base motion (the target, or the sub-goal), with
+       0.2 s ramps; widened twice if that is not enough.
 
     Returns the repaired motion (on ``demo``'s frames) and what was changed, one phrase per
     change; the caller checks the result (:func:`worse_than_target`) and lowers alpha only if it still fails."""
@@ -158,14 +160,16 @@ def make_feasible(base: Clip, demo: Clip, report: dict, target_report: dict, tar
         return np.clip(_centred(w.astype(float), kernel / kernel.sum()), 0.0, 1.0)
 
     rep = perform(fixed)
-    if worse_than_target(rep, target_report, target) is not None and worse_than_target(rep, target_report, target, dynamic=False) is None:
+    why = worse_than_target(rep, target_report, target)
+    if why is not None and worse_than_target(rep, target_report, target, dynamic=False) is None:
         for tempo in TEMPOS:
             slower = fixed.with_data(fixed.data, fps=demo.fps * tempo)
             slower_rep = perform(slower)
             if worse_than_target(slower_rep, target_report, target) is None or tempo == TEMPOS[-1]:
                 fixed, rep = slower, slower_rep
-                changes.append(f"shown at {tempo:.0%} of its speed (the faster motion needs the ground to push "
-                               "outside the feet)")
+                changes.append(f"shown at {tempo:.0%} of its speed (at its own, " + (
+                    "a simulated body would need a helping hand to follow it)" if "tracking controller" in why
+                    else "the ground would have to push outside the feet)"))
                 break
     # first the body part whose emphasis, taken out of the phases off balance, helps most (the
     # others keep theirs); then, if the balance still fails, every part in ever wider phases
