@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -53,6 +54,12 @@ def test_every_simulator_verb_answers_within_its_contract(simulator_service, cli
     # the simulated test, asked for: the squat followed on a floor, the frames it needed a hand in said
     s = h["report"]["support"]
     assert s["tracking_checked"] and 0 <= s["frames_tracking_helped"] <= squat.n_frames and s["max_root_error_m"] < 0.1
+    # the body's simulation model is shared by requests in parallel and changed by none: the same answer
+    req = {"skeleton": squat.skeleton.to_json(), "mass": 80.0, "clip": clip_to_wire(squat, with_skeleton=False),
+           "track": True}
+    with ThreadPoolExecutor(3) as pool:
+        again = list(pool.map(lambda _: c.request("simulator", "perform", req)["report"]["support"], range(3)))
+    assert all(a["tracking_runs"] == s["tracking_runs"] and a["mean_help"] == s["mean_help"] for a in again)
     # plant: a squat whose hips float 10 cm gets its feet back on the floor (the root's height mostly)
     lifted = squat.data.copy()
     lifted[:, squat.channels.index("root.ty")] += 0.10 / squat.skeleton.unit_m
@@ -129,7 +136,6 @@ def test_questions_to_people_never_hold_the_workers(simulator_service, client_of
     """Four questions to a person-other held every simulator worker, and `list`
     waited 14-29 s. Six questions (more than the four workers) wait for their person while
     every other verb answers; then the person answers them all."""
-    from concurrent.futures import ThreadPoolExecutor
 
     from shared.bus.client import Client
     from tests.conftest import settings_of
