@@ -206,6 +206,14 @@ def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_
     t = np.linspace(0, 2, 60)
     robot_clip = Clip(np.column_stack([30 * np.sin(t)] * 4), ["shoulder_pitch", "shoulder_roll", "elbow", "knee"], 30.0)
     assert any("tracking" in n for n in perform_tracked(arm, robot_clip)[1]["not_checked"])
+    # the root's orientation given on either side of the quaternion's double cover, frame by frame: the same
+    from shared.bodies.tracking import track, tracking_model
+
+    model, q = tracking_model(body), qpos_trajectory(body, clip)
+    flipped = q.copy()
+    flipped[1::2, 3:7] *= -1
+    a, b = (track(body, x, clip.fps, model) for x in (q, flipped))
+    assert a["frames_helped"] == b["frames_helped"] and np.allclose(a["help"], b["help"])
     # a request never runs for minutes: a motion longer than the simulation follows says so
     long = still.with_data(np.repeat(clip.data[10:11], 130, axis=0), fps=1.0)
     report = perform_tracked(body, long)[1]

@@ -90,8 +90,8 @@ def tracking_model(body: Body) -> tuple[mujoco.MjModel, list]:
         if j.type == mujoco.mjtJoint.mjJNT_HINGE:
             j.armature = ARMATURE
     model = spec.compile()
-    if (model.nq, model.nv) != (body.model.nq, body.model.nv):
-        raise ValueError("the tracking model's joints differ from the body's")
+    if (model.nq, model.nv) != (body.model.nq, body.model.nv) or model.jnt_type[0] != mujoco.mjtJoint.mjJNT_FREE:
+        raise ValueError("the tracking model's joints differ from the body's (a free root first)")
     return model, soles
 
 
@@ -130,6 +130,8 @@ def track(body: Body, q: np.ndarray, fps: float, model_soles: tuple | None = Non
     model, soles = model_soles or tracking_model(body)  # read only: one model serves calls in parallel
     data = mujoco.MjData(model)
     q = grounded(body, q, fps, soles)
+    flip = np.cumsum(np.r_[0, np.einsum("ij,ij->i", q[1:, 3:7], q[:-1, 3:7]) < 0]) % 2 == 1
+    q[flip, 3:7] *= -1  # the root's quaternions on one side of the double cover: interpolated between frames below
     v, a = qpos_derivatives(model, q, fps)
     data.qpos[:], data.qvel[:] = q[0], v[0]
     mujoco.mj_forward(model, data)
