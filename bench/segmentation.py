@@ -207,10 +207,11 @@ def _with_space(args, tuning: list, cross: tuple) -> dict:
     how, key = _chosen(sweep)
     same = all(getattr(how, k) == getattr(seg.Settings(), k) for k in SPACE_GRID)
     print(f"chosen with a space: {key}; {'the module defaults' if same else 'NOT the module defaults: update shared/capture/segment.py'}")
-    report = {"with a space of bd and bk: cross-performer (dg takes, bk targets)": run_set(*cross, how, space=hdm05_space(args.hdm05, ["bd", "bk"])),
-              "with bk's space (as tuned): cross-performer (dg takes, bk targets)": run_set(*cross, how, space=hdm05_space(args.hdm05, ["bk"])),
+    both = hdm05_space(args.hdm05, ["bd", "bk"])
+    report = {"with a space of bd and bk: cross-performer (dg takes, bk targets)": run_set(*cross, how, space=both),
+              "with bk's space (as tuned): cross-performer (dg takes, bk targets)": run_set(*cross, how, space=spaces[0]),
               "with a space of bd and bk: same performer (dg takes, dg's own first clip)":
-                  run_set(*hdm05_set(args.hdm05, "dg", "dg", "bd", own=True), how, space=hdm05_space(args.hdm05, ["bd", "bk"]))}
+                  run_set(*hdm05_set(args.hdm05, "dg", "dg", "bd", own=True), how, space=both)}
     if (args.bandai / "bvh").exists():
         b = bandai_set(args.bandai)
         report["with the studio's space: bandai1 (five styles of a gesture joined, target 'normal')"] = run_set(*b, how, space=bandai_space(b[1], b[2]))

@@ -135,6 +135,14 @@ def test_a_body_from_the_bvh_skeleton_agrees_with_the_asf_one(bundled, tmp_path)
         assert np.abs(pa.column(ch)).max() == pytest.approx(np.abs(pb.column(ch)).max(), rel=0.1), ch
 
 
+def _arms_swung(still: Clip, hz: float) -> Clip:
+    """A pose held still (30 fps) with both upper arms swung 40 degrees at ``hz``."""
+    data = still.data.copy()
+    for arm in ("lhumerus.rx", "rhumerus.rx"):
+        data[:, still.channels.index(arm)] += 40.0 * np.sin(2 * np.pi * hz * np.arange(still.n_frames) / 30.0)
+    return still.with_data(data)
+
+
 def test_the_dynamic_balance_check_sees_what_the_static_one_cannot(bundled):
     """The centre of pressure (zero-moment point) from the free root's inverse dynamics: for a
     pose held still it is the centre of gravity's ground projection (the weight, straight
@@ -156,10 +164,7 @@ def test_the_dynamic_balance_check_sees_what_the_static_one_cannot(bundled):
     assert perform(body, still)[1]["support"]["frames_dynamic_outside"] == 0
     counts = []
     for hz in (0.5, 2.5):
-        data = still.data.copy()
-        for arm in ("lhumerus.rx", "rhumerus.rx"):
-            data[:, clip.channels.index(arm)] += 40.0 * np.sin(2 * np.pi * hz * np.arange(60) / 30.0)
-        s = perform(body, still.with_data(data))[1]["support"]
+        s = perform(body, _arms_swung(still, hz))[1]["support"]
         assert s["frames_outside_support"] == 0  # statically balanced throughout
         counts.append(s["frames_dynamic_outside"])
     assert counts[1] > counts[0] and counts[1] > 20, counts
@@ -186,10 +191,7 @@ def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_
     assert s["tracking_checked"] and s["frames_tracking_helped"] == 0 and s["max_root_error_m"] < 0.01, s
     helped = []
     for hz in (0.5, 2.5):
-        data = still.data.copy()
-        for arm in ("lhumerus.rx", "rhumerus.rx"):
-            data[:, clip.channels.index(arm)] += 40.0 * np.sin(2 * np.pi * hz * np.arange(60) / 30.0)
-        s = perform_tracked(body, still.with_data(data))[1]["support"]
+        s = perform_tracked(body, _arms_swung(still, hz))[1]["support"]
         assert s["frames_outside_support"] == 0
         helped.append(s["frames_tracking_helped"])
     assert helped[0] == 0 and helped[1] > 20, helped

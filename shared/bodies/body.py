@@ -337,10 +337,11 @@ def _support_report(body: Body, q: np.ndarray, cog: np.ndarray, margin: float = 
     return out
 
 
-def perform(body: Body, clip: Clip) -> tuple[Clip, dict]:
+def perform(body: Body, clip: Clip, q: np.ndarray | None = None) -> tuple[Clip, dict]:
     """The clip performed by ``body``: torques, centre of gravity and a feasibility report
-    (:func:`shared.bodies.tracking.perform_tracked` adds the simulated test)."""
-    q = qpos_trajectory(body, clip)
+    (:func:`shared.bodies.tracking.perform_tracked` adds the simulated test). ``q``: the clip's
+    :func:`qpos_trajectory` when the caller has it."""
+    q = qpos_trajectory(body, clip) if q is None else q
     warned: dict = {}
     v, _, tau, cog = inverse_dynamics(body, q, clip.fps, warned)
     for d in body.dofs:  # Coulomb friction, which mj_inverse does not model (damping it does)

@@ -1,5 +1,5 @@
 """A dynamic test in MuJoCo: a tracking controller follows the motion on a body that stands on a
-floor (beyond the thesis, issue 30; :func:`perform_tracked`).
+floor (beyond the thesis: the coach's feasibility check; :func:`perform_tracked`).
 
 The static and zero-moment-point tests of :func:`shared.bodies.body.perform` judge the motion's
 own numbers (inverse dynamics with ideal feet). This test simulates it: the body of
@@ -134,7 +134,6 @@ def track(body: Body, q: np.ndarray, fps: float, model_soles: tuple | None = Non
     q[flip, 3:7] *= -1  # the root's quaternions on one side of the double cover: interpolated between frames below
     v, a = qpos_derivatives(model, q, fps)
     data.qpos[:], data.qvel[:] = q[0], v[0]
-    mujoco.mj_forward(model, data)
     weight = float(body.mass) * 9.81
     edges = _wrench_directions(body.up_axis)
     kp, kd = BANDWIDTH ** 2, 2.0 * BANDWIDTH
@@ -179,9 +178,11 @@ def track(body: Body, q: np.ndarray, fps: float, model_soles: tuple | None = Non
     has = steps > 0  # a motion of more frames a second than SIM_HZ: its frames between steps interpolated
     help_ = np.interp(np.arange(n), np.flatnonzero(has), help_[has] / steps[has])
     helped = help_ > HELP
-    return {"tracked": True, "help": help_, "help_limit": HELP, "frames_helped": int(helped.sum()),
+    # MuJoCo resets a simulation whose accelerations blow up and warns; what followed is no tracking
+    diverged = bool(data.warning[int(mujoco.mjtWarning.mjWARN_BADQACC)].number) or not np.all(np.isfinite(help_))
+    return {"help": help_, "help_limit": HELP, "frames_helped": int(helped.sum()),
             "mean_help": float(help_.mean()) if n else 0.0, "tracking_runs": runs_of(helped),
-            "max_root_error_m": root_error, "fell": fell}
+            "max_root_error_m": root_error, "fell": fell, "diverged": diverged}
 
 
 def perform_tracked(body: Body, clip: Clip, track: bool = True) -> tuple[Clip, dict]:
@@ -190,15 +191,16 @@ def perform_tracked(body: Body, clip: Clip, track: bool = True) -> tuple[Clip, d
     ``frames_tracking_helped``, ``mean_help``, ``help_limit`` and ``max_root_error_m``; a body it
     cannot be run on (no free root and feet, a model MuJoCo cannot build, a simulation that
     diverged) says why in ``not_checked``. The model is built once per body and kept on it."""
-    out, report = perform(body, clip)
+    q = qpos_trajectory(body, clip)
+    out, report = perform(body, clip, q)
     if track:
-        why = _track_report(body, clip, report["support"])
+        why = _track_report(body, clip, q, report["support"])
         if why:
             report["not_checked"].append(f"tracking in a simulation ({why})")
     return out, report
 
 
-def _track_report(body: Body, clip: Clip, support: dict) -> str | None:
+def _track_report(body: Body, clip: Clip, q: np.ndarray, support: dict) -> str | None:
     if not (support.get("checked") and support.get("dynamic_checked")) or body.skeleton is None:
         return "the body has no free root and feet to stand on"
     if clip.duration > MAX_SECONDS:
@@ -208,8 +210,8 @@ def _track_report(body: Body, clip: Clip, support: dict) -> str | None:
             body.tracking = tracking_model(body)
         except ValueError as e:  # a skeleton MuJoCo cannot simulate with contacts: said, not raised
             return f"its model could not be built: {e}"
-    r = track(body, qpos_trajectory(body, clip), clip.fps, body.tracking)
-    if not np.all(np.isfinite(r["help"])):
+    r = track(body, q, clip.fps, body.tracking)
+    if r["diverged"]:
         return "the simulation diverged"
     support.update(tracking_checked=True, tracking_runs=r["tracking_runs"], frames_tracking_helped=r["frames_helped"],
                    mean_help=r["mean_help"], help_limit=r["help_limit"], max_root_error_m=r["max_root_error_m"])

@@ -269,6 +269,18 @@ def start(session: Session, ports: CoachPorts) -> None:
         session.effort = EffortEstimate(float(e), last=1.0)  # the first motion shown is the target
 
 
+def _once_per_clip(compute):
+    """``compute(clip)``, computed once per clip (kept with the clip, so its id is never reused)."""
+    seen: dict[int, tuple[Clip, object]] = {}
+
+    def of(clip: Clip):
+        if id(clip) not in seen:
+            seen[id(clip)] = (clip, compute(clip))
+        return seen[id(clip)][1]
+
+    return of
+
+
 def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int | None = None) -> tuple[Trial, Clip]:
     """One trial (see module docstring). Returns the record and the motion to show next.
     ``felt``: the learner's word for the last demonstration's effort (effort policy)."""
@@ -303,21 +315,14 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
             demo = partial_emphasis(base.resample(demo.fps), demo, part)
         return demo
 
-    efforts: dict[int, tuple[Clip, float]] = {}  # the clip is kept with its effort: its id cannot be reused
-    reports: dict[int, tuple[Clip, dict]] = {}  # the same for the simulator's reports (a clip checked, then repaired)
+    def effort(demo: Clip) -> float:
+        e = ports.effort(demo)
+        if e is None:  # (a session with an effort estimate has a learner with a body)
+            raise Unavailable("the learner's body cannot tell the demonstration's effort", cause="no_body")
+        return float(e)
 
-    def report_of(demo: Clip) -> dict:
-        if id(demo) not in reports:
-            reports[id(demo)] = (demo, ports.perform(demo)[0])
-        return reports[id(demo)][1]
-
-    def effort_of(demo: Clip) -> float:
-        if id(demo) not in efforts:
-            e = ports.effort(demo)
-            if e is None:  # (a session with an effort estimate has a learner with a body)
-                raise Unavailable("the learner's body cannot tell the demonstration's effort", cause="no_body")
-            efforts[id(demo)] = (demo, float(e))
-        return efforts[id(demo)][1]
+    # a clip checked, then repaired, is asked about again: each is performed once
+    report_of, effort_of = _once_per_clip(lambda c: ports.perform(c)[0]), _once_per_clip(effort)
 
     def why_not(demo: Clip) -> str | None:
         if session.check and session.target_report:
