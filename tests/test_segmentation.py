@@ -294,6 +294,24 @@ def test_the_targets_motion_in_a_space_is_named_recognised_or_refused(bundled):
     assert seg.segment(take, unnamed, expected=2, space=space).notes == [note]
 
 
+def test_a_space_with_one_example_of_the_target_leaves_it_to_the_other_motions_given(bundled):
+    """A space that holds the target's motion once cannot tell how far a repetition may lie from
+    it: given other motions too, the cohort check decides (said in a note, the same repetitions as
+    without the space); given none, the space still decides."""
+    from shared.pss.space import ProtoSymbolSpace
+
+    others = ["elbowToKnee1RepsLelbowStart", "rotateArmsBothBackward1Reps", "squat1Reps"]
+    target = _clips(bundled, "bd", "kickLFront1Reps")[0]
+    space = ProtoSymbolSpace.build([target] + [c for o in others for c in _clips(bundled, "bd", o)], sensor=False)
+    take, _ = join(_clips(bundled, "bk", "kickLFront1Reps") * 2, seed=7)
+    background = [_clips(bundled, "dg", o)[0] for o in others]
+    both = seg.segment(take, target, expected=4, background=background, space=space)
+    cohort = seg.segment(take, target, expected=4, background=background)
+    assert both.space is None and any("1 example of 'kickLFront1Reps'" in n for n in both.notes), both.notes
+    assert [(r.start, r.end) for r in both.repetitions] == [(r.start, r.end) for r in cohort.repetitions]
+    assert seg.segment(take, target, expected=4, space=space).space == "kickLFront1Reps"
+
+
 def _space_of_one(bundled):
     from shared.pss.space import ProtoSymbolSpace
 

@@ -44,7 +44,11 @@ cohort ratio is below ``COHORT``. The result says whether the take holds the exp
 repetitions, fewer, more, or none: a different motion. The settings are a :class:`Settings`.
 
 **With a proto-symbol space** (``space``: a space holding the target's motion and others, read
-here or asked through the pss service; thesis eq. 2.6): the space decides instead of the cohort.
+here or asked through the pss service; thesis eq. 2.6): the space decides instead of the cohort
+when it holds at least ``SPACE_EXAMPLES`` (2) examples of the target's motion; a space that holds
+it once knows nothing of how far a repetition may lie from it, so other motions given (the
+``background``) then decide by the cohort check, and without them the space still does (a note
+says which).
 A stretch is a repetition when its cost against the target is at most ``SPACE_COST`` (the own
 repetitions' limits as above) and the space, abstracting the stretch into an HMM, finds the
 target's motion nearer than any other (:class:`shared.capture.naming.Named`: the recognition
@@ -77,10 +81,12 @@ With a space, chosen on the same tuning takes each with a space of its targets' 
 cut, and the tie goes to the larger: a rule written after both were reported, below) and reported
 on dg's takes: with a space of bd and bk F1 1.00, median boundary error 92 ms, no other motion cut
 (with bk's space alone, as tuned: the same); the same performer 0.99; the game studio's styles
-0.14 (the studio's space: its 'normal' clips and two styles of each content); CMU's windows 1.00
-but 4 stretches of other windows cut (a space of one 2-second clip per window, all of one dance,
-tells them apart no better than the cohort). At ``SPACE_COST`` 1.1 dg's kicks (costs 1.13-1.14)
-are not found: F1 0.91 across performers.
+0.14 (the studio's space: its 'normal' clips and two styles of each content). CMU's windows with a
+space of one 2-second clip per window, all of one dance: F1 1.00 but 4 stretches of other windows
+cut while the space decided (it named them window0 where the cohort check refused them); since
+``SPACE_EXAMPLES`` (written after that report, for it: the tuning spaces hold 2-12 examples of every
+motion, so the choice above is unchanged) the cohort decides there. At ``SPACE_COST`` 1.1 dg's
+kicks (costs 1.13-1.14) are not found: F1 0.91 across performers.
 """
 
 from __future__ import annotations
@@ -115,6 +121,9 @@ POSTURE = 0.25  # the weight of the mean poses' distance in a comparison (Settin
 OWN = 1.5  # the person's own repetitions find the others (Settings.own; 0: off)
 SECOND_COST = 1.4  # once the take holds the target, a stretch's cost against it, at most (with OWN on)
 SPACE_COST = 1.15  # with a proto-symbol space, a first repetition's cost against the target, at most (Settings.space_cost)
+#: the space decides only when it holds at least this many examples (proto-symbols) of the target's motion;
+#: with fewer, and other motions given, the cohort check decides (module docstring)
+SPACE_EXAMPLES = 2
 REST_AFTER = 0.2  # seconds of take after the last expected repetition before a live take ends (until_repeated)
 
 
@@ -505,8 +514,9 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
     caller has one (checks of a growing take). ``space``: a proto-symbol space (or a namer like
     :class:`shared.capture.naming.SpaceNamer`) holding the target's motion (``label``, or
     :func:`shared.capture.naming.target_label`) and others: a stretch is a repetition when the
-    space's nearest motion for it is the target's (instead of the cohort check; the
-    ``background`` is then not used); ``named``: the space's ratios of the take's stretches kept
+    space's nearest motion for it is the target's (instead of the cohort check, the
+    ``background`` then not used, when the space holds ``SPACE_EXAMPLES`` examples of the
+    target's motion or no background is given; else the cohort check decides); ``named``: the space's ratios of the take's stretches kept
     by the caller across checks of a growing take."""
     how = settings or Settings()
     if take.n_frames < 2 or target.n_frames < 2:
@@ -522,8 +532,14 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
     if space is not None:
         namer = space if hasattr(space, "nearest") else SpaceNamer(space)
         name, note = target_label(namer, target, label)
-        by_space, others = Named(namer, name, take, fps, how.space_ratio, named), []
         notes += [note] if note else []
+        named_by = Named(namer, name, take, fps, how.space_ratio, named)  # (checks the space holds it and another)
+        examples = sum(1 for lab in namer.labels if lab == name)
+        if examples >= SPACE_EXAMPLES or not others:
+            by_space, others = named_by, []
+        else:
+            notes.append(f"the space holds {examples} example of {name!r}, too few to tell how far a repetition may "
+                         f"lie from it: the other motions given decide (the cohort check)")
     taken, best_refused, closest = _find(a, b, others, how, fps, by_space)
     limit = how.cohort if by_space is None else by_space.limit
     reps = [Repetition(float(s / fps), float(e / fps), float(c), max(0.0, 1.0 - float(ratio) / limit), float(ratio))

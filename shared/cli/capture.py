@@ -96,8 +96,9 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
                                                       "the target's motion and others: a movement is a repetition "
                                                       "when the space names it the target's motion (instead of the "
                                                       "--background check; it finds more of another performer's "
-                                                      "repetitions: bench.segmentation). With it, --max-cost is the "
-                                                      "space's first cost (default 1.15)."),
+                                                      "repetitions: bench.segmentation; a space holding the target's "
+                                                      "motion only once leaves it to --background when given). With "
+                                                      "it, --max-cost is the space's first cost (default 1.15)."),
                     label: str | None = typer.Option(None, help=LABEL_HELP),
                     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON.")):
     """Find the repetitions of a target in one continuous take (each with a confidence), and say

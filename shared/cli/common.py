@@ -27,7 +27,8 @@ BACKGROUND_HELP = ("Other motions (clips) a repetition must be nearer to the tar
                    "one of them is not cut into repetitions of the target; repeat the option.")
 SPACE_HELP = ("A space of the cluster's pss service (`space build`) holding the target's motion and others: a movement "
               "is a repetition when the space names it the target's motion, instead of the --background check (it "
-              "finds more of another performer's repetitions: bench.segmentation).")
+              "finds more of another performer's repetitions: bench.segmentation); a space holding the target's "
+              "motion only once leaves the decision to --background when given.")
 LABEL_HELP = "With --space: the target's motion in it (default: the target's own label, else what the space recognises it as)."
 
 
