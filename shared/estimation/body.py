@@ -533,13 +533,24 @@ class BodyEstimate:
         return keys[i] if h[i] > 1e-3 else None
 
 
+#: the extended model class in the bodies the self thinks possible (:func:`plausible_bodies`): the
+#: mean spring stiffness (N m/rad) and rotor inertia (kg m^2) whose torques on the self's basic
+#: motions are on average as large as the prior's damping's (mean 0.03 N m s/rad at their mean joint
+#: speed of 0.6 rad/s: 0.018 N m; their mean joint angle is 0.3 rad, acceleration 2 rad/s^2), and
+#: the largest rest angle (rad) of a spring
+PLAUSIBLE_SPRING, PLAUSIBLE_ARMATURE, PLAUSIBLE_REST = 0.06, 0.009, 0.5
+
+
 def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
     """``n`` bodies (rows of theta) the self thinks possible before any answer: each moving
     link's mass ``exp(N(0, 0.5))`` and length ``exp(N(0, 0.2))`` times its own (gravity part
     mass x length, inertial part mass x length^2, a longer upper arm carrying the forearm
     further out: the elbow point mass), and, each with probability 1/2, a payload in the hand
     (exponential, mean 0.1 kg), damping (mean 0.03 N m s/rad) and friction (mean 0.02 N m) at
-    every joint. The first row is the self. The overall scale does not matter to comparisons."""
+    every joint, and the extended model class (:data:`EXTENSIONS`): springs at every joint
+    (exponential stiffness, mean ``PLAUSIBLE_SPRING``, each with a rest angle uniform within
+    ``PLAUSIBLE_REST`` of the self's) and rotor inertia (mean ``PLAUSIBLE_ARMATURE``). The first
+    row is the self. The overall scale does not matter to comparisons."""
     names = column_names(joints)
     r = np.random.default_rng(seed)
     out = np.zeros((n, len(names)))
@@ -563,4 +574,12 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
             if r.random() < 0.5:
                 for j in joints:
                     out[i, col[f"{kind}.{j}"]] = r.exponential(mean)
+        if r.random() < 0.5:  # springs, k (q - q0) = k q - k q0: the rest angle's torque on rest_up or rest_down
+            for j in joints:
+                k, q0 = r.exponential(PLAUSIBLE_SPRING), r.uniform(-PLAUSIBLE_REST, PLAUSIBLE_REST)
+                out[i, col[f"spring.{j}"]] = k
+                out[i, col[f"rest_down.{j}" if q0 > 0 else f"rest_up.{j}"]] = k * abs(q0)
+        if r.random() < 0.5:
+            for j in joints:
+                out[i, col[f"armature.{j}"]] = r.exponential(PLAUSIBLE_ARMATURE)
     return out
