@@ -478,6 +478,26 @@ def _wait_dead(pid: int, timeout: float = 30.0) -> None:
         time.sleep(0.05)
 
 
+def test_requests_in_flight_share_their_clients_one_watch_thread(cluster, dev_split):
+    """A request without a timeout of its own is watched by its client's one watcher thread (the
+    wait ended at MIRRORCOACH_TIMEOUT or the verb's limit), not by a thread it starts: three
+    builds in flight at once, one 'request-watch' thread."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from shared.bus.client import Client
+
+    clips = [clip_to_wire(x.resample(30)) for x in dev_split[0][:14]]
+    seen = []
+    with Client(settings_of(cluster)) as c, ThreadPoolExecutor(3) as pool:
+        futures = [pool.submit(c.request, "pss", "build", {"space": f"watched{i}", "clips": clips, "replace": True})
+                   for i in range(3)]
+        while not all(f.done() for f in futures):
+            seen.append(sum(t.name == "request-watch" for t in threading.enumerate()))
+            time.sleep(0.005)
+        assert all(f.result()["n_proto_symbols"] == 14 for f in futures)
+    assert seen and max(seen) == 1, seen
+
+
 @pytest.mark.slow
 def test_a_long_request_is_waited_for_and_a_frozen_service_noticed(cluster, dev_split):
     """Without --timeout the client waits MIRRORCOACH_TIMEOUT, extended to the verb's own limit

@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import threading
 import time
 
@@ -41,7 +43,9 @@ def _may_run_longer(service: str, verb: str, timeout: float) -> str:
 class _Watch:
     """Ends a request's wait (its Zenoh cancellation token) at ``MIRRORCOACH_TIMEOUT``, or, when
     the verb's contract lets it run longer, at the verb's time limit or as soon as the service is
-    no longer there to answer (looked at every ``EVERY_S`` past ``MIRRORCOACH_TIMEOUT``)."""
+    no longer there to answer (looked at every ``EVERY_S`` past ``MIRRORCOACH_TIMEOUT``). The
+    client's one :class:`_Watcher` thread keeps the time of every request's watch: a request
+    starts no thread of its own (starting one cost a request a scheduler slice on a busy machine)."""
 
     EVERY_S = 2.0
 
@@ -49,31 +53,35 @@ class _Watch:
         self.client, self.service, self.verb = client, service, verb
         self.timeout = timeout  # grows to the verb's limit once MIRRORCOACH_TIMEOUT has passed
         self.longest = max(timeout, client.settings.time_limit, 600.0) + 30.0
-        self._stop = threading.Event()
+        self.stopped = False
+        self._extended = False  # past MIRRORCOACH_TIMEOUT, waiting up to the verb's limit
 
     def start(self):
         import zenoh
 
         self.token = zenoh.CancellationToken()
         self._t0 = time.monotonic()
-        threading.Thread(target=self._run, name="request-watch", daemon=True).start()
+        self.client._watcher.add(self, self._t0 + self.timeout)
         return self.token
 
     def stop(self) -> None:
-        self._stop.set()
+        if not self.stopped:
+            self.stopped = True
+            self.client._watcher.stopped()
 
-    def _run(self) -> None:
-        if self._stop.wait(self.timeout):
-            return
-        limit = _verb_limit(self.service, self.verb)  # read only now: schemas load numpy (a slow start)
-        if limit is None or limit <= self.timeout:
-            self.token.cancel()
-            return
-        self.timeout = limit + 10.0
-        while not self._stop.wait(self.EVERY_S):
-            if time.monotonic() - self._t0 >= self.timeout or not self._still_there():
+    def due(self, now: float) -> float | None:
+        """The watch's time came (the watcher calls it): end the wait, or the next time to look."""
+        if not self._extended:
+            limit = _verb_limit(self.service, self.verb)  # read only now: schemas load numpy (a slow start)
+            if limit is None or limit <= self.timeout:
                 self.token.cancel()
-                return
+                return None
+            self.timeout, self._extended = limit + 10.0, True
+            return now + self.EVERY_S
+        if now - self._t0 >= self.timeout or not self._still_there():
+            self.token.cancel()
+            return None
+        return now + self.EVERY_S
 
     def _still_there(self) -> bool:
         if self.client.settings.identity is None:
@@ -86,6 +94,64 @@ class _Watch:
             return self.service in self.client.alive(timeout=1.0)
         except MirrorcoachError:
             return False
+
+
+class _Watcher:
+    """One thread per client for the watches of all its requests: a heap of their next times.
+    A finished request's entry is dropped when its time comes, or all at once when finished ones
+    outnumber the running (so the heap stays about as large as the requests in flight). Looking
+    whether a service is still there (past ``MIRRORCOACH_TIMEOUT`` only) asks the router for up
+    to 1 s, and the other watches wait that long."""
+
+    def __init__(self) -> None:
+        self._order = itertools.count()
+        self._heap: list = []
+        self._running = 0
+        self._cond = threading.Condition()
+        self._thread: threading.Thread | None = None
+        self._closed = False
+
+    def add(self, watch: _Watch, when: float) -> None:
+        with self._cond:
+            heapq.heappush(self._heap, (when, next(self._order), watch))
+            self._running += 1
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="request-watch", daemon=True)
+                self._thread.start()
+            self._cond.notify()
+
+    def stopped(self) -> None:
+        with self._cond:
+            self._running -= 1
+            if len(self._heap) > 64 and len(self._heap) > 2 * self._running:
+                self._heap = [e for e in self._heap if not e[2].stopped]
+                heapq.heapify(self._heap)
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._closed:
+                    while self._heap and self._heap[0][2].stopped:
+                        heapq.heappop(self._heap)
+                    wait = self._heap[0][0] - time.monotonic() if self._heap else None
+                    if wait is not None and wait <= 0:
+                        break
+                    self._cond.wait(wait)
+                if self._closed:
+                    return
+                _, _, watch = heapq.heappop(self._heap)
+            nxt = watch.due(time.monotonic())  # outside the lock: it may ask the router (up to 1 s)
+            if nxt is None:  # the wait was ended: the watch is done
+                watch.stop()
+                continue
+            with self._cond:
+                if not watch.stopped:
+                    heapq.heappush(self._heap, (nxt, next(self._order), watch))
 
 
 def _verb_limit(service: str, verb: str) -> float | None:
@@ -122,6 +188,7 @@ class Client:
             raise Unavailable(f"the cluster is not running (no router at {self.settings.router}; start it with `make up`)",
                               router=self.settings.router) from None
         self._subs: list = []
+        self._watcher = _Watcher()
 
     def __enter__(self):
         return self
@@ -130,6 +197,7 @@ class Client:
         self.close()
 
     def close(self) -> None:
+        self._watcher.close()
         for s in self._subs:
             s.undeclare()
         self._subs.clear()
