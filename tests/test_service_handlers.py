@@ -116,3 +116,22 @@ def test_what_the_selfs_body_gives_is_computed_once_and_a_failure_is_asked_again
     for i in range(5):
         once.once(i, lambda i=i: i, 10.0)
     assert len(once.table) == 3
+
+
+def test_the_estimators_kept_loads_under_many_workers_at_once(tmp_path):
+    """Requests on more estimates than the 64 the estimator keeps loaded, eight workers at once:
+    every load answers with its own estimate, and no more than 64 stay kept."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from shared.estimation.conversation import Language, OtherEstimate
+    from shared.estimation.motions import basic_motions
+
+    est = EstimatorHandlers(tmp_path, _no_bus, lambda *event: None)
+    motions = basic_motions()
+    for i in range(80):
+        OtherEstimate(Language(d=4 + i % 5), motions, probes=False).save(est.path(f"e{i}"))
+    names = [f"e{(7 * i) % 80}" for i in range(3000)]
+    with ThreadPoolExecutor(8) as pool:
+        got = list(pool.map(lambda n: (n, est.load(n).language.d), names))
+    assert all(d == 4 + int(n[1:]) % 5 for n, d in got) and len(got) == 3000
+    assert len(est.loaded) <= 64

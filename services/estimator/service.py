@@ -224,6 +224,7 @@ class EstimatorHandlers:
         self.building: dict = {}  # name -> lock: a fresh estimate's space is built by one request
         self.building_lock = threading.Lock()
         self.loaded: dict = {}  # name -> (file stamp, estimate): estimate requests reuse the last load and its body fit
+        self.loaded_lock = threading.Lock()  # the workers' requests read and trim it at once
 
     def path(self, name: str):
         return self.root / f"{check_name(name)}.npz"
@@ -238,13 +239,15 @@ class EstimatorHandlers:
             raise NotFound(f"no estimate named {name!r}", estimate=name)
         st = self.path(name).stat()
         stamp = (st.st_mtime_ns, st.st_size, st.st_ino)
-        hit = self.loaded.get(name)
+        with self.loaded_lock:
+            hit = self.loaded.get(name)
         if hit is not None and hit[0] == stamp:
             return stamp, copy.deepcopy(hit[1])  # a copy: a handler may change it and then fail before saving
         est = OtherEstimate.load(self.path(name))
-        self.loaded[name] = (stamp, est)
-        while len(self.loaded) > 64:
-            self.loaded.pop(next(iter(self.loaded)))
+        with self.loaded_lock:
+            self.loaded[name] = (stamp, est)
+            while len(self.loaded) > 64:
+                self.loaded.pop(next(iter(self.loaded)))
         return stamp, copy.deepcopy(est)
 
     def keep(self, name: str, stamp: tuple, est: OtherEstimate) -> None:
@@ -252,9 +255,10 @@ class EstimatorHandlers:
         saved answers, the residual correction) for the next request on the same saved
         estimate: both follow from the saved state alone, so every ``estimate`` request after
         the first reuses them instead of fitting them again."""
-        hit = self.loaded.get(name)
-        if hit is not None and hit[0] == stamp:
-            self.loaded[name] = (stamp, est)
+        with self.loaded_lock:
+            hit = self.loaded.get(name)
+            if hit is not None and hit[0] == stamp:
+                self.loaded[name] = (stamp, est)
 
     def start(self, req):
         name = req["estimate"]
