@@ -160,7 +160,7 @@ REPEATS = 3
 #: 30/30 at 0, 10 and 20 % noise, 40 left the development kinds 1-6 short; since the bodies the self
 #: thinks possible hold the extended model class (:func:`shared.estimation.body.plausible_bodies`)
 #: 60 left one heavier-legs other at 20 % noise short (99.9 % not reached) and 90 took every
-#: in-model kind to 30/30 again, the development kinds to 29/30, 30/30 and 29/30)
+#: in-model kind to 30/30 again (10 others at each noise), the development kinds to 30/30 (drag) and 28/30 (bias))
 MAX_QUESTIONS = 90
 BODY_SAMPLES = 1024
 
