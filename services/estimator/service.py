@@ -143,9 +143,16 @@ def model_reply(check: dict) -> dict:
     if not check["answers"]:
         return {**check, "verdict": "no answers yet"}
     if check["outside"]:
-        verdict = (f"outside what I can model: {check['misfits']} of {check['answers']} answers disagree with every body "
-                   f"I can write down, while the other's repeated answers differ {check['repeat_disagreement']:.0%} of "
-                   f"the time (binomial p = {check['p']:.2g})")
+        why = []
+        if check.get("misfit_outside", True):
+            why.append(f"{check['misfits']} of {check['answers']} answers disagree with every body I can write down, while "
+                       f"the other's repeated answers differ {check['repeat_disagreement']:.0%} of the time (binomial p = "
+                       f"{check['p']:.2g})")
+        drift = check.get("drift") or {}
+        if drift.get("drifting"):
+            why.append(f"its answers grow {'heavier' if drift['tau'] > 0 else 'lighter'} against every body I can write "
+                       f"down as the conversation goes on (Kendall's tau {drift['tau']:.2f}, p = {drift['p']:.2g})")
+        verdict = "outside what I can model: " + "; and ".join(why)
     else:
         verdict = (f"{check['agreement']:.0%} of {check['answers']} answers agree with the estimated body; the other's "
                    f"repeated answers differ {check['repeat_disagreement']:.0%} of the time")
