@@ -125,6 +125,7 @@ class OtherEstimate:
         self._body: Any = None  # the body estimate (shared.estimation.body.BodyEstimate), on first use
         self._saved_body: dict | None = None  # theta, s and how many answers they were fitted to, from a file
         self._regressors: dict = {}
+        self._kept: dict[str, tuple[int, Any]] = {}  # what _once_per_answers computed, and at how many answers
         self.other = ""  # the other's name, for the service
         self.notes: list[str] = []  # what happened besides sets (rule identified, conversation stopped)
         self.probes_asked: list[tuple[str, int]] = []
@@ -428,10 +429,9 @@ class OtherEstimate:
         a person's drifting words are no heavier body). Measured on the tuning population (seed
         13, 6 sets): no drift said for the 110 in-model and development others (|tau| at most
         0.37), 1 of the 20 people-like others."""
-        n_answers = len(self.body_answers)
-        cached = getattr(self, "_drift", None)
-        if cached is not None and cached[0] == n_answers:
-            return cached[1]
+        return self._once_per_answers("drift", lambda: self._drift(ports))
+
+    def _drift(self, ports: Ports) -> dict:
         from scipy.stats import kendalltau
 
         body = self.body(ports)
@@ -448,8 +448,16 @@ class OtherEstimate:
             r = kendalltau(place, ratio)
             if np.isfinite(r.pvalue):
                 out = {"tau": float(r.statistic), "p": float(r.pvalue), "drifting": bool(r.pvalue < OUTSIDE_P)}
-        self._drift: tuple[int, dict] | None = (n_answers, out)
         return out
+
+    def _once_per_answers(self, what: str, compute):
+        """``compute()``, kept until the next answer or until the body is fitted anew."""
+        hit = self._kept.get(what)
+        if hit is not None and hit[0] == len(self.body_answers):
+            return hit[1]
+        value = compute()
+        self._kept[what] = (len(self.body_answers), value)
+        return value
 
     def repeat_disagreement(self) -> float:
         """Among questions asked more than once, the share of answers that differ from that
@@ -465,12 +473,12 @@ class OtherEstimate:
     def correction(self, ports: Ports):
         """The residual correction of the body estimate from every answer so far
         (:mod:`shared.estimation.correction`; cached until the next answer)."""
+        return self._once_per_answers("correction", lambda: self._correction(ports))
+
+    def _correction(self, ports: Ports):
         from shared.estimation.correction import features, fit
 
         n_answers = len(self.body_answers)
-        cached = getattr(self, "_correction", None)
-        if cached is not None and cached[0] == n_answers:
-            return cached[1]
         body = self.body(ports)
         lang = self.language
         width = lang.g_max / lang.d
@@ -489,15 +497,13 @@ class OtherEstimate:
             t.append((lo + hi) / 2 / g - 1.0)
             noise.append(spread / g)
             n.append(np.mean(where) / max(n_answers - 1, 1))
-        corr = fit(np.array(x), np.array(t), np.array(noise), np.array(n))  # no answers yet: no correction
-        self._correction: tuple[int, Any] | None = (n_answers, corr)
-        return corr
+        return fit(np.array(x), np.array(t), np.array(noise), np.array(n))  # no answers yet: no correction
 
     def forget_body(self) -> None:
         """Fit the body again from the answers (after the language's rule changed)."""
         self._body = None
         self._saved_body = None
-        self._correction = None
+        self._kept = {}  # the correction and the drift test read the body
 
     def body_state(self) -> dict | None:
         if self._body is not None:

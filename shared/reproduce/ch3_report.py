@@ -150,7 +150,8 @@ def outside_lines(outside: dict | None) -> list[str]:
              "only when the answers call for it; its settings were chosen on seed 13's in-model and development "
              "kinds, never on these. Same conversations and errors as above. The last column "
              "is the estimator's model check (`OtherEstimate.model_check`): answers its best body misses beyond what "
-             "the other's own inconsistency explains.", "",
+             "the other's own inconsistency explains, or answers that drift against it over the conversation "
+             "(`OtherEstimate.drift`).", "",
              f"| kind | {method_columns()} | body unknown at {FAST:g}x speed | questions per other | conversations "
              "stopped early | said \"outside what I can model\" (residual corrected) |", "|---" * (2 * len(METHODS) + 5) + "|"]
     for kind, s in summ.items():
