@@ -89,8 +89,10 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                  noise: float = typer.Option(0.0, help="Probability an answer is one bin off."),
                  seed: int = typer.Option(0, help="Seed of the answer noise."),
                  kind: str | None = typer.Option(None, help="Draw an uneven body from the population: "
-                                                    "mass, links, payload, shares, damping, friction, joints, legs, mixed "
-                                                    "(its mass replaces --mass; see `other reveal`)."),
+                                                    "mass, links, payload, shares, damping, friction, joints, legs, mixed; "
+                                                    "or one outside the estimators' model: springs, armature, gears, "
+                                                    "coupling, stribeck, fatigue (its mass replaces --mass; see "
+                                                    "`other reveal`)."),
                  index: int = typer.Option(0, help="Which of the kind's population (0-999)."),
                  population_seed: int = typer.Option(2026, help="Seed of the population."),
                  replace: bool = typer.Option(False, "--replace")):
@@ -101,6 +103,8 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
 
         drawn = population(kind, index + 1, seed=population_seed)[index]
         params.update(mass=drawn["mass"], body=drawn["body"], kind=kind, joints=drawn["joints"])
+        if drawn.get("transmission"):  # gears, coupling, Stribeck friction, fatigue: between body and feeling
+            params["transmission"] = drawn["transmission"]
     with client() as c:
         r = c.request("simulator", "other_create", {"other": name, "kind": "person" if person else "simulated",
                                                     "params": params, "replace": replace})
