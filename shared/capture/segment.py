@@ -516,8 +516,8 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
     :func:`shared.capture.naming.target_label`) and others: a stretch is a repetition when the
     space's nearest motion for it is the target's (instead of the cohort check, the
     ``background`` then not used, when the space holds ``SPACE_EXAMPLES`` examples of the
-    target's motion or no background is given; else the cohort check decides); ``named``: the space's ratios of the take's stretches kept
-    by the caller across checks of a growing take."""
+    target's motion or no background is given; else the cohort check decides); ``named``: the
+    space's ratios of the take's stretches kept by the caller across checks of a growing take."""
     how = settings or Settings()
     if take.n_frames < 2 or target.n_frames < 2:
         raise BadInput("the take and the target need at least two frames each")
