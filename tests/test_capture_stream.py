@@ -139,6 +139,8 @@ def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp
                               "--expected", "4", "--out", str(tmp_path / "reps"), "--json"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
+    # with neither other motions nor a space, the command says what only the first cost can tell
+    assert "note: no --background or --space" in r.stderr and "may be cut into repetitions" in r.stderr, r.stderr
     out = json.loads(r.stdout)
     assert len(out["files"]) == len(out["repetitions"]) >= 3 and all(Path(f).exists() for f in out["files"])
     assert all(load_clip(f).n_frames > 10 for f in out["files"])

@@ -13,7 +13,17 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import BACKGROUND_HELP, LABEL_HELP, SKELETON_HELP, SPACE_HELP, app, fail, read_clip, space_fields
+from shared.cli.common import (
+    BACKGROUND_HELP,
+    LABEL_HELP,
+    SKELETON_HELP,
+    SPACE_HELP,
+    app,
+    fail,
+    read_clip,
+    say_if_unguarded,
+    space_fields,
+)
 
 capture_app = typer.Typer(help="Live motion capture: a clip served as a live BVH stream, a take recorded from one, a "
                                "take cut into the repetitions of a target.", no_args_is_help=True)
@@ -110,6 +120,7 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
     from shared.io import save_clip
 
     space_fields(None if space is None else str(space), label)  # --label needs --space: said before any file is read
+    say_if_unguarded(background, space)
     t = read_clip(take, skeleton=skeleton)
     tgt = read_clip(target, skeleton=skeleton)
     bg = [read_clip(b, skeleton=skeleton) for b in background]

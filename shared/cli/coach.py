@@ -18,6 +18,7 @@ from shared.cli.common import (
     fail,
     jsonable,
     read_clip,
+    say_if_unguarded,
     space_fields,
     wire,
 )
@@ -257,6 +258,7 @@ def coach_live(session: str = typer.Argument(..., help="A session started with `
     if info.get("learner"):
         fail(f"session {session} coaches the simulated learner {info['learner']}; start one with --person")
     controls = Controls(folder)
+    say_if_unguarded(background, space)
     msg = {"source": source, "seconds": seconds, "idle": idle, "target": wire(tgt), "expected": expected,
            "check_every": 0.1, "background": [wire(read_clip(b, skeleton=skeleton)) for b in background],
            **space_fields(space, label)}

@@ -32,6 +32,15 @@ SPACE_HELP = ("A space of the cluster's pss service (`space build`) holding the 
 LABEL_HELP = "With --space: the target's motion in it (default: the target's own label, else what the space recognises it as)."
 
 
+def say_if_unguarded(background, space) -> None:
+    """With neither other motions nor a space, only the target's first cost tells a repetition from
+    a different motion that resembles it: said once, on stderr."""
+    if not background and not space:
+        typer.echo("note: no --background or --space: a movement within the target's first cost counts as a repetition, "
+                   "so a different motion close to the target may be cut into repetitions (bench.segmentation: 3 "
+                   "stretches of another motion in its report's takes); give the other motions the person may do", err=True)
+
+
 def space_fields(space: str | None, label: str | None) -> dict:
     """A capture request's ``space`` and ``label`` fields from the command's options."""
     if label is not None and space is None:

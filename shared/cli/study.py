@@ -18,6 +18,7 @@ from shared.cli.common import (
     client,
     fail,
     read_clip,
+    say_if_unguarded,
     space_fields,
     wire,
 )
@@ -366,6 +367,7 @@ def study_run(folder: Path = FOLDER,
     target = wire(target_clip)
     others = [wire(read_clip(b)) for b in background]
     named = space_fields(space, label)
+    say_if_unguarded(background, space)
     controls = Controls(folder)
     skipped: set[str] = set()
     done = 0
