@@ -35,7 +35,15 @@ def worse_than_target(report: dict, target_report: dict, target: Clip, dynamic: 
     more than ``LIMIT_TOLERANCE`` past both its limit and the target's own extreme (real mocap
     already exceeds the ASF limits), or more of its frames than ``BALANCE_TOLERANCE`` are off
     balance where the target's are not: the centre of gravity outside the support or (with
-    ``dynamic``) the centre of pressure the motion needs."""
+    ``dynamic``) the centre of pressure the motion needs, or the simulated body needing a hand
+    (the tracking test, when the reports have it)."""
+    failed = failing_test(report, target_report, target, dynamic)
+    return None if failed is None else failed[1]
+
+
+def failing_test(report: dict, target_report: dict, target: Clip, dynamic: bool = True) -> tuple[str, str] | None:
+    """:func:`worse_than_target`'s first failing test, as (``"limits"`` or the support report's
+    runs it counted: ``outside_runs``, ``dynamic_runs``, ``tracking_runs``; the sentence)."""
     worst = None
     for c, v in report["joint_limit_violations"].items():
         lo, hi = v["limits"]
@@ -45,29 +53,30 @@ def worse_than_target(report: dict, target_report: dict, target: Clip, dynamic: 
         if over > LIMIT_TOLERANCE and (worst is None or over > worst[1]):
             worst = (c, over)
     if worst:
-        return f"{worst[0]} goes {worst[1]:.0f} degrees past its limit and past the target's own range"
+        return "limits", f"{worst[0]} goes {worst[1]:.0f} degrees past its limit and past the target's own range"
     s, ts = report["support"], target_report["support"]
     if s.get("checked") and ts.get("checked"):
         share = off_balance_share(report, target_report, "outside_runs")
         if share > BALANCE_TOLERANCE["outside_runs"]:
-            return f"the centre of gravity leaves the support on {share:.0%} of the frames where the target's does not"
+            return "outside_runs", f"the centre of gravity leaves the support on {share:.0%} of the frames where the target's does not"
     if dynamic and s.get("dynamic_checked") and ts.get("dynamic_checked"):
         share = off_balance_share(report, target_report, "dynamic_runs")
         if share > BALANCE_TOLERANCE["dynamic_runs"]:
-            return (f"the ground reaction it needs acts outside the feet (centre of pressure) or pulls on {share:.0%} "
-                    "of the frames where the target's does not: it would tip over")
+            return "dynamic_runs", (f"the ground reaction it needs acts outside the feet (centre of pressure) or pulls on "
+                                    f"{share:.0%} of the frames where the target's does not: it would tip over")
     if dynamic and s.get("tracking_checked") and ts.get("tracking_checked"):
         share = off_balance_share(report, target_report, "tracking_runs")
         if share > BALANCE_TOLERANCE["tracking_runs"]:
-            return (f"a tracking controller in a simulation with a floor follows it only with a helping hand of more than "
-                    f"{s['help_limit']:.0%} of its weight on {share:.0%} of the frames where the target needs none: "
-                    "it would fall")
+            return "tracking_runs", (f"a tracking controller in a simulation with a floor follows it only with a helping "
+                                     f"hand of more than {s['help_limit']:.0%} of its weight on {share:.0%} of the frames "
+                                     "where the target needs none: it would fall")
     return None
 
 
 def off_balance_share(report: dict, target_report: dict, kind: str, match: np.ndarray | None = None) -> float:
     """The share of a motion's frames off balance by one test (``outside_runs``: the centre of
-    gravity outside the support; ``dynamic_runs``: the centre of pressure it needs) where the
+    gravity outside the support; ``dynamic_runs``: the centre of pressure it needs;
+    ``tracking_runs``: the simulated body needing a hand) where the
     target, at the matched frame, is not: ``match[t]`` is the target's frame for the motion's
     frame ``t`` (by default both spread evenly over the same time)."""
     n, n_t = int(report["frames"]), int(target_report["frames"])
@@ -160,15 +169,15 @@ def make_feasible(base: Clip, demo: Clip, report: dict, target_report: dict, tar
         return np.clip(_centred(w.astype(float), kernel / kernel.sum()), 0.0, 1.0)
 
     rep = perform(fixed)
-    why = worse_than_target(rep, target_report, target)
-    if why is not None and worse_than_target(rep, target_report, target, dynamic=False) is None:
+    failed = failing_test(rep, target_report, target)
+    if failed is not None and worse_than_target(rep, target_report, target, dynamic=False) is None:
         for tempo in TEMPOS:
             slower = fixed.with_data(fixed.data, fps=demo.fps * tempo)
             slower_rep = perform(slower)
             if worse_than_target(slower_rep, target_report, target) is None or tempo == TEMPOS[-1]:
                 fixed, rep = slower, slower_rep
                 changes.append(f"shown at {tempo:.0%} of its speed (at its own, " + (
-                    "a simulated body would need a helping hand to follow it)" if "tracking controller" in why
+                    "a simulated body would need a helping hand to follow it)" if failed[0] == "tracking_runs"
                     else "the ground would have to push outside the feet)"))
                 break
     # first the body part whose emphasis, taken out of the phases off balance, helps most (the

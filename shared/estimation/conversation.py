@@ -382,10 +382,9 @@ class OtherEstimate:
 
         if not self.body_answers:
             return {"answers": 0, "agreement": None, "repeat_disagreement": None, "outside": False, "p": None}
-        body = self.body(ports)
         repeat = self.repeat_disagreement()
         lang = self.language
-        g = {key: body._g(self.regressor(ports, key), body.theta) for key, _ in self.body_answers}
+        g = self.answered_g(ports)
         width = lang.g_max / lang.d
 
         def misfit(key, k):  # the estimate's g outside the word's bin by more than MISFIT_TOLERANCE of a bin
@@ -434,21 +433,29 @@ class OtherEstimate:
     def _drift(self, ports: Ports) -> dict:
         from scipy.stats import kendalltau
 
-        body = self.body(ports)
         lang = self.language
+        g_of = self.answered_g(ports)
         place, ratio = [], []
         for i, (key, k) in enumerate(self.body_answers):
             lo, hi = lang.bounds(k)
-            g = body._g(self.regressor(ports, key), body.theta)
-            if np.isfinite(hi) and g > 1e-9:  # the open last bin has no middle
+            if np.isfinite(hi) and g_of[key] > 1e-9:  # the open last bin has no middle
                 place.append(i)
-                ratio.append((lo + hi) / 2 / g)
+                ratio.append((lo + hi) / 2 / g_of[key])
         out = {"tau": 0.0, "p": 1.0, "drifting": False}
         if len(place) >= 8:
             r = kendalltau(place, ratio)
             if np.isfinite(r.pvalue):
                 out = {"tau": float(r.statistic), "p": float(r.pvalue), "drifting": bool(r.pvalue < OUTSIDE_P)}
         return out
+
+    def answered_g(self, ports: Ports) -> dict[str, float]:
+        """The body estimate's ``g`` for every question answered so far (the model check, the
+        drift test and the residual correction read it; kept until the next answer)."""
+        def compute() -> dict[str, float]:
+            body = self.body(ports)
+            return {key: body._g(self.regressor(ports, key), body.theta) for key, _ in self.body_answers}
+
+        return self._once_per_answers("g", compute)
 
     def _once_per_answers(self, what: str, compute):
         """``compute()``, kept until the next answer or until the body is fitted anew."""
@@ -486,14 +493,14 @@ class OtherEstimate:
         places: dict[tuple[str, int], list[int]] = {}
         for i, answer in enumerate(self.body_answers):
             places.setdefault(answer, []).append(i)
+        g_of = self.answered_g(ports)
         x, t, noise, n = [], [], [], []
         for (key, k), where in places.items():
             lo, hi = lang.bounds(k)
-            y = self.regressor(ports, key)
-            g = body._g(y, body.theta)
+            g = g_of[key]
             if not np.isfinite(hi) or g < 1e-9:  # the open last bin has no middle
                 continue
-            x.append(features(y, body.theta, body.names, self._clip_of(key)))
+            x.append(features(self.regressor(ports, key), body.theta, body.names, self._clip_of(key)))
             t.append((lo + hi) / 2 / g - 1.0)
             noise.append(spread / g)
             n.append(np.mean(where) / max(n_answers - 1, 1))
