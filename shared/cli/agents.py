@@ -93,7 +93,7 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                                                     "or one outside the estimators' model: springs, armature, gears, "
                                                     "coupling, stribeck, fatigue (its mass replaces --mass; see "
                                                     "`other reveal`)."),
-                 index: int = typer.Option(0, help="Which of the kind's population (0-999)."),
+                 index: int = typer.Option(0, min=0, max=999, help="Which of the kind's population (0-999)."),
                  population_seed: int = typer.Option(2026, help="Seed of the population."),
                  replace: bool = typer.Option(False, "--replace")):
     """Create an other: a simulated agent with hidden parameters, or a person's seat."""

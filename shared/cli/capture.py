@@ -120,10 +120,10 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
     from shared.io import save_clip
 
     space_fields(None if space is None else str(space), label)  # --label needs --space: said before any file is read
-    say_if_unguarded(background, space)
     t = read_clip(take, skeleton=skeleton)
     tgt = read_clip(target, skeleton=skeleton)
     bg = [read_clip(b, skeleton=skeleton) for b in background]
+    say_if_unguarded(background, space)  # (after the files: a wrong path is said first)
     how = Settings()
     if max_cost is not None:
         how = replace(how, **({"max_cost": max_cost} if space is None else {"space_cost": max_cost}))
