@@ -1,15 +1,39 @@
 """``make bench`` (chapter 3 part): one conversation set through the bus (4 shared motions and
 4 probes: dialogue -> simulator, pss associate, pss rebuild, the body fit, state saved), and the
-full ``reproduce ch3`` run over the uneven population (target under 3 minutes). Writes
+full ``reproduce ch3`` run over the uneven population (target under 3 minutes), with the CPU
+seconds each process of the cluster spent on it: their sum over the machine's cores is the
+shortest the run could take with every core busy all the time. Writes
 ``bench/results/ch3.{json,md}``."""
 
 from __future__ import annotations
 
+import os
 import tempfile
 import time
 from pathlib import Path
 
 from bench.common import parse_args, private_cluster, stats, write_results
+
+
+def cpu_seconds(s) -> dict[str, float]:
+    """User + system CPU seconds so far of every running process of the cluster (its pid files)
+    and of this one (``bench``)."""
+    from shared.bus.pidfiles import read_pid
+
+    tick = os.sysconf("SC_CLK_TCK")
+    out = {}
+    for f in sorted(s.run_dir.glob("*.pid")):
+        pid = read_pid(f)
+        if pid is None or f.stem == "supervisor":
+            continue
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
+        except OSError:
+            continue
+        out[f.stem] = (int(fields[11]) + int(fields[12])) / tick  # utime, stime (fields 14 and 15)
+    t = os.times()
+    out["bench"] = t.user + t.system
+    return out
 
 
 def main(argv=None) -> int:
@@ -27,10 +51,18 @@ def main(argv=None) -> int:
             c.request("estimator", "converse", {"estimate": "r2", "sets": 1})
             ts.append(time.perf_counter() - t0)
         res["conversation_set"] = stats(ts)
+        before = cpu_seconds(s)
         t0 = time.perf_counter()
         run(c, Path(tempfile.mkdtemp(prefix="mc-ch3-")), echo=lambda *a: None)
         res["reproduce_ch3_s"] = time.perf_counter() - t0
-    print(f"one conversation set {res['conversation_set']['median_ms']:.0f} ms; reproduce ch3 {res['reproduce_ch3_s']:.0f} s")
+        after = cpu_seconds(s)
+    cpu = {k: round(v - before.get(k, 0.0), 1) for k, v in sorted(after.items(), key=lambda kv: -kv[1])}
+    cores = os.cpu_count() or 1
+    total = sum(cpu.values())
+    res.update(cpu_s=cpu, cpu_total_s=total, cores=cores, all_cores_busy_s=total / cores,
+               cores_busy=total / res["reproduce_ch3_s"])
+    print(f"one conversation set {res['conversation_set']['median_ms']:.0f} ms; reproduce ch3 {res['reproduce_ch3_s']:.0f} s; "
+          f"CPU {total:.0f} s ({', '.join(f'{k} {v:.0f}' for k, v in cpu.items())}) on {cores} cores")
     write_results(args.out, "ch3", res, [
         "# Chapter 3 benchmark (`make bench`, bench/ch3.py)", "",
         "| what | measured | target |", "|---|---|---|",
@@ -38,6 +70,10 @@ def main(argv=None) -> int:
         f"{res['conversation_set']['median_ms']:.0f} ms (p95 {res['conversation_set']['p95_ms']:.0f}) | - |",
         f"| full `reproduce ch3` (9 in-model and 6 outside kinds x 10 others, 6 sets, people-like answers, identification, d = 4-8, rules, noise) | "
         f"{res['reproduce_ch3_s']:.0f} s | < 180 s |",
+        f"| its CPU, every process of the cluster and the bench | {total:.0f} s: "
+        + ", ".join(f"{k} {v:.0f}" for k, v in cpu.items()) + " | - |",
+        f"| the same CPU spread over all {cores} cores (the shortest the run could be as it computes now) | "
+        f"{total / cores:.0f} s (the run kept {res['cores_busy']:.2f} cores busy on average) | < 180 s |",
     ])
     return 0
 
