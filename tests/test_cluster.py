@@ -294,6 +294,22 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
     assert (tmp_path / "again/ch3/results.json").read_bytes() == (tmp_path / "rep/ch3/results.json").read_bytes()
     assert sorted(json.loads((tmp_path / "rep/ch3/results.json").read_text())) == [
         "identification", "open", "people", "robustness", "rules", "uneven"]
+    # Ctrl-C stops the run: the conversations not started are dropped, those in flight end at their next
+    # request (it ran the first section's 30 others to their end before: 86 s for the full run's 90)
+    p = subprocess.Popen([sys.executable, "-m", "shared.cli", "reproduce", "ch3", "--out", str(tmp_path / "stopped"),
+                          "--others", "10", "--kinds", "mass,links,payload", "--no-outside"], env=env, cwd=REPO,
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert p.stdout is not None and "others whose bodies differ" in p.stdout.readline()  # the pool is running
+        time.sleep(1.0)
+        p.send_signal(signal.SIGINT)
+        t0 = time.monotonic()
+        rest = p.communicate(timeout=120)[0]
+        assert p.returncode == 130 and time.monotonic() - t0 < 15, (p.returncode, time.monotonic() - t0, rest)
+        assert "payload:" not in rest and "rule identification" not in rest and "interrupted: " in rest, rest
+    finally:
+        if p.poll() is None:
+            p.kill()
 
 
 def test_coaching_from_the_cli(cluster, bundled, tmp_path):

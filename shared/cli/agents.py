@@ -431,6 +431,10 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                     fail("--learners must be 2 to 1000 and --sensitivity-learners 0 to 1000 (statistics need two)")
                 run_coaching(c, data, out / "ch4-6", learners=learners, targets=chosen, families=fams,
                              sensitivity_learners=sensitivity_learners, echo=typer.echo)
+    except KeyboardInterrupt:  # (shared/reproduce/stopping.py: within a request of Ctrl-C)
+        typer.echo("interrupted: a chapter's report is written once all its sections are done; "
+                   "the chapters written before it are kept", err=True)
+        raise typer.Exit(130) from None
     finally:
         if started:
             down(settings, echo=typer.echo)

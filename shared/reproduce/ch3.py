@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -47,12 +46,13 @@ from shared.reproduce.ch3_report import (
     WORKERS,
     write_report,
 )
+from shared.reproduce.stopping import stopping, worker_pool
 
 
 class Ch3:
     def __init__(self, client, out: Path, sets: int = SETS, echo=print, others: int = OTHERS, kinds=KINDS,
                  population_seed: int = 2026):
-        self.c, self.out, self.sets, self.echo = client, Path(out), sets, echo
+        self.c, self.out, self.sets, self.echo = stopping(client), Path(out), sets, echo  # Ctrl-C: stopping.py
         self.others, self.kinds, self.population_seed = others, list(kinds), population_seed
         self.out.mkdir(parents=True, exist_ok=True)
         self._truth: dict = {}
@@ -82,7 +82,7 @@ class Ch3:
             r = self.c.request("estimator", "estimate", {"estimate": name, "clip": clip_to_wire(m), "method": method})
             return clip_from_wire(r["clip"]).select([f"tau.{j}" for j in joints])
 
-        with ThreadPoolExecutor(4) as pool:
+        with worker_pool(self.c, 4) as pool:
             return list(pool.map(one, motions))
 
     def new_other(self, name: str, **params) -> dict:
@@ -170,7 +170,7 @@ class Ch3:
             kind, self.others, seed=self.population_seed, d=6, g_max=G_MAX, joints=list(ALL) if kind == "legs" else list(ARM)))]
         # every kind's others in one pool: WORKERS conversations always in flight (a pool per kind
         # waited for its slowest other before the next kind began); each kind said once it is done
-        with ThreadPoolExecutor(WORKERS) as pool:
+        with worker_pool(self.c, WORKERS) as pool:
             futures = [(task[0], pool.submit(self.one_other, *task)) for task in tasks]
             for kind in kinds:
                 rows = [f.result() for k, f in futures if k == kind]
@@ -191,7 +191,7 @@ class Ch3:
             pop = population(kind, self.others, seed=self.population_seed, d=6, g_max=G_MAX, joints=list(ARM))
             pops[kind] = [{**p, **a, "seed": p["seed"] + 500} for p, a in zip(pop, people_answers(self.others,
                                                                                                   self.population_seed))]
-        with ThreadPoolExecutor(WORKERS) as pool:  # both kinds in one pool (see uneven)
+        with worker_pool(self.c, WORKERS) as pool:  # both kinds in one pool (see uneven)
             futures = {kind: [pool.submit(self.one_other, f"people-{kind}", i, p) for i, p in enumerate(pop)]
                        for kind, pop in pops.items()}
             for kind, pop in pops.items():
@@ -235,7 +235,7 @@ class Ch3:
             return r.get("rule") == c.name, len(r["questions"]), r["reason"]
 
         # every configuration's others in one pool (see uneven); each kind said once it is done
-        with ThreadPoolExecutor(WORKERS) as pool:
+        with worker_pool(self.c, WORKERS) as pool:
             futures = [(config, [pool.submit(one, config, i, p) for i, p in enumerate(population(
                 config[0], max(self.others, len(config[2])), seed=self.population_seed, joints=list(ALL),
                 g_max=G_MAX_RULES))]) for config in configs]
@@ -270,7 +270,7 @@ class Ch3:
             self.start(name, name, d=d, g_max=G_MAX)
             return self.curve(name, params, Language(d=d, g_max=G_MAX), {"known": known, "unknown": unknown})
 
-        with ThreadPoolExecutor(3) as pool:  # three others of their own: at once
+        with worker_pool(self.c, 3) as pool:  # three others of their own: at once
             curves = dict(zip((4, 6, 8), pool.map(one, (4, 6, 8))))
         for d in (4, 6, 8):
             res[d] = curves[d]
@@ -302,7 +302,7 @@ class Ch3:
                                        "questions": ident and ident["questions"], "design": ident and ident.get("design"),
                                        **self.curve(name, params, lang, {"unknown": unknown})}
 
-        with ThreadPoolExecutor(2) as pool:  # the two d's: two others of their own, at once
+        with worker_pool(self.c, 2) as pool:  # the two d's: two others of their own, at once
             list(pool.map(one, (5, 7), ("f4", "f2")))
         # the same order of keys as one d after the other
         out = {f"{label}|{d}": out[f"{label}|{d}"] for d in (5, 7) for label in ("right", "wrong", "wrong-f2")
@@ -325,7 +325,7 @@ class Ch3:
             self.start(name, name, d=6, g_max=G_MAX)
             return self.curve(name, params, lang, {"known": known, "unknown": unknown})
 
-        with ThreadPoolExecutor(2) as pool:  # two others of their own: at once
+        with worker_pool(self.c, 2) as pool:  # two others of their own: at once
             return dict(zip((0.1, 0.2), pool.map(one, (0.1, 0.2))))
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ from shared.reproduce.coaching_stats import (
     r_l,
     tidy_rows,
 )
+from shared.reproduce.stopping import stopping, worker_pool
 from shared.reproduce.tidy import write
 
 
@@ -55,7 +55,7 @@ def target_clip(hdm05: Path, label: str):
 class Experiment:
     def __init__(self, client, target, name: str, learners: int, seed: int = 0, trials: int = 4, workers: int = 4,
                  echo=print, family: str = "thesis"):
-        self.c, self.target, self.name = client, target, name
+        self.c, self.target, self.name = stopping(client), target, name  # Ctrl-C: stopping.py
         self.learners, self.seed, self.trials, self.workers, self.echo = learners, seed, trials, workers, echo
         self.family = family
         self.wire = clip_to_wire(target)
@@ -76,7 +76,7 @@ class Experiment:
     def group(self, tag: str, policy_of, check: bool = False, params_of=None, **kw) -> list[dict]:
         """One session per learner of the population (``policy_of(i)`` -> policy; ``params_of(i)``
         -> parameters set on learner ``i``, see ``learner_params``)."""
-        with ThreadPoolExecutor(self.workers) as pool:
+        with worker_pool(self.c, self.workers) as pool:
             return list(pool.map(lambda i: self.session(tag, i, policy_of(i), check,
                                                         **({"params": params_of(i)} if params_of else {}), **kw),
                                  range(self.learners)))
