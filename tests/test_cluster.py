@@ -296,9 +296,11 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
         "identification", "open", "people", "robustness", "rules", "uneven"]
     # Ctrl-C stops the run: the conversations not started are dropped, those in flight end at their next
     # request (it ran the first section's 30 others to their end before: 86 s for the full run's 90)
+    # (Ctrl-C as a terminal sends it: a test run in the background, as CI's may be, inherits SIGINT ignored)
     p = subprocess.Popen([sys.executable, "-m", "shared.cli", "reproduce", "ch3", "--out", str(tmp_path / "stopped"),
                           "--others", "10", "--kinds", "mass,links,payload", "--no-outside"], env=env, cwd=REPO,
-                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert p.stdout is not None and "others whose bodies differ" in p.stdout.readline()  # the pool is running
         time.sleep(1.0)
