@@ -296,22 +296,24 @@ def test_chapter3_from_the_cli(cluster, tmp_path):
         "identification", "open", "people", "robustness", "rules", "uneven"]
     # Ctrl-C stops the run: the conversations not started are dropped, those in flight end at their next
     # request (it ran the first section's 30 others to their end before: 86 s for the full run's 90)
-    # (Ctrl-C as a terminal sends it: a test run in the background, as CI's may be, inherits SIGINT ignored)
-    p = subprocess.Popen([sys.executable, "-m", "shared.cli", "reproduce", "ch3", "--out", str(tmp_path / "stopped"),
-                          "--others", "10", "--kinds", "mass,links,payload", "--no-outside"], env=env, cwd=REPO,
-                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    try:
-        assert p.stdout is not None and "others whose bodies differ" in p.stdout.readline()  # the pool is running
-        time.sleep(1.0)
-        p.send_signal(signal.SIGINT)
-        t0 = time.monotonic()
-        rest = p.communicate(timeout=120)[0]
-        assert p.returncode == 130 and time.monotonic() - t0 < 15, (p.returncode, time.monotonic() - t0, rest)
-        assert "payload:" not in rest and "rule identification" not in rest and "interrupted: " in rest, rest
-    finally:
-        if p.poll() is None:
-            p.kill()
+    # (Ctrl-C as a terminal sends it: a test run in the background, as CI's may be, inherits SIGINT ignored);
+    # SIGTERM (kill, timeout) the same
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        p = subprocess.Popen([sys.executable, "-m", "shared.cli", "reproduce", "ch3", "--out", str(tmp_path / "stopped"),
+                              "--others", "10", "--kinds", "mass,links,payload", "--no-outside"], env=env, cwd=REPO,
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        try:
+            assert p.stdout is not None and "others whose bodies differ" in p.stdout.readline()  # the pool is running
+            time.sleep(1.0)
+            p.send_signal(sig)
+            t0 = time.monotonic()
+            rest = p.communicate(timeout=120)[0]
+            assert p.returncode == 130 and time.monotonic() - t0 < 15, (sig, p.returncode, time.monotonic() - t0, rest)
+            assert "payload:" not in rest and "rule identification" not in rest and "interrupted: " in rest, rest
+        finally:
+            if p.poll() is None:
+                p.kill()
 
 
 def test_coaching_from_the_cli(cluster, bundled, tmp_path):

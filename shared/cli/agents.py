@@ -395,6 +395,12 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
         if up(settings, echo=typer.echo) != 0:
             raise typer.Exit(1)
         started = True
+    import signal
+
+    def stop(signum, frame):  # `kill`, `timeout`, a cancelled job: stopped as by Ctrl-C (a cluster it started goes down)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)
     try:
         with Client(settings) as c:
             if "ch3" in chapters:
@@ -436,5 +442,6 @@ def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch
                    "the chapters written before it are kept", err=True)
         raise typer.Exit(130) from None
     finally:
+        signal.signal(signal.SIGTERM, previous)
         if started:
             down(settings, echo=typer.echo)
