@@ -18,19 +18,15 @@ from bench.common import parse_args, private_cluster, stats, write_results
 def cpu_seconds(s) -> dict[str, float]:
     """User + system CPU seconds so far of every running process of the cluster (its pid files)
     and of this one (``bench``)."""
+    from shared.bus.pidfiles import cpu_seconds as of_pid
     from shared.bus.pidfiles import read_pid
 
-    tick = os.sysconf("SC_CLK_TCK")
     out = {}
     for f in sorted(s.run_dir.glob("*.pid")):
         pid = read_pid(f)
-        if pid is None or f.stem == "supervisor":
-            continue
-        try:
-            fields = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
-        except OSError:
-            continue
-        out[f.stem] = (int(fields[11]) + int(fields[12])) / tick  # utime, stime (fields 14 and 15)
+        spent = None if pid is None or f.stem == "supervisor" else of_pid(pid)
+        if spent is not None:
+            out[f.stem] = spent
     t = os.times()
     out["bench"] = t.user + t.system
     return out

@@ -1071,3 +1071,16 @@ def test_a_study_sweeps_alpha_per_person_and_feeds_emu2(cluster, bundled, tmp_pa
     r = cli(env, "study", "init", tmp_path / "bad", "--target", target, "--participants", "1", "--cases", "1,swep",
             "--seed", "3")
     assert r.returncode == 2 and "'swep'" in r.stderr
+
+
+def test_a_process_cpu_seconds_are_the_kernels():
+    """bench.ch3 counts each cluster process's CPU from its pid file (shared.bus.pidfiles.cpu_seconds):
+    the same seconds the process sees of itself, and none for a process that is gone."""
+    from shared.bus.pidfiles import cpu_seconds
+
+    sum(i * i for i in range(2_000_000))  # some CPU of our own
+    mine, t = cpu_seconds(os.getpid()), os.times()
+    assert mine is not None and mine > 0 and abs(mine - (t.user + t.system)) <= 0.05, (mine, t)
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    assert cpu_seconds(gone.pid) is None

@@ -14,14 +14,25 @@ from pathlib import Path
 from shared.bus.config import Settings
 
 
-def proc_stat(pid: int) -> tuple[str, str] | None:
-    """(state, start time in clock ticks since boot) of a process, or None if there is none."""
+def _stat_fields(pid: int) -> list[str] | None:
+    """``/proc/PID/stat``'s fields after the command's name (the third field first), or None."""
     try:
         with open(f"/proc/{pid}/stat") as f:
-            fields = f.read().rsplit(")", 1)[1].split()
+            return f.read().rsplit(")", 1)[1].split()
     except (OSError, IndexError):
         return None
-    return fields[0], fields[19]
+
+
+def proc_stat(pid: int) -> tuple[str, str] | None:
+    """(state, start time in clock ticks since boot) of a process, or None if there is none."""
+    fields = _stat_fields(pid)
+    return None if fields is None else (fields[0], fields[19])
+
+
+def cpu_seconds(pid: int) -> float | None:
+    """User + system CPU seconds a process has spent so far, or None if there is none."""
+    fields = _stat_fields(pid)
+    return None if fields is None else (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def pid_alive(pid: int) -> bool:
