@@ -66,6 +66,8 @@ PROBE_SPEEDS = (0.5, 1.0, 2.0)  # a probe played at half, the same or twice the 
 RANDOM_PROBES = 12  # random probe motions (seed PROBE_SEED, not the evaluation's unknown motions' 2012)
 PROBE_SEED = 77
 PROBES_PER_SET = 4
+#: the speed at which the motions that matter to a probe's choice are played too (besides as they are)
+FAST_TARGET = 2.0
 _PROBES: dict = {}  # shared motions -> their probe motions (deterministic)
 METHODS = ("thesis", "space", "interval", "body")
 SPACES = ("thesis", "space", "self")  # the proto-symbol spaces of an estimate (the last is the self's, P_self)
@@ -285,9 +287,11 @@ class OtherEstimate:
         body and the interval estimators. ``None`` when no probe's answer is in doubt."""
         body = self.body(ports)
         cands = {k: self.regressor(ports, k) for k in self.probe_motions()}
-        # the motions that matter: the shared ones and the random probe motions as they are
+        # the motions that matter: the shared ones and the random probe motions as they are, and
+        # each of them played FAST_TARGET times as fast (module docstring)
         targets = [self.regressor(ports, m.name) for m in self.motions]
         targets += [y for k, y in cands.items() if k.startswith("probe") and k.endswith("_x1_v1")]
+        targets += [y for k, y in cands.items() if k.endswith(f"_x1_v{FAST_TARGET:g}")]
         key = body.choose_probe(cands, asked={n for n, _ in self.probes_asked}, targets=targets)
         if key is None:
             return None
