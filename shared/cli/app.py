@@ -256,9 +256,16 @@ def main() -> None:
             raise
         typer.echo(f"error: {hint}", err=True)
         sys.exit(2)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # outside typer's own handling (choosing the group)
         typer.echo("interrupted", err=True)
         sys.exit(130)
+    except SystemExit as e:
+        # typer turns Ctrl-C in a command into a silent exit 130 (typer.core._main raises
+        # Exit(130) from the KeyboardInterrupt); say so. A command that says more itself (reproduce)
+        # raises its own Exit(130), not from the interrupt, and is left as it is.
+        if e.code == 130 and isinstance(getattr(e.__context__, "__cause__", None), KeyboardInterrupt):
+            typer.echo("interrupted", err=True)
+        raise
 
 
 if __name__ == "__main__":  # run the imported module, so the cluster commands are registered on its app
