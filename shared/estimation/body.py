@@ -78,16 +78,9 @@ and played twice as fast, ``conversation.FAST_TARGET``: the mean squared correla
 same Gaussian). Measured on the population of seed 13 (6 others per kind, 6 sets): the
 correlation weight took the payload kind's known-motion error from 4.0 % to 1.5 % and
 friction's from 3.4 % to 1.8 %, the other kinds within noise. The motions played twice as fast
-were added on 2026-11-28, chosen on the tuning populations of seeds 13 and 14 (in-model and
-development kinds, 10 others each; the mean of known / unknown / 2.5x-speed errors) and
-people-like answers (seed 13): without them 3.20 / 2.53 / 6.54 % and 3.05 / 2.77 / 7.22 %, with
-them 3.27 / 2.79 / 5.60 % and 3.02 / 2.51 / 5.68 % (people-like unknown 10.5 / 22.4 % against
-10.0 / 21.6 %). A motion's inertial and speed-dependent parts grow with its speed, and the
-questions chosen for motions as they are left them the least known. Tried on the same
-populations and not kept: choosing probes under the extended model class's uncertainty
-(springs, rotor inertia) instead of the model the estimate is (3.94 / 3.22 / 6.96 % on seed 13;
-questions spent on columns most others do not have), both together (3.95 / 2.98 / 5.86 %), and
-the motions played at half speed as well (3.32 / 2.78 / 6.66 %).
+(chosen on seeds 13 and 14, in-model and development kinds: the mean of known / unknown / 2.5x
+errors 4.09 -> 3.89 % and 4.35 -> 3.74 %; the variants tried and not kept: ``docs/chapter3.md``)
+because questions chosen for motions as they are left their speed-dependent torques least known.
 """
 
 from __future__ import annotations

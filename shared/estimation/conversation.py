@@ -66,7 +66,8 @@ PROBE_SPEEDS = (0.5, 1.0, 2.0)  # a probe played at half, the same or twice the 
 RANDOM_PROBES = 12  # random probe motions (seed PROBE_SEED, not the evaluation's unknown motions' 2012)
 PROBE_SEED = 77
 PROBES_PER_SET = 4
-#: the speed at which the motions that matter to a probe's choice are played too (besides as they are)
+#: the speed at which the motions that matter to a probe's choice are played too (besides as they are);
+#: one of PROBE_SPEEDS: the probe candidates at that speed are those motions
 FAST_TARGET = 2.0
 _PROBES: dict = {}  # shared motions -> their probe motions (deterministic)
 METHODS = ("thesis", "space", "interval", "body")
