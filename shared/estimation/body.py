@@ -77,10 +77,10 @@ one whose answer is least predictable (its entropy) times how much its ``g`` tel
 and played twice as fast, ``conversation.FAST_TARGET``: the mean squared correlation under the
 same Gaussian). Measured on the population of seed 13 (6 others per kind, 6 sets): the
 correlation weight took the payload kind's known-motion error from 4.0 % to 1.5 % and
-friction's from 3.4 % to 1.8 %, the other kinds within noise. The motions played twice as fast
-(chosen on seeds 13 and 14, in-model and development kinds: the mean of known / unknown / 2.5x
-errors 4.09 -> 3.89 % and 4.35 -> 3.74 %; the variants tried and not kept: ``docs/chapter3.md``)
-because questions chosen for motions as they are left their speed-dependent torques least known.
+friction's from 3.4 % to 1.8 %, the other kinds within noise. The fast ones are there because
+questions chosen for motions as they are left their speed-dependent torques least known (chosen
+on seeds 13 and 14, in-model and development kinds: the mean of known / unknown / 2.5x errors
+4.09 -> 3.89 % and 4.35 -> 3.74 %; the variants tried and not kept: ``docs/chapter3.md``).
 """
 
 from __future__ import annotations
