@@ -147,8 +147,8 @@ def outside_lines(outside: dict | None) -> list[str]:
              "tendon-like coupling, Stribeck friction, fatigue over the conversation (a tiring other's error is "
              "against what it feels after the last question). The body estimator's extended model class has columns "
              "for the first two (springs with a rest angle, rotor inertia: `shared.estimation.body.EXTENSIONS`), fit "
-             "only when the answers call for it; its settings were chosen on seed 13's in-model and development "
-             "kinds, never on these. Same conversations and errors as above. The last column "
+             "only when the answers call for it; its settings were chosen on seed 13's (and the probes' on seed 14's) in-model "
+             "and development kinds, never on these. Same conversations and errors as above. The last column "
              "is the estimator's model check (`OtherEstimate.model_check`): answers its best body misses beyond what "
              "the other's own inconsistency explains, or answers that drift against it over the conversation "
              "(`OtherEstimate.drift`).", "",
@@ -282,7 +282,7 @@ def write_report(out: Path, res: dict, seconds: float, ch=None) -> Path:
     pop_seed = ch.population_seed if ch else 2026
     lines += ["## Others whose bodies really differ", "",
               f"{n_kind} kinds of body, {next(iter(summ.values()))['n'] if summ else 0} others each "
-              f"(`shared/agents/population.py`, seed {pop_seed}; the body estimator's settings were chosen on seed 13), "
+              f"(`shared/agents/population.py`, seed {pop_seed}; the body estimator's settings were chosen on seed 13, its probes' on seeds 13 and 14), "
               f"d = 6, {ch.sets if ch else SETS} conversation sets of the 4 shared motions and 4 probes each; "
               "errors (eq. 3.9) on the 4 known and 10 unknown motions, mean over the kind's others (worst in brackets).",
               "", f"| kind | {method_columns()} | body unknown at {FAST:g}x speed | "
