@@ -268,4 +268,3 @@ def test_a_reply_that_breaks_its_contract_is_an_error_not_a_traceback(tmp_path):
         finally:
             session.close()
     assert r.returncode != 0 and "does not match its contract" in r.stderr and "Traceback" not in r.stderr, r.stderr
-

@@ -19,15 +19,7 @@ from shared.estimation.body import (
     nonnegative_least_squares,
     self_regressor,
 )
-from shared.estimation.conversation import (
-    OUTSIDE_MARGIN,
-    OUTSIDE_P,
-    Language,
-    LocalPorts,
-    OtherEstimate,
-    evaluate,
-    hold,
-)
+from shared.estimation.conversation import Language, LocalPorts, OtherEstimate, evaluate, hold
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
 from shared.estimation.rules import (
     MAX_QUESTIONS,
@@ -284,10 +276,7 @@ def test_the_model_check_tells_an_inconsistent_other_from_one_outside_the_model(
         if check["misfit_outside"]:
             said += 1
             assert check["outside"] and check["p"] < 0.01 and check["misfits"] / check["answers"] > 0.1, check
-        else:
-            # not said: the misfits are within what a word's edge makes a consistent other waver by
-            # (the binomial test against the floor's rate) or no more than OUTSIDE_MARGIN of the answers
-            assert check["p"] >= OUTSIDE_P or check["misfits"] / check["answers"] <= OUTSIDE_MARGIN, check
+        # an other not said is left unchecked here: the rule's own negation would be the only assertion
     assert said >= 1
 
 
