@@ -11,7 +11,9 @@ is who-knows-what the space has never seen. Splits:
 Nothing is tuned on these splits' test clips except where said: the space's defaults, its
 calibration from its own proto-symbols. Two defaults were chosen with this dataset:
 recognition's variance ceiling (``shared.pss.space.RECOGNITION_VAR_CEILING``) and the window
-the travel velocities are averaged over (``shared.pss.features.TRAVEL_WINDOW``), each on the
+the travel velocities are averaged over (``shared.pss.features.TRAVEL_WINDOW``), and so was the
+pose floor a space for other styles may be built with (``STYLE_POSE_FLOOR``, ``--pose-floor``;
+its rows are the space built with it), each on the
 half split's 8 training styles (leave one style out) with HDM05's dev split held at 100 %, so
 the half split's 7 test styles are held out from every choice (but the travel window's idea came
 from their confusions, and they were scored at a few windows before it was chosen); the
@@ -51,9 +53,9 @@ def load_bandai(folder: Path) -> list:
     return clips
 
 
-def split(space_clips, test_clips, name: str) -> dict:
+def split(space_clips, test_clips, name: str, pose_floor: float | None = None) -> dict:
     t0 = time.perf_counter()
-    space = ProtoSymbolSpace.build(space_clips)
+    space = ProtoSymbolSpace.build(space_clips, pose_floor=pose_floor)
     build_s = time.perf_counter() - t0
     shown, nearest, conf, wrong = [], [], [], Counter()
     for c in test_clips:
@@ -87,32 +89,63 @@ def choose_window(train: list, windows=(0.0, 0.5, 1.0, 2.0, 3.0)) -> list[dict]:
     try:
         for w in windows:
             features.TRAVEL_WINDOW = w
-            closed = shown = n = 0
-            for style in sorted({s for s, _ in train}):
-                space = ProtoSymbolSpace.build([c for s, c in train if s != style])
-                for c in (c for s, c in train if s == style):
-                    r = space.recognize(c)
-                    closed, shown, n = closed + (r.nearest_label == c.label), shown + (r.label == c.label), n + 1
-            rows.append({"window_s": w, "closed": closed / n, "as_shown": shown / n, "clips": n})
+            closed, shown, n = _leave_one_style_out(train)
+            rows.append({"window_s": w, "closed": closed, "as_shown": shown, "clips": n})
             print(rows[-1], flush=True)
     finally:
         features.TRAVEL_WINDOW = kept
     return rows
 
 
+def _leave_one_style_out(train: list, pose_floor: float | None = None) -> tuple[float, float, int]:
+    """Closed set and as shown over the training styles, each left out in turn (a space of the others)."""
+    closed = shown = n = 0
+    for style in sorted({s for s, _ in train}):
+        space = ProtoSymbolSpace.build([c for s, c in train if s != style], pose_floor=pose_floor)
+        for c in (c for s, c in train if s == style):
+            r = space.recognize(c)
+            closed, shown, n = closed + (r.nearest_label == c.label), shown + (r.label == c.label), n + 1
+    return closed / n, shown / n, n
+
+
+def choose_pose_floor(train: list, hdm05: Path, floors=(None, 0.02, 0.03, 0.04, 0.05)) -> list[dict]:
+    """How ``STYLE_POSE_FLOOR`` was chosen: each candidate on the training styles only (leave one
+    style out), with HDM05's dev split (bd + bk -> dg) closed set as the constraint (it must stay
+    at 100 %); the largest closed set among the floors that keep it."""
+    from shared.io import find_clips
+
+    dev = [load_clip(f) for f in find_clips([hdm05 / "amc"])]
+    test = [c for c in dev if "_dg_" in c.name]
+    rows = []
+    for floor in floors:
+        closed, shown, n = _leave_one_style_out(train, floor)
+        space = ProtoSymbolSpace.build([c for c in dev if "_dg_" not in c.name], pose_floor=floor)
+        dg = sum(space.recognize(c).nearest_label == c.label for c in test) / len(test)
+        rows.append({"floor": floor, "closed": closed, "as_shown": shown, "clips": n, "dg_closed": dg})
+        print(rows[-1], flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     args = parse_args(__doc__, argv, extra=lambda ap: ap.add_argument(
-        "--choose", action="store_true", help="Also rerun the choice of the travel window on the half split's "
-                                               "training styles (leave one style out; about 6 minutes)."))
+        "--choose", action="store_true", help="Also rerun the choices of the travel window and of recognition's "
+                                               "pose floor on the half split's training styles (leave one style out; "
+                                               "about 15 minutes)."))
     folder = args.hdm05.parent / "bandai1" / "bvh"
     clips = load_bandai(folder)
     if len(clips) < 170:
         raise SystemExit(f"the game studio's files are not at {folder} (see ../shared/data/bandai1/SOURCE.md)")
     styles = sorted({s for s, _ in clips})
     half = styles[::2]
-    rows = [split([c for s, c in clips if s == "normal"], [c for s, c in clips if s != "normal"], "normal -> 14 others"),
-            split([c for s, c in clips if s in half], [c for s, c in clips if s not in half],
-                  f"{len(half)} styles -> {len(styles) - len(half)} others")]
+    from shared.pss.space import STYLE_POSE_FLOOR
+
+    rows = []
+    for floor in (None, STYLE_POSE_FLOOR):
+        with_floor = "" if floor is None else f", --pose-floor {floor:g}"
+        rows += [split([c for s, c in clips if s == "normal"], [c for s, c in clips if s != "normal"],
+                       f"normal -> 14 others{with_floor}", floor),
+                 split([c for s, c in clips if s in half], [c for s, c in clips if s not in half],
+                       f"{len(half)} styles -> {len(styles) - len(half)} others{with_floor}", floor)]
     md = ["# Recognition across a game studio's styles (bandai1, CC BY-NC 4.0)", "",
           "Label: the clip's content; styles the space never saw. The space's defaults; two of them, "
           "recognition's variance ceiling and the window its travel velocities are averaged over, were chosen on "
@@ -120,7 +153,9 @@ def main(argv=None) -> int:
           "styles are held out from every choice (but the travel window's idea came from their confusions, and "
           "they were scored at a few windows before it was chosen), the 'normal' split's test clips include the "
           "styles they were chosen on. As shown: what `space recognize` prints, "
-          "\"none of these\" counts as not recognised. Peers on the same position features, in the same run.", "",
+          "\"none of these\" counts as not recognised. Peers on the same position features, in the same run. The "
+          "rows with `--pose-floor` are a space built for other styles (not the default: docs/pss.md), its floor "
+          "chosen the same way; `--choose` reruns the choices.", "",
           "| split | space / test clips | PSS closed set | PSS as shown | rejected | MiniRocket (aeon) | 1-NN DTW (aeon) |",
           "|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -141,6 +176,12 @@ def main(argv=None) -> int:
                "| window | closed set | as shown |", "|---|---|---|"]
         md += [f"| {r['window_s']:g} s | {100 * r['closed']:.1f} % | {100 * r['as_shown']:.1f} % |"
                for r in res["window_choice"]]
+        res["pose_floor_choice"] = choose_pose_floor([(s, c) for s, c in clips if s in half], args.hdm05)
+        md += ["", f"The pose floor of a space for other styles (`--pose-floor`, {STYLE_POSE_FLOOR:g}), chosen on the same "
+               "training styles (leave one style out) with HDM05's dev split held at 100 % closed set:", "",
+               "| floor | closed set | as shown | HDM05 dev split (dg), closed set |", "|---|---|---|---|"]
+        md += [f"| {'none' if r['floor'] is None else format(r['floor'], 'g')} | {100 * r['closed']:.1f} % | "
+               f"{100 * r['as_shown']:.1f} % | {100 * r['dg_closed']:.1f} % |" for r in res["pose_floor_choice"]]
     write_results(args.out, "styles", res, md)
     print("\n".join(md))
     return 0

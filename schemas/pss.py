@@ -42,6 +42,9 @@ PARAMS = Map({
     "group_by": F(Str(choices=("clip", "label")), "one proto-symbol per clip or per label"),
     "recognition_var_ceiling": F(Float(0.0), "state variances capped at this value when recognising (absent: none, "
                                              "a space saved before it)", required=False),
+    "recognition_pose_floor": F(Float(0.0), "state variances of the position group's pose outputs raised to at least "
+                                            "this value when recognising (absent: none, a space saved before it)",
+                                required=False),
 })
 
 SYMBOL_ROW = Map({"name": F(Str(max_len=64)), "label": F(Str(max_len=64))})
@@ -101,6 +104,8 @@ BUILD = Endpoint(
         "fps": F(Float(1.0, 240.0), "resample the clips to this frame rate", required=False, default=30.0),
         "covariance_type": F(Str(choices=("diag", "full")), required=False, default="diag"),
         "group_by": F(Str(choices=("clip", "label")), required=False, default="clip"),
+        "pose_floor": F(Float(0.0), "recognition's variance floor on the pose outputs, for a space that recognises "
+                                    "styles it does not hold (absent: none)", required=False),
         "replace": F(Bool(), "replace an existing space of that name", required=False, default=False),
     }), doc="build a space from clips (eq. 2.5)"),
     Message("pss.build.reply", INFO),

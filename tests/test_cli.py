@@ -148,6 +148,17 @@ def test_space_build_recognize_generate(bundled, tmp_path):
 
     a, b = ProtoSymbolSpace.load(space), ProtoSymbolSpace.load(tmp_path / "lazy.npz")
     assert b.names == a.names and np.allclose(b.distances, a.distances, rtol=1e-10) and np.allclose(b.points, a.points)
+    # a space for other styles: the pose floor saved with it, recognition reads it; none by default
+    r = run("offline", "build", tmp_path / "styles.npz", bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps",
+            "--pose-floor", "0.03")
+    assert r.returncode == 0, r.stderr
+    assert ProtoSymbolSpace.load(tmp_path / "styles.npz").params.recognition_pose_floor == 0.03
+    assert a.params.recognition_pose_floor is None
+    r = run("offline", "recognize", tmp_path / "styles.npz", held, "--json")
+    assert r.returncode == 0 and json.loads(r.stdout)["label"] == "squat1Reps", r.stderr
+    r = run("offline", "build", tmp_path / "zero.npz", bundled / "amc/squat1Reps", "--pose-floor", "0")
+    assert r.returncode == 2 and "pose floor must be a positive variance" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "zero.npz").exists()
 
 
 def test_errors_are_one_line_without_traceback(bundled, tmp_path):

@@ -229,3 +229,41 @@ def test_the_scale_benchmark_runs_and_reports_every_column(hdm05, tmp_path):
         assert row["add_one_s"] > 0 and row["add_next_s"] > 0
     md = (tmp_path / "scale.md").read_text()
     assert "| 10 |" in md and "| 14 |" in md
+
+
+
+def test_a_space_built_with_a_pose_floor_recognises_with_it_and_keeps_its_proto_symbols(dev_space, dev_split, tmp_path):
+    """``pose_floor`` (a space for other styles): recognition compares proto-symbols with the
+    position group's pose outputs (joints, root height and up vector) floored at it and every
+    output capped at the ceiling; the travel velocities are not floored, and the proto-symbols
+    keep the variances they were trained with (the same as a space without the floor: generation,
+    association and coaching read those). A clip to recognise is seen the same way. The floor is
+    saved with the space; the default space has none; a bad floor is refused."""
+    from shared.errors import BadInput
+    from shared.pss.space import RECOGNITION_VAR_CEILING, STYLE_POSE_FLOOR
+    from shared.pss.symbol import pose_indices
+
+    assert dev_space.params.recognition_pose_floor is None
+    space = ProtoSymbolSpace.build(dev_split[0], dim=3, pose_floor=STYLE_POSE_FLOOR)
+    f = space.features
+    assert space.params.recognition_pose_floor == STYLE_POSE_FLOOR
+    rg = f.group_indices(space.recognition_groups)
+    pose = np.flatnonzero(np.isin(rg, pose_indices(f)))
+    travel = np.setdiff1d(np.arange(len(rg)), pose)
+    assert len(travel) == 3 and len(pose) == len(rg) - 3
+    seen = np.stack([m.covars for m in space.recognition_models()])
+    assert seen[:, :, pose].min() >= STYLE_POSE_FLOOR and seen.max() <= RECOGNITION_VAR_CEILING
+    assert seen[:, :, travel].min() < STYLE_POSE_FLOOR  # not floored
+    trained = np.stack([s.hmm.covars for s in space.symbols])
+    assert np.array_equal(trained, np.stack([s.hmm.covars for s in dev_space.symbols]))  # trained as without it
+    assert trained[:, :, rg[pose]].min() < STYLE_POSE_FLOOR
+    unfloored = np.stack([m.covars for m in dev_space.recognition_models()])
+    assert unfloored[:, :, pose].min() < STYLE_POSE_FLOOR
+    clip_hmm = space.abstract(dev_split[1][0]).marginal(rg)
+    assert clip_hmm.covars[:, pose].min() < STYLE_POSE_FLOOR <= space.as_recognised(clip_hmm).covars[:, pose].min()
+    back = ProtoSymbolSpace.load(space.save(tmp_path / "styles.npz"))
+    assert back.params.recognition_pose_floor == STYLE_POSE_FLOOR
+    assert np.array_equal(np.stack([m.covars for m in back.recognition_models()]), seen)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(BadInput, match="pose floor"):
+            ProtoSymbolSpace.build(dev_split[0][:3], pose_floor=bad)

@@ -120,6 +120,7 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     assert added["n_proto_symbols"] == 5
     before = _checked(contract.INFO_EP, c.request("pss", "info", {"space": "copy"}))
     assert before["n_proto_symbols"] == 5
+    assert before["params"].get("recognition_pose_floor") is None  # none by default
     placed = _checked(contract.ADD, c.request("pss", "add", {"space": "copy", "clips": [clip_to_wire(train[6])],
                                                              "rebuild": False}))
     assert placed["n_proto_symbols"] == 6 and np.allclose(placed["points"][:5], before["points"])  # the rest kept
@@ -138,6 +139,10 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     assert changes == [("copy", "built"), ("copy", "added"), ("copy", "added"), ("copy", "deleted")]
     for e in events:
         contract.EVENTS["space"].validate(e)
+    styled = _checked(contract.BUILD, c.request("pss", "build", {"space": "styled", "pose_floor": 0.03,
+                                                                 "clips": [clip_to_wire(x) for x in train[:4]]}))
+    assert styled["params"]["recognition_pose_floor"] == 0.03  # a space for other styles
+    c.request("pss", "delete", {"space": "styled"})
 
 
 def _bad_cases(clip, other_clip, amc_file):

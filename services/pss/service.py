@@ -100,7 +100,7 @@ def make_service(settings: Settings | None = None) -> Service:
         clips = [clip_from_wire(c) for c in req["clips"]]
         space = write(name, "build", lambda: ProtoSymbolSpace.build(
             clips, n_states=req["n_states"], dim=req["dim"], fps=req["fps"],
-            covariance_type=req["covariance_type"], group_by=req["group_by"], name=name))
+            covariance_type=req["covariance_type"], group_by=req["group_by"], name=name, pose_floor=req.get("pose_floor")))
         changed(name, "built", space)
         return space_info(name, space)
 

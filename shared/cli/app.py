@@ -15,6 +15,7 @@ from pathlib import Path
 import typer
 
 from shared.cli.common import (
+    POSE_FLOOR_HELP,
     SKELETON_HELP,
     app,
     clip_app,
@@ -89,6 +90,7 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
                 dim: int = typer.Option(3, help="Dimension of the space."),
                 states: int | None = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
                 group_by: str = typer.Option("clip", help="'clip': a proto-symbol per clip; 'label': one per label."),
+                pose_floor: float | None = typer.Option(None, "--pose-floor", min=0.0, help=POSE_FLOOR_HELP),
                 skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                 hold_mb: float = typer.Option(HOLD_CLIP_MB, "--hold-mb", min=0,
                                               help="Clip files held in memory at once, MB together; above it each "
@@ -111,7 +113,7 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
                               on_read=lambda _: prog.advance(reading))
         assert clips is not None  # (read, or to be read one at a time)
         task = prog.add_task("training proto-symbols", total=len(clips))
-        space = ProtoSymbolSpace.build(clips, dim=dim, n_states=states, group_by=group_by, name=out.stem,
+        space = ProtoSymbolSpace.build(clips, dim=dim, n_states=states, group_by=group_by, name=out.stem, pose_floor=pose_floor,
                                        progress=lambda done, total: prog.update(task, completed=done, total=total))
     space.save(out)
     i = space.info()

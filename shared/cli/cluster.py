@@ -11,6 +11,7 @@ import typer
 
 from shared.bus.wirefiles import wire_file, wire_name
 from shared.cli.common import (
+    POSE_FLOOR_HELP,
     READING,
     SKELETON_HELP,
     TIMEOUT_HELP,
@@ -45,6 +46,7 @@ def space_build(name: str = typer.Argument(..., help="Name of the space (letters
                 dim: int = typer.Option(3, help="Dimension of the space."),
                 states: int | None = typer.Option(None, help="HMM states (default: from the shortest clip, at most 15)."),
                 group_by: str = typer.Option("clip", help="'clip': a proto-symbol per clip; 'label': one per label."),
+                pose_floor: float | None = typer.Option(None, "--pose-floor", min=0.0, help=POSE_FLOOR_HELP),
                 replace: bool = typer.Option(False, "--replace", help="Replace an existing space of that name."),
                 skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                 timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
@@ -54,6 +56,8 @@ def space_build(name: str = typer.Argument(..., help="Name of the space (letters
     req = {"space": name, "clips": [wire(c) for c in clips], "dim": dim, "group_by": group_by, "replace": replace}
     if states is not None:
         req["n_states"] = states
+    if pose_floor is not None:
+        req["pose_floor"] = pose_floor
     with client() as c, busy(f"building space {name} from {len(clips)} clips"):
         info = c.request("pss", "build", req, timeout=timeout)
     if as_json:

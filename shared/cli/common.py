@@ -30,6 +30,9 @@ SPACE_HELP = ("A space of the cluster's pss service (`space build`) holding the 
               "finds more of another performer's repetitions: bench.segmentation); a space holding the target's "
               "motion only once leaves the decision to --background when given.")
 LABEL_HELP = "With --space: the target's motion in it (default: the target's own label, else what the space recognises it as)."
+POSE_FLOOR_HELP = ("Recognition's variance floor on the pose outputs, for a space that must recognise motions done "
+                   "in styles it does not hold (0.03 was chosen on a game studio's styles; it costs clips across "
+                   "HDM05's performers, so none by default; docs/pss.md).")
 
 
 def say_if_unguarded(background, space) -> None:

@@ -129,15 +129,18 @@ def _diag_hmm_distances_numpy(mu1, var1, logdet1, mu, var, logdet, w):
     return np.sqrt(np.maximum(bd, 0.0)).sum(axis=1)
 
 
-def _stack(models: list[LeftToRightHMM], f=slice(None), ceiling: float | None = None):
-    """Means, variances (capped at ``ceiling``) and per-state log-determinants of diagonal HMMs
-    seen on features ``f``, stacked with spare rows (:func:`shared.pss.rows.spare`): a bank's
-    first extension (a clip added to its space) writes in place."""
+def _stack(models: list[LeftToRightHMM], f=slice(None), ceiling: float | None = None, floor=None):
+    """Means, variances (raised to ``floor``, one value per feature of ``f``, then capped at
+    ``ceiling``) and per-state log-determinants of diagonal HMMs seen on features ``f``, stacked
+    with spare rows (:func:`shared.pss.rows.spare`): a bank's first extension (a clip added to
+    its space) writes in place."""
     shape = (len(models),) + models[0].means[:, f].shape
     means, var, logdet = spare(shape), spare(shape), spare(shape[:2])
     for i, m in enumerate(models):
         _check(m, models[0])
         means[i], var[i] = m.means[:, f], m.covars[:, f]
+    if floor is not None:
+        np.maximum(var, floor, out=var)
     if ceiling is not None:
         np.minimum(var, ceiling, out=var)
     np.sum(np.log(var), axis=2, out=logdet)
@@ -166,9 +169,10 @@ class ModelBank:
             self._kernel_weights = np.ones(n_features) if self.weights is None else self.weights
 
     @classmethod
-    def of(cls, models: list[LeftToRightHMM], features=None, ceiling: float | None = None) -> ModelBank:
+    def of(cls, models: list[LeftToRightHMM], features=None, ceiling: float | None = None, floor=None) -> ModelBank:
         """The bank of ``models`` seen on ``features`` (all when None; as
-        :meth:`LeftToRightHMM.marginal` sees them), diagonal variances capped at ``ceiling``.
+        :meth:`LeftToRightHMM.marginal` sees them), diagonal variances raised to ``floor`` (one
+        value per feature seen) and capped at ``ceiling``.
         Stacked directly, and the bank's own models are views of its stacked arrays: the HMMs
         on those features exist once (a list of marginal HMMs and their stack held them twice,
         0.3 GB at 3,000 game-studio proto-symbols)."""
@@ -179,7 +183,7 @@ class ModelBank:
             f = slice(int(f[0]), int(f[0]) + len(f))  # a run of features: sliced, not gathered (10x faster)
         bank = cls.__new__(cls)
         bank.diag = True
-        bank.means, bank.vars, bank.logdet = _stack(models, f, ceiling)
+        bank.means, bank.vars, bank.logdet = _stack(models, f, ceiling, floor)
         bank.models = [LeftToRightHMM(bank.means[i], bank.vars[i], m.stay, "diag") for i, m in enumerate(models)]
         bank._weigh(None)
         return bank

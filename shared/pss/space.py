@@ -40,6 +40,7 @@ from shared.pss.symbol import (  # the space's parts, named here too (its public
     MAX_STATES,
     READABLE_FORMATS,
     RECOGNITION_VAR_CEILING,
+    STYLE_POSE_FLOOR,
     Association,
     ProtoSymbol,
     Recognition,
@@ -53,7 +54,8 @@ if TYPE_CHECKING:  # annotations only: recognition's decision is imported where 
     from shared.pss.recognition import Calibration
 
 __all__ = ["ProtoSymbolSpace", "ProtoSymbol", "SpaceParams", "Recognition", "Association", "default_n_states",
-           "performer", "FORMAT", "READABLE_FORMATS", "GEOMETRY_GROUPS", "MAX_STATES", "RECOGNITION_VAR_CEILING"]
+           "performer", "FORMAT", "READABLE_FORMATS", "GEOMETRY_GROUPS", "MAX_STATES", "RECOGNITION_VAR_CEILING",
+           "STYLE_POSE_FLOOR"]
 
 
 class _AtRate(Sequence):
@@ -96,7 +98,8 @@ class ProtoSymbolSpace:
     @classmethod
     def build(cls, clips: Sequence[Clip], *, n_states: int | None = None, dim: int = 3, fps: float = 30.0,
               covariance_type: str = "diag", var_floor: float = 0.01, backend: str = "banded",
-              group_by: str = "clip", sensor: bool = True, name: str = "space", progress=None) -> ProtoSymbolSpace:
+              group_by: str = "clip", sensor: bool = True, name: str = "space", progress=None,
+              pose_floor: float | None = None) -> ProtoSymbolSpace:
         """``P = F_build(D)`` (eq. 2.5).
 
         Parameters
@@ -110,6 +113,10 @@ class ProtoSymbolSpace:
             One proto-symbol per clip, or one per label trained on all its repetitions.
         progress : callable(done, total), optional
             Called after every HMM is trained.
+        pose_floor : float, optional
+            Recognition's variance floor on the position group's pose outputs (diagonal spaces):
+            for a space that must recognise motions done in styles it does not hold
+            (:data:`STYLE_POSE_FLOOR`; none by default).
         """
         if not len(clips):
             raise BadInput("a space needs at least one clip")
@@ -117,6 +124,10 @@ class ProtoSymbolSpace:
             raise BadInput(f"group_by must be 'clip' or 'label', got {group_by!r}")
         if dim < 1:
             raise BadInput("dimension must be at least 1")
+        if pose_floor is not None and not (pose_floor > 0 and np.isfinite(pose_floor)):
+            raise BadInput(f"the pose floor must be a positive variance, got {pose_floor!r}")
+        if pose_floor is not None and covariance_type != "diag":
+            raise BadInput("a pose floor needs diagonal covariances")
         if isinstance(clips, list):  # held by the caller anyway: each at the space's rate once
             clips = [c if c.fps == fps else c.resample(fps) for c in clips]
         else:
@@ -139,7 +150,8 @@ class ProtoSymbolSpace:
                            frames=shortest, states=n_states)
         params = SpaceParams(recognition_var_ceiling=RECOGNITION_VAR_CEILING if covariance_type == "diag" else None,
                              n_states=n_states, fps=fps, dim=dim, covariance_type=covariance_type,
-                             var_floor=var_floor, backend=backend, group_by=group_by)
+                             var_floor=var_floor, backend=backend, group_by=group_by,
+                             recognition_pose_floor=pose_floor)
         symbols = []
         for i, (key, members) in enumerate(groups.items()):
             seqs = [features.encode(clips[k]) for k in members]
@@ -282,19 +294,29 @@ class ProtoSymbolSpace:
         if key not in self._group_models:
             idx = self.features.group_indices(self.recognition_groups)
             self._group_models[key] = ModelBank.of(self.models, None if len(idx) == self.features.n_features else idx,
-                                                   self._ceiling())
+                                                   self._ceiling(), self._recognition_floor())
         return self._group_models[key]
 
     def _ceiling(self) -> float | None:
         """Recognition's variance ceiling (None: none, older files and full covariances)."""
         return self.params.recognition_var_ceiling if self.params.covariance_type == "diag" else None
 
+    def _recognition_floor(self) -> np.ndarray | None:
+        """Recognition's variance floor of every output of the recognition groups (None: none)."""
+        if self.params.covariance_type != "diag":
+            return None
+        return self.params.recognition_floors(self.features, self.recognition_groups)
+
     def as_recognised(self, hmm: LeftToRightHMM) -> LeftToRightHMM:
-        """``hmm`` (on the recognition groups) as recognition compares it: its variances capped."""
-        ceiling = self._ceiling()
-        if ceiling is None or hmm.covariance_type != "diag":
+        """``hmm`` (on the recognition groups) as recognition compares it: its variances floored
+        (the space's pose floor, if any: :data:`STYLE_POSE_FLOOR`) and capped
+        (:data:`RECOGNITION_VAR_CEILING`)."""
+        ceiling, floor = self._ceiling(), self._recognition_floor()
+        if (ceiling is None and floor is None) or hmm.covariance_type != "diag":
             return hmm
-        return LeftToRightHMM(hmm.means, np.minimum(hmm.covars, ceiling), hmm.stay, hmm.covariance_type)
+        var = hmm.covars if floor is None else np.maximum(hmm.covars, floor)
+        var = var if ceiling is None else np.minimum(var, ceiling)
+        return LeftToRightHMM(hmm.means, var, hmm.stay, hmm.covariance_type)
 
     def bank_on(self, groups) -> ModelBank:
         """The proto-symbols on some channel groups stacked for fast eq. 2.4 (cached)."""

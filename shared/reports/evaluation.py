@@ -32,7 +32,7 @@ import numpy as np
 
 from shared.errors import BadInput
 from shared.motion.clip import Clip
-from shared.pss.space import ProtoSymbolSpace, performer
+from shared.pss.space import STYLE_POSE_FLOOR, ProtoSymbolSpace, performer
 
 PEER_FRAMES = 64
 #: what ``space recognize`` shows for an open-set rejection (scored as not recognised)
@@ -358,6 +358,9 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
             recs = [space.recognize(c) for c in test]
             point = pss_recognition(space, test, use="point")
             robust = robustness(space, test)
+            # a space for other styles (docs/pss.md): the same clips with recognition's pose floor
+            styled = ProtoSymbolSpace.build(train, pose_floor=STYLE_POSE_FLOOR)
+            floored = [styled.recognize(c) for c in test]
         truth = [label_of(c) for c in test]
         ours = _summarise("PSS (label)", truth, [r.nearest_label for r in recs], [r.seconds for r in recs])
         shown = _summarise("PSS as shown", truth, [r.label or NONE_OF_THESE for r in recs], [r.seconds for r in recs])
@@ -367,6 +370,11 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
         split: dict[str, Any] = {"train": len(train), "test": len(test), "n_states": space.params.n_states, "build_s": build_s,
                  "robustness": robust,
                  "methods": {"pss": ours.__dict__, "pss_shown": shown.__dict__, "pss_point": point.__dict__,
+                             "pss_pose_floor": _summarise("PSS, pose floor", truth, [r.nearest_label for r in floored],
+                                                          [r.seconds for r in floored]).__dict__,
+                             "pss_pose_floor_shown": _summarise("PSS, pose floor, as shown", truth,
+                                                                [r.label or NONE_OF_THESE for r in floored],
+                                                                [r.seconds for r in floored]).__dict__,
                              **{k: v.__dict__ for k, v in pss_alternatives(space, recs, truth).items()}},
                  "calibration": {"ece": expected_calibration_error(conf, correct), "mean_confidence": float(conf.mean()),
                                  "scheme": space.calibration.scheme,
