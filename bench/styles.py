@@ -111,7 +111,8 @@ def _leave_one_style_out(train: list, pose_floor: float | None = None) -> tuple[
 def choose_pose_floor(train: list, hdm05: Path, floors=(None, 0.02, 0.03, 0.04, 0.05)) -> list[dict]:
     """How ``STYLE_POSE_FLOOR`` was chosen: each candidate on the training styles only (leave one
     style out), with HDM05's dev split (bd + bk -> dg) closed set as the constraint (it must stay
-    at 100 %); the largest closed set among the floors that keep it."""
+    at 100 %). The rows; ``STYLE_POSE_FLOOR`` is the largest closed set among the floors that keep
+    the constraint."""
     from shared.io import find_clips
 
     dev = [load_clip(f) for f in find_clips([hdm05 / "amc"])]

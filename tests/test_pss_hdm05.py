@@ -264,6 +264,9 @@ def test_a_space_built_with_a_pose_floor_recognises_with_it_and_keeps_its_proto_
     back = ProtoSymbolSpace.load(space.save(tmp_path / "styles.npz"))
     assert back.params.recognition_pose_floor == STYLE_POSE_FLOOR
     assert np.array_equal(np.stack([m.covars for m in back.recognition_models()]), seen)
+    derived = dev_space.with_pose_floor(STYLE_POSE_FLOOR)  # the same space without training it again
+    a, b = derived.recognize(dev_split[1][0]), space.recognize(dev_split[1][0])
+    assert a.nearest == b.nearest and a.label == b.label and np.array_equal(derived.points, space.points)
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(BadInput, match="pose floor"):
             ProtoSymbolSpace.build(dev_split[0][:3], pose_floor=bad)

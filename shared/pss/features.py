@@ -78,6 +78,8 @@ _UP = np.array([0.0, 1.0, 0.0])
 #: half split's confusions, whose test styles were scored at four windows before this choice (best
 #: there 2 s, not the 1 s chosen), and HDM05's bd and bk splits at 0, 1 and 2 s (2 s lost a bd clip).
 TRAVEL_WINDOW = 1.0
+#: the position group's outputs of how the body travels over the floor (the rest of the group is its pose)
+TRAVEL_FEATURES = ("pos(root).v_forward", "pos(root).v_lateral", "pos(root).yaw_rate")
 
 
 def moving_mean(x: np.ndarray, width: int) -> np.ndarray:
@@ -236,8 +238,7 @@ class MotionFeatures:
         parents = {j.parent for j in sk.joints}
         pts += [f"{j.name}.end" for i, j in enumerate(sk.joints) if j.end is not None and i not in parents]
         names = [f"pos({p}).{a}" for p in pts for a in "xyz"]
-        return names + ["pos(root).height", "pos(root).up_x", "pos(root).up_y", "pos(root).up_z",
-                        "pos(root).v_forward", "pos(root).v_lateral", "pos(root).yaw_rate"]
+        return names + ["pos(root).height", "pos(root).up_x", "pos(root).up_y", "pos(root).up_z", *TRAVEL_FEATURES]
 
     @property
     def has_position(self) -> bool:

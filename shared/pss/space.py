@@ -124,10 +124,6 @@ class ProtoSymbolSpace:
             raise BadInput(f"group_by must be 'clip' or 'label', got {group_by!r}")
         if dim < 1:
             raise BadInput("dimension must be at least 1")
-        if pose_floor is not None and not (pose_floor > 0 and np.isfinite(pose_floor)):
-            raise BadInput(f"the pose floor must be a positive variance, got {pose_floor!r}")
-        if pose_floor is not None and covariance_type != "diag":
-            raise BadInput("a pose floor needs diagonal covariances")
         if isinstance(clips, list):  # held by the caller anyway: each at the space's rate once
             clips = [c if c.fps == fps else c.resample(fps) for c in clips]
         else:
@@ -150,8 +146,7 @@ class ProtoSymbolSpace:
                            frames=shortest, states=n_states)
         params = SpaceParams(recognition_var_ceiling=RECOGNITION_VAR_CEILING if covariance_type == "diag" else None,
                              n_states=n_states, fps=fps, dim=dim, covariance_type=covariance_type,
-                             var_floor=var_floor, backend=backend, group_by=group_by,
-                             recognition_pose_floor=pose_floor)
+                             var_floor=var_floor, backend=backend, group_by=group_by).with_pose_floor(pose_floor)
         symbols = []
         for i, (key, members) in enumerate(groups.items()):
             seqs = [features.encode(clips[k]) for k in members]
@@ -302,10 +297,17 @@ class ProtoSymbolSpace:
         return self.params.recognition_var_ceiling if self.params.covariance_type == "diag" else None
 
     def _recognition_floor(self) -> np.ndarray | None:
-        """Recognition's variance floor of every output of the recognition groups (None: none)."""
-        if self.params.covariance_type != "diag":
-            return None
-        return self.params.recognition_floors(self.features, self.recognition_groups)
+        """Recognition's variance floor of every output of the recognition groups (None: none; cached)."""
+        key = ("recognition floor",)
+        if key not in self._group_models:
+            self._group_models[key] = (self.params.recognition_floors(self.features, self.recognition_groups)
+                                       if self.params.covariance_type == "diag" else None)
+        return self._group_models[key]
+
+    def with_pose_floor(self, pose_floor: float | None) -> ProtoSymbolSpace:
+        """This space recognising with ``pose_floor`` (its proto-symbols, not trained again)."""
+        return ProtoSymbolSpace.from_symbols(self.params.with_pose_floor(pose_floor), self.features, self.symbols,
+                                             name=self.name)
 
     def as_recognised(self, hmm: LeftToRightHMM) -> LeftToRightHMM:
         """``hmm`` (on the recognition groups) as recognition compares it: its variances floored

@@ -358,8 +358,8 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
             recs = [space.recognize(c) for c in test]
             point = pss_recognition(space, test, use="point")
             robust = robustness(space, test)
-            # a space for other styles (docs/pss.md): the same clips with recognition's pose floor
-            styled = ProtoSymbolSpace.build(train, pose_floor=STYLE_POSE_FLOOR)
+            # a space for other styles (docs/pss.md): the same proto-symbols, recognition's pose floor on
+            styled = space.with_pose_floor(STYLE_POSE_FLOOR)
             floored = [styled.recognize(c) for c in test]
         truth = [label_of(c) for c in test]
         ours = _summarise("PSS (label)", truth, [r.nearest_label for r in recs], [r.seconds for r in recs])
