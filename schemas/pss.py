@@ -106,6 +106,9 @@ BUILD = Endpoint(
         "group_by": F(Str(choices=("clip", "label")), required=False, default="clip"),
         "pose_floor": F(Float(0.0), "recognition's variance floor on the pose outputs, for a space that recognises "
                                     "styles it does not hold (absent: none)", required=False),
+        "open_set": F(Bool(), "false: a space for association and generation only: recognition's open-set tests "
+                              "(the novelty model, the discriminant ratio) are not fitted, its 'none of these' is "
+                              "the distance rule alone", required=False, default=True),
         "replace": F(Bool(), "replace an existing space of that name", required=False, default=False),
     }), doc="build a space from clips (eq. 2.5)"),
     Message("pss.build.reply", INFO),

@@ -270,3 +270,25 @@ def test_a_space_built_with_a_pose_floor_recognises_with_it_and_keeps_its_proto_
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(BadInput, match="pose floor"):
             ProtoSymbolSpace.build(dev_split[0][:3], pose_floor=bad)
+
+
+def test_a_space_built_without_the_open_set_associates_alike_and_says_none_of_these_by_distance(torque_space, tmp_path):
+    """``open_set=False`` (the estimator's spaces, used for association only): the novelty model
+    and the discriminant ratio are not fitted nor saved; recognition still answers, its "none of
+    these" the distance rule's alone, and says so; association is the default space's."""
+    _, train, test = torque_space
+    some = [c for k, c in enumerate(train) if [x.label for x in train[:k]].count(c.label) < 2]  # two of each class
+    full = ProtoSymbolSpace.build(some, dim=3)
+    plain = ProtoSymbolSpace.build(some, dim=3, open_set=False)
+    assert plain.novelty_model is None and plain.discriminant is None and full.novelty_model is not None
+    back = ProtoSymbolSpace.load(plain.save(tmp_path / "plain.npz"))
+    assert back.novelty_model is None and back.discriminant is None
+    assert "without the novelty model" in back.info()["open_set"]
+    assert "without" not in full.info()["open_set"] and "novelty model" in full.info()["open_set"]
+    c = test[0]
+    probe = c.with_data(c.select(c.group("motion")), channels=c.group("motion"), groups={"motion": c.group("motion")})
+    r = back.recognize(c)
+    assert r.decision.model_novelty == 0.0 and r.decision.ratio_novelty == 0.0
+    assert r.nearest == full.recognize(c).nearest
+    a, b = back.associate(probe, "sensor"), full.associate(probe, "sensor")
+    assert np.array_equal(a.weights, b.weights) and np.array_equal(a.aligned.data, b.aligned.data)

@@ -143,6 +143,14 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
                                                                  "clips": [clip_to_wire(x) for x in train[:4]]}))
     assert styled["params"]["recognition_pose_floor"] == 0.03  # a space for other styles
     c.request("pss", "delete", {"space": "styled"})
+    firsts = list({x.label: x for x in reversed(train)}.values())  # one clip of each class
+    plain = _checked(contract.BUILD, c.request("pss", "build", {"space": "plain", "open_set": False,
+                                                                "clips": [clip_to_wire(x) for x in firsts]}))
+    assert "without the novelty model" in plain["open_set"]  # association only: the distance rule alone
+    assert "without" not in info["open_set"]
+    a = c.request("pss", "associate", {"space": "plain", "clip": clip_to_wire(m)})
+    assert a["aligned"]["data"].shape[0] == m.resample(30).n_frames
+    c.request("pss", "delete", {"space": "plain"})
 
 
 def _bad_cases(clip, other_clip, amc_file):

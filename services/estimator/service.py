@@ -111,7 +111,8 @@ class BusPorts:
         return name if len(name) <= 64 else prefix + hashlib.sha1(self.name.encode()).hexdigest()[:32]
 
     def build(self, clips, space: str = "thesis") -> None:
-        self.c.request("pss", "build", {"space": self.space_of(space), "replace": True,
+        # association only: recognition's open-set tests are not fitted (most of saving a few clips' space)
+        self.c.request("pss", "build", {"space": self.space_of(space), "replace": True, "open_set": False,
                                         "clips": [clip_to_wire(c) for c in clips]})
 
     def associate(self, motion, space: str = "thesis") -> np.ndarray:

@@ -100,7 +100,8 @@ def make_service(settings: Settings | None = None) -> Service:
         clips = [clip_from_wire(c) for c in req["clips"]]
         space = write(name, "build", lambda: ProtoSymbolSpace.build(
             clips, n_states=req["n_states"], dim=req["dim"], fps=req["fps"],
-            covariance_type=req["covariance_type"], group_by=req["group_by"], name=name, pose_floor=req.get("pose_floor")))
+            covariance_type=req["covariance_type"], group_by=req["group_by"], name=name, pose_floor=req.get("pose_floor"),
+            open_set=req["open_set"]))
         changed(name, "built", space)
         return space_info(name, space)
 

@@ -22,6 +22,7 @@ the clip's own axes) plus the report.
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass, field
 
 import mujoco
@@ -153,9 +154,12 @@ def qpos_derivatives(model, q: np.ndarray, fps: float) -> tuple[np.ndarray, np.n
     """Velocities and accelerations (T, nv) by central differences (``mj_differentiatePos``)."""
     n = len(q)
     dt = 1.0 / fps
-    fwd = np.empty((n - 1, model.nv))
-    for t in range(n - 1):
-        mujoco.mj_differentiatePos(model, fwd[t], dt, q[t], q[t + 1])
+    if model.nq == model.nv:  # hinges and slides only: MuJoCo's (q2 - q1) / dt, every frame at once
+        fwd = (q[1:] - q[:-1]) / dt
+    else:
+        fwd = np.empty((n - 1, model.nv))
+        for t in range(n - 1):
+            mujoco.mj_differentiatePos(model, fwd[t], dt, q[t], q[t + 1])
     v = np.empty((n, model.nv))
     v[1:-1] = 0.5 * (fwd[:-1] + fwd[1:])
     v[0], v[-1] = fwd[0], fwd[-1]
@@ -165,11 +169,32 @@ def qpos_derivatives(model, q: np.ndarray, fps: float) -> tuple[np.ndarray, np.n
     return v, a
 
 
+_SCRATCH = threading.local()
+
+
+def scratch_data(model) -> mujoco.MjData:
+    """An ``MjData`` of ``model`` for this thread, reset (as new: warnings cleared), kept for the
+    next call: making one costs about as much as ``mj_inverse`` on 50 frames. The last 32 models
+    a thread used keep theirs."""
+    kept = getattr(_SCRATCH, "data", None)
+    if kept is None:
+        kept = _SCRATCH.data = {}
+    hit = kept.pop(id(model), None)
+    if hit is None or hit[0] is not model:
+        hit = (model, mujoco.MjData(model))
+    else:
+        mujoco.mj_resetData(model, hit[1])
+    kept[id(model)] = hit  # the most recent last
+    while len(kept) > 32:
+        kept.pop(next(iter(kept)))
+    return hit[1]
+
+
 def mj_inverse_series(model, q: np.ndarray, v: np.ndarray, a: np.ndarray,
                       warnings: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``mj_inverse`` frame by frame: generalised forces (T, nv) and the centre of gravity (T, 3).
     ``warnings``, if given, receives MuJoCo's warning counts (``inertia``, ``badqacc``, ...)."""
-    data = mujoco.MjData(model)
+    data = scratch_data(model)
     tau = np.empty((len(q), model.nv))
     cog = np.empty((len(q), 3))
     for t in range(len(q)):

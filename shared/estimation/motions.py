@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
@@ -49,19 +51,28 @@ def basic_motions(joints: list[str] | None = None) -> list[Clip]:
 
 
 def unknown_motions(n: int = 10, seed: int = UNKNOWN_SEED, joints: list[str] | None = None) -> list[Clip]:
-    joints = list(joints or ARM)
+    return [_clip(name, dict(zip(js, data.T.copy())), list(js))
+            for name, js, data in _unknown_profiles(n, seed, tuple(joints or ARM))]
+
+
+@lru_cache(maxsize=64)
+def _unknown_profiles(n: int, seed: int, joints: tuple[str, ...]) -> list[tuple[str, tuple[str, ...], np.ndarray]]:
+    """The curves of :func:`unknown_motions`, interpolated once per process (every rule
+    identification and every conversation's random probes ask for the same ones)."""
     out = []
     for i in range(n):
         r = np.random.default_rng([seed, i])
         duration = float(r.uniform(2.0, 4.0))
         frames = int(round(duration * FPS)) + 1
         t = np.linspace(0, duration, frames)
-        prof = {}
+        prof = []
         for j in joints:
             lo, hi = RANGE[j]
             knots = np.linspace(0, duration, 5)
             values = np.r_[0.0, r.uniform(lo, hi, size=3), 0.0]
             values[0] = values[-1] = np.clip(0.0, lo, hi)
-            prof[j] = PchipInterpolator(knots, values)(t)
-        out.append(_clip(f"unknown_{i + 1:02d}", prof, joints))
+            prof.append(PchipInterpolator(knots, values)(t))
+        data = np.column_stack(prof)
+        data.flags.writeable = False
+        out.append((f"unknown_{i + 1:02d}", joints, data))
     return out

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import brentq, least_squares
@@ -306,6 +307,18 @@ def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors
             "posterior": {c.name: float(p) for c, p in zip(candidates, post)}}
 
 
+@lru_cache(maxsize=16)
+def _plausible(joints: tuple[str, ...], n: int) -> np.ndarray:
+    """:func:`shared.estimation.body.plausible_bodies` of a joint set, drawn once per process (the
+    same seed: the same bodies; 1,024 of them take a quarter of a second of Python, asked for by every
+    identification without open answers)."""
+    from shared.estimation.body import plausible_bodies
+
+    out = plausible_bodies(list(joints), n)
+    out.flags.writeable = False
+    return out
+
+
 def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str, np.ndarray, int]],
                      candidates: list[Candidate], scale: float = 1.0, n: int = BODY_SAMPLES) -> dict[str, np.ndarray]:
     """Per candidate rule, the bodies the other's open answers allow if it converts with that
@@ -315,10 +328,10 @@ def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str
     possible (:func:`shared.estimation.body.plausible_bodies`)."""
     from dataclasses import replace
 
-    from shared.estimation.body import BodyEstimate, plausible_bodies
+    from shared.estimation.body import BodyEstimate
 
     if not answers:  # nothing known of this other yet: the bodies the self thinks possible, for every rule
-        prior = plausible_bodies(language.joints, n)
+        prior = _plausible(tuple(language.joints), n).copy()
         return {c.name: prior for c in candidates}
     out = {}
     for c in candidates:

@@ -99,7 +99,7 @@ class ProtoSymbolSpace:
     def build(cls, clips: Sequence[Clip], *, n_states: int | None = None, dim: int = 3, fps: float = 30.0,
               covariance_type: str = "diag", var_floor: float = 0.01, backend: str = "banded",
               group_by: str = "clip", sensor: bool = True, name: str = "space", progress=None,
-              pose_floor: float | None = None) -> ProtoSymbolSpace:
+              pose_floor: float | None = None, open_set: bool = True) -> ProtoSymbolSpace:
         """``P = F_build(D)`` (eq. 2.5).
 
         Parameters
@@ -117,6 +117,9 @@ class ProtoSymbolSpace:
             Recognition's variance floor on the position group's pose outputs (diagonal spaces):
             for a space that must recognise motions done in styles it does not hold
             (:data:`STYLE_POSE_FLOOR`; none by default).
+        open_set : bool
+            False: for association and generation only, "none of these" by the distance rule alone
+            (the novelty model and discriminant ratio not fitted: most of saving a small space).
         """
         if not len(clips):
             raise BadInput("a space needs at least one clip")
@@ -157,7 +160,10 @@ class ProtoSymbolSpace:
                                        [seen[k][2] for k in members], [seen[k][3] for k in members]))
             if progress:
                 progress(i + 1, len(groups))
-        return cls.from_symbols(params, features, symbols, name=name)
+        space = cls.from_symbols(params, features, symbols, name=name)
+        if not open_set:
+            space._novelty = space._discriminant = False
+        return space
 
     @classmethod
     def from_symbols(cls, params: SpaceParams, features: MotionFeatures, symbols: list[ProtoSymbol],
@@ -588,6 +594,7 @@ class ProtoSymbolSpace:
                 if self.calibration.n_calibration and not self.calibration.class_scales else "") + ((
                 " with the ratio on eq. 2.4 distances (a file written before the discriminant ratio)"
                 if self._discriminant is False else ", the discriminant ratio") + (
-                " (a file written before the novelty model)" if self._novelty is False else " or the novelty model")
+                " (without the novelty model: a file written before it, or built without the open set)"
+                if self._novelty is False else " or the novelty model")
                 if len(set(self.labels)) > 1 else " alone (one class: no other class to be nearer to)"),
         }
