@@ -220,6 +220,33 @@ def test_training_is_left_to_right_floored_and_reports_convergence():
     assert full.is_valid() and np.all(np.linalg.eigvalsh(full.covars) > 0)
 
 
+def test_a_model_trained_once_is_the_model_trained_anew_and_its_copy_is_the_callers(monkeypatch):
+    """``fit_hmm_once``: the same sequences and settings give :func:`fit_hmm`'s model, trained
+    once (the second call trains nothing) and handed out as a copy; other settings or other
+    bytes train again; the models kept stay within their byte budget."""
+    from shared.pss import hmm as hmm_module
+
+    rng = np.random.default_rng(6)
+    reps = _repetitions(rng)
+    trained = []
+    real = hmm_module.fit_hmm
+    monkeypatch.setattr(hmm_module, "fit_hmm", lambda *a, **k: trained.append(1) or real(*a, **k))
+    first = hmm_module.fit_hmm_once(reps, 5, var_floor=0.01)
+    reference = real(reps, 5, var_floor=0.01)
+    for name in ("means", "covars", "stay"):
+        assert np.array_equal(getattr(first, name), getattr(reference, name))
+    first.means[:] = 0.0  # the caller's copy: the model kept is not touched
+    again = hmm_module.fit_hmm_once([r.copy() for r in reps], 5, var_floor=0.01)
+    assert len(trained) == 1 and np.array_equal(again.means, reference.means)
+    hmm_module.fit_hmm_once(reps, 5, var_floor=0.02)
+    hmm_module.fit_hmm_once([reps[0] + 1e-9] + reps[1:], 5, var_floor=0.01)
+    assert len(trained) == 3
+    monkeypatch.setattr(hmm_module, "TRAINED_CACHE_BYTES", 1)  # nothing fits: every call trains
+    hmm_module.fit_hmm_once(reps, 4)
+    hmm_module.fit_hmm_once(reps, 4)
+    assert len(trained) == 5 and hmm_module._TRAINED_SIZE[0] <= 1
+
+
 def test_training_refuses_bad_input():
     rng = np.random.default_rng(5)
     with pytest.raises(ModelError, match="fewer than"):

@@ -342,11 +342,14 @@ def test_the_extended_model_is_fit_only_when_the_answers_call_for_it(monkeypatch
     assert body.model == "rigid"
     body.inconsistency = 0.0
     body.theta = theta
+    fits: list = []  # the Gauss-Newton runs of a fit: the rigid body's, and the extended one's unless it cannot win
+    real = BodyEstimate._gauss_newton
+    monkeypatch.setattr(BodyEstimate, "_gauss_newton", lambda self, *a: fits.append(1) or real(self, *a))
     body.fit()
-    assert body.model == "extended"
+    assert body.model == "extended" and len(fits) == 2
     monkeypatch.setattr(BodyEstimate, "EXTENSION_EVIDENCE", float("inf"))
     est.forget_body()
-    assert est.body(ports).model == "rigid"
+    assert est.body(ports).model == "rigid" and len(fits) == 3  # no rigid cost is above inf: no extended fit
     assert extended < _error(est, ports, other, lang, unknown)
     monkeypatch.undo()
     mass, ports, *_ = _converse(population("mass", 1, seed=13, d=6, g_max=0.6, joints=list(ARM))[0], 6)

@@ -63,10 +63,9 @@ estimate each answer is a linear constraint on ``theta`` (:func:`g_and_gradient`
 bodies every answer allows is an intersection of slabs, narrowed by each answer.
 
 **The estimate** (:class:`BodyEstimate`) is the body nearest to a proportional one (``s`` free)
-that satisfies the answers: regularised least squares (scipy ``least_squares``, bounds
-``theta >= 0``) with a squared hinge on every violated bin and a weak pull to every bin's middle
-(each distinct question counted once), re-linearised at every iteration. Noisy answers that
-contradict each other are settled by the least squares.
+that satisfies the answers: regularised least squares (``theta >= 0``) with a squared hinge on
+every violated bin and a weak pull to every bin's middle (each distinct question counted once),
+re-linearised at every iteration; contradicting (noisy) answers are settled by the least squares.
 
 **Probe motions** (:meth:`BodyEstimate.choose_probe`): a Gaussian approximation of the
 remaining uncertainty (prior plus one linear measurement per answer, a bin's width being a
@@ -202,8 +201,7 @@ def self_regressor(motion: Clip, joints, missing=()) -> np.ndarray:
 
 
 def regressor_torques(y: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """``Y theta`` of a regressor (T, J, P): one matrix-vector product (``y @ theta`` on the 3-D
-    array is one small product per frame, 4 times slower)."""
+    """``Y theta`` of a regressor (T, J, P) as one matrix-vector product (4x faster than ``y @ theta``)."""
     y = np.asarray(y, float)
     return (y.reshape(-1, y.shape[-1]) @ theta).reshape(y.shape[:-1])
 
@@ -437,17 +435,19 @@ class BodyEstimate:
         The rigid body and the extended model class (springs, rotor inertia) are both fit from
         the last estimate; the extended one is kept (``model``) when its cost is lower by
         ``EXTENSION_EVIDENCE`` plus ``NOISE_EVIDENCE`` per answer the other's inconsistency may
-        have put off: a body the rigid model explains keeps the rigid estimate."""
+        have put off (not fit when the rigid cost is below that); otherwise the rigid estimate."""
         x0 = np.r_[self.theta, self.s]
         fits = {}
+        need = self.EXTENSION_EVIDENCE + self.NOISE_EVIDENCE * self.inconsistency * len(self._distinct())
         for model in ("rigid", "extended"):
             problem = self._problem(self.priors[model])
             if problem is None:
                 return self.theta
             parts, n_p = problem
             fits[model] = self._gauss_newton(parts, x0)
-        need = self.EXTENSION_EVIDENCE + self.NOISE_EVIDENCE * self.inconsistency * len(self._distinct())
-        extended = fits["rigid"][1] - fits["extended"][1] > need
+            if fits["rigid"][1] <= need:  # no cost >= 0 is lower by more than that
+                break
+        extended = "extended" in fits and fits["rigid"][1] - fits["extended"][1] > need
         self.model = "extended" if extended else "rigid"
         x = fits[self.model][0]
         self.theta, self.s = x[:n_p].copy(), float(x[n_p])

@@ -12,7 +12,7 @@ import numpy as np
 from shared.errors import BadInput
 from shared.motion.clip import Clip
 from shared.pss.distance import distance_matrix, distances_to
-from shared.pss.hmm import fit_hmm
+from shared.pss.hmm import fit_hmm, fit_hmm_once
 from shared.pss.symbol import Association
 from shared.pss.synthesis import generate
 
@@ -69,8 +69,9 @@ def associate_channels(space: ProtoSymbolSpace, clip, method, seed, weighting="a
     seqs = space._sequences(clip, ("motion", "position") if group == "position" else ("motion",))
     gidx = space.features.feature_indices(group)
     p = space.params
-    hmm = fit_hmm([x[:, gidx] for x in seqs], p.n_states, covariance_type=p.covariance_type,
-                  var_floor=p.var_floor, backend=p.backend, n_iter=p.n_iter)
+    # (trained once per process: the estimator's spaces associate the same motions over and over)
+    hmm = fit_hmm_once([x[:, gidx] for x in seqs], p.n_states, covariance_type=p.covariance_type,
+                       var_floor=p.var_floor, backend=p.backend, n_iter=p.n_iter)
     f = space.bank_on((group,)).distances(hmm) * marginal_scale(space, group)
     rec = space._place(hmm, f)
     reach = reach_of(space, (group,), float(np.min(f)) / marginal_scale(space, group))

@@ -26,8 +26,11 @@ after fitting). Tests check that both reach the same log-likelihood.
 
 from __future__ import annotations
 
+import hashlib
+import threading
 import warnings
-from dataclasses import dataclass, field
+from collections import OrderedDict
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -219,6 +222,44 @@ def fit_hmm(
     if not model.is_valid():
         raise ModelError("HMM training produced invalid parameters (NaN or non-positive variance); the clip is too short or degenerate for this many states")
     return model
+
+
+_TRAINED: OrderedDict = OrderedDict()  # (sequences, settings) -> model, the most recently used last
+_TRAINED_LOCK = threading.Lock()
+_TRAINED_SIZE = [0]  # bytes of the models kept
+TRAINED_CACHE_BYTES = 64 * 2**20  # the models fit_hmm_once keeps per process, at most
+
+
+def fit_hmm_once(sequences, n_states: int, **settings) -> LeftToRightHMM:
+    """:func:`fit_hmm`, each distinct (sequences, ``n_states``, settings) trained once per process;
+    a copy of the model is returned. Baum-Welch is deterministic: the same bytes and settings give
+    the same model. The estimator's spaces rebuild and associate the same motions over and over
+    (the self's database, the shared motions, the motions it is asked about); the last
+    :data:`TRAINED_CACHE_BYTES` of models are kept."""
+    seqs = as_sequences(sequences)
+    digest = hashlib.blake2b(digest_size=16)
+    for x in seqs:
+        x = np.ascontiguousarray(x, dtype=float)
+        digest.update(repr(x.shape).encode())
+        digest.update(x.tobytes())
+    key = (digest.digest(), int(n_states), tuple(sorted(settings.items())))
+    with _TRAINED_LOCK:
+        kept = _TRAINED.get(key)
+        if kept is not None:
+            _TRAINED.move_to_end(key)
+    if kept is None:
+        model = fit_hmm(seqs, n_states, **settings)
+        size = model.means.nbytes + model.covars.nbytes + model.stay.nbytes
+        with _TRAINED_LOCK:
+            if key not in _TRAINED:
+                _TRAINED[key] = (model, size)
+                _TRAINED_SIZE[0] += size
+            while _TRAINED_SIZE[0] > TRAINED_CACHE_BYTES and _TRAINED:
+                _TRAINED_SIZE[0] -= _TRAINED.popitem(last=False)[1][1]
+    else:
+        model = kept[0]
+    return replace(model, means=model.means.copy(), covars=model.covars.copy(), stay=model.stay.copy(),
+                   history=list(model.history))
 
 
 def _floor(covars, var_floor, covariance_type):
