@@ -115,6 +115,28 @@ def test_automatic_identification_names_the_rule_of_a_proportional_other(identif
         assert 1 <= len(r["questions"]) <= 12
 
 
+def test_the_prediction_tables_are_computed_once_for_the_same_bodies_and_motions(identification, monkeypatch):
+    """Every identification without open answers predicts from the same bodies: the tables of
+    predicted answers are computed once per process (read-only), and other bodies compute their own."""
+    from shared.estimation import rules
+
+    motions, regs, bodies = identification
+    computed: list = []
+    real = rules.g_bodies
+    monkeypatch.setattr(rules, "g_bodies", lambda *a, **k: computed.append(1) or real(*a, **k))
+    monkeypatch.setattr(rules, "_TABLES", rules.OrderedDict())
+    names = [m.name for m in motions]
+    first = rules._prediction_tables(THESIS_CANDIDATES, names, regs, bodies, 0.05)
+    n = len(computed)
+    again = rules._prediction_tables(THESIS_CANDIDATES, names, {k: v.copy() for k, v in regs.items()},
+                                     {k: v.copy() for k, v in bodies.items()}, 0.05)
+    assert n == len(names) * len(THESIS_CANDIDATES) and len(computed) == n and again[1] is first[1]
+    assert not first[1].flags.writeable and not first[2].flags.writeable
+    heavier = {k: v * 1.5 for k, v in bodies.items()}
+    other = rules._prediction_tables(THESIS_CANDIDATES, names, regs, heavier, 0.05)
+    assert len(computed) == 2 * n and other[1] is not first[1]
+
+
 def test_an_other_that_fits_no_rule_stops_with_a_reason(identification):
     motions, regs, bodies = identification
     r = identify_bodies(THESIS_CANDIDATES, motions, regs, bodies, lambda a, b: "nonsense")

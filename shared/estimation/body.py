@@ -84,6 +84,8 @@ on seeds 13 and 14, in-model and development kinds: the mean of known / unknown 
 
 from __future__ import annotations
 
+import hashlib
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -295,6 +297,10 @@ class Answer:
     k: int
 
 
+_SCALES: dict = {}  # (shared motions, language) -> BodyEstimate._scales, the last 64
+_SCALES_LOCK = threading.Lock()
+
+
 class BodyEstimate:
     """The other's body ``theta`` from its open answers (see module docstring).
 
@@ -320,9 +326,7 @@ class BodyEstimate:
         self.names = column_names(language.joints)
         self.theta_self = theta_self(language.joints)
         self.answers: list[Answer] = []
-        # a column's typical effect on g per unit, over the shared motions (the prior's scale)
-        eff = np.array([[self._g(y[..., p:p + 1], np.ones(1)) for p in range(y.shape[-1])] for y in shared]).mean(axis=0)
-        g_self = float(np.mean([self._g(y, self.theta_self) for y in shared]))
+        eff, g_self = self._scales(shared)
         self.g_self = max(g_self, 1e-9)
         base = np.where(eff > 1e-12, self.PRIOR * self.g_self / np.maximum(eff, 1e-12), 1.0)
         extension = np.array([n.split(".")[0] in EXTENSIONS for n in self.names])
@@ -338,6 +342,29 @@ class BodyEstimate:
         self.coupling = np.zeros((len(self.pairs), len(self.names)))
         for r, (i, j) in enumerate(self.pairs):
             self.coupling[r, i], self.coupling[r, j] = -1.0 / self.COUPLING, 1.0 / self.COUPLING
+
+    def _scales(self, shared: list[np.ndarray]) -> tuple[np.ndarray, float]:
+        """A column's typical effect on g per unit over the shared motions (the prior's scale), and
+        the self's mean g: the same for every estimate of one language and shared motions, so
+        computed once per process (a loop over columns and motions in Python)."""
+        lang = self.language
+        digest = hashlib.blake2b(digest_size=16)
+        for y in shared:
+            y = np.ascontiguousarray(y, dtype=float)
+            digest.update(repr(y.shape).encode())
+            digest.update(y.tobytes())
+        key = (digest.digest(), lang.rule, lang.tau_max, None if lang.weights is None else tuple(lang.weights),
+               tuple(self.theta_self))
+        with _SCALES_LOCK:
+            kept = _SCALES.get(key)
+        if kept is None:
+            eff = np.array([[self._g(y[..., p:p + 1], np.ones(1)) for p in range(y.shape[-1])] for y in shared])
+            kept = (eff.mean(axis=0), float(np.mean([self._g(y, self.theta_self) for y in shared])))
+            with _SCALES_LOCK:
+                _SCALES[key] = kept
+                while len(_SCALES) > 64:
+                    _SCALES.pop(next(iter(_SCALES)))
+        return kept[0].copy(), kept[1]
 
     @property
     def prior_sd(self) -> np.ndarray:
@@ -546,55 +573,3 @@ class BodyEstimate:
             score = h * rho2.mean(axis=0)
         i = int(np.argmax(score))
         return keys[i] if h[i] > 1e-3 else None
-
-
-#: the extended model class in the bodies the self thinks possible (:func:`plausible_bodies`): the
-#: mean spring stiffness (N m/rad) and rotor inertia (kg m^2) whose torques on the self's basic
-#: motions are on average as large as the prior's damping's (mean 0.03 N m s/rad at their mean joint
-#: speed of 0.6 rad/s: 0.018 N m; their mean joint angle is 0.3 rad, acceleration 2 rad/s^2), and
-#: the largest rest angle (rad) of a spring
-PLAUSIBLE_SPRING, PLAUSIBLE_ARMATURE, PLAUSIBLE_REST = 0.06, 0.009, 0.5
-
-
-def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
-    """``n`` bodies (rows of theta) the self thinks possible before any answer: each moving
-    link's mass ``exp(N(0, 0.5))`` and length ``exp(N(0, 0.2))`` times its own (gravity part
-    mass x length, inertial part mass x length^2, a longer upper arm carrying the forearm
-    further out: the elbow point mass), and, each with probability 1/2, a payload in the hand
-    (exponential, mean 0.1 kg), damping (mean 0.03 N m s/rad) and friction (mean 0.02 N m) at
-    every joint, and the extended model class (:data:`EXTENSIONS`): springs at every joint
-    (exponential stiffness, mean ``PLAUSIBLE_SPRING``, each with a rest angle uniform within
-    ``PLAUSIBLE_REST`` of the self's) and rotor inertia (mean ``PLAUSIBLE_ARMATURE``). The first
-    row is the self. The overall scale does not matter to comparisons."""
-    names = column_names(joints)
-    r = np.random.default_rng(seed)
-    out = np.zeros((n, len(names)))
-    out[0] = theta_self(joints)
-    col = {name: k for k, name in enumerate(names)}
-    from shared.bodies.robot import LINK_SHARE
-
-    for i in range(1, n):
-        mass = {link: float(np.exp(r.normal(0.0, 0.5))) for link in LINKS}
-        length = {link: float(np.exp(r.normal(0.0, 0.2))) for link in LINKS}
-        for link in LINKS:
-            if f"{link}.gravity" in col:
-                out[i, col[f"{link}.gravity"]] = mass[link] * length[link]
-                out[i, col[f"{link}.inertial"]] = mass[link] * length[link] ** 2
-        if "elbow_mass" in col:  # the forearm's mass carried (length - 1) upper arms further out, about
-            forearm_kg = mass["forearm"] * LINK_SHARE["forearm"] * SELF_MASS
-            out[i, col["elbow_mass"]] = max(length["upper_arm"] - 1.0, 0.0) * forearm_kg
-        if "hand_mass" in col and r.random() < 0.5:
-            out[i, col["hand_mass"]] = r.exponential(0.1)
-        for kind, mean in (("damping", 0.03), ("friction", 0.02)):
-            if r.random() < 0.5:
-                for j in joints:
-                    out[i, col[f"{kind}.{j}"]] = r.exponential(mean)
-        if r.random() < 0.5:  # springs, k (q - q0) = k q - k q0: the rest angle's torque on rest_up or rest_down
-            for j in joints:
-                k, q0 = r.exponential(PLAUSIBLE_SPRING), r.uniform(-PLAUSIBLE_REST, PLAUSIBLE_REST)
-                out[i, col[f"spring.{j}"]] = k
-                out[i, col[f"rest_down.{j}" if q0 > 0 else f"rest_up.{j}"]] = k * abs(q0)
-        if r.random() < 0.5:
-            for j in joints:
-                out[i, col[f"armature.{j}"]] = r.exponential(PLAUSIBLE_ARMATURE)
-    return out

@@ -15,6 +15,9 @@
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -159,7 +162,7 @@ CONFIDENCE = 0.999
 REPEATS = 3
 #: questions at most (seed 13, f1-f4 with the noise levels weighed: 60 took every in-model kind to
 #: 30/30 at 0, 10 and 20 % noise, 40 left the development kinds 1-6 short; since the bodies the self
-#: thinks possible hold the extended model class (:func:`shared.estimation.body.plausible_bodies`)
+#: thinks possible hold the extended model class (:func:`plausible_bodies`)
 #: 60 left one heavier-legs other at 20 % noise short (99.9 % not reached) and 90 took every
 #: in-model kind to 30/30 again (10 others at each noise), the development kinds to 30/30 (drag) and 28/30 (bias))
 MAX_QUESTIONS = 90
@@ -218,6 +221,52 @@ def predicted_answers(g_first: np.ndarray, g_second: np.ndarray, jnd: float) -> 
     return np.where(equal, 2, np.where(a > b, 0, 1))
 
 
+_TABLES: OrderedDict = OrderedDict()  # identify_bodies' prediction tables, the last two (~12 MB each)
+_TABLES_LOCK = threading.Lock()
+
+
+def _prediction_tables(candidates, names, regressors, bodies, jnd):
+    """Every pair of motions, each candidate's and body's predicted answer to it (pairs, C, N) and
+    the same one-hot (C, pairs x answers, N): computed once per process for the same candidates,
+    motions, bodies and ``jnd`` (every identification without open answers has the same ones,
+    those of the bodies the self thinks possible)."""
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(repr((jnd, names, [(c.rule, c.weights) for c in candidates])).encode())
+    seen: dict = {}
+    for array in [regressors[m] for m in names] + [bodies[c.name] for c in candidates]:
+        if id(array) not in seen:  # (the candidates share the prior's bodies)
+            seen[id(array)] = hashlib.blake2b(np.ascontiguousarray(array, dtype=float).tobytes(),
+                                              digest_size=16).digest() + repr(np.shape(array)).encode()
+        digest.update(seen[id(array)])
+    key = digest.digest()
+    with _TABLES_LOCK:
+        if key in _TABLES:
+            _TABLES.move_to_end(key)
+            return _TABLES[key]
+    g = {}
+    for m in names:
+        shared: dict = {}  # candidates whose bodies are the same (no open answers yet) share the torques
+        rows = []
+        for c in candidates:
+            body = seen[id(bodies[c.name])]
+            if body not in shared:
+                shared[body] = body_torques(regressors[m], bodies[c.name])
+            rows.append(g_bodies(c, regressors[m], bodies[c.name], shared[body]))
+        g[m] = np.array(rows)
+    pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]]
+    preds = np.array([predicted_answers(g[a], g[b], jnd) for a, b in pairs], dtype=np.int8)  # (pairs, C, N)
+    # whether each body predicts each answer of each pair: (C, pairs x answers, N)
+    onehot = (preds.transpose(1, 0, 2)[:, :, None, :] == np.arange(3)[None, None, :, None]).astype(float)
+    onehot = onehot.reshape(len(candidates), -1, preds.shape[2])
+    for a in (preds, onehot):
+        a.flags.writeable = False
+    with _TABLES_LOCK:
+        _TABLES[key] = (pairs, preds, onehot)
+        while len(_TABLES) > 2:
+            _TABLES.popitem(last=False)
+    return pairs, preds, onehot
+
+
 def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors: dict[str, np.ndarray],
                     bodies: dict[str, np.ndarray], ask_compare: Callable[[Clip, Clip], str], jnd: float = 0.05,
                     noise: float | None = None, confidence: float = CONFIDENCE, max_questions: int = MAX_QUESTIONS,
@@ -242,22 +291,8 @@ def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors
         raise BadInput("no candidate rules")
     names = [m.name for m in motions]
     by_name = {m.name: m for m in motions}
-    g = {}
-    for m in names:
-        shared: dict = {}  # candidates whose bodies are the same (no open answers yet) share the torques
-        rows = []
-        for c in candidates:
-            key = bodies[c.name].tobytes()
-            if key not in shared:
-                shared[key] = body_torques(regressors[m], bodies[c.name])
-            rows.append(g_bodies(c, regressors[m], bodies[c.name], shared[key]))
-        g[m] = np.array(rows)
-    pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]]
-    preds = np.array([predicted_answers(g[a], g[b], jnd) for a, b in pairs], dtype=np.int8)  # (pairs, C, N)
+    pairs, preds, onehot = _prediction_tables(candidates, names, regressors, bodies, jnd)
     n_bodies = preds.shape[2]
-    # whether each body predicts each answer of each pair: (C, pairs x answers, N)
-    onehot = (preds.transpose(1, 0, 2)[:, :, None, :] == np.arange(3)[None, None, :, None]).astype(float)
-    onehot = onehot.reshape(len(candidates), -1, n_bodies)
     levels = np.array(NOISE_LEVELS if noise is None else (noise,), float)
     w = np.full((len(candidates), n_bodies, len(levels)), 1.0 / (len(candidates) * n_bodies * len(levels)))
     times = np.zeros(len(pairs), int)  # how often each pair was asked
@@ -307,13 +342,64 @@ def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors
             "posterior": {c.name: float(p) for c, p in zip(candidates, post)}}
 
 
+#: the extended model class in the bodies the self thinks possible (:func:`plausible_bodies`): the
+#: mean spring stiffness (N m/rad) and rotor inertia (kg m^2) whose torques on the self's basic
+#: motions are on average as large as the prior's damping's (mean 0.03 N m s/rad at their mean joint
+#: speed of 0.6 rad/s: 0.018 N m; their mean joint angle is 0.3 rad, acceleration 2 rad/s^2), and
+#: the largest rest angle (rad) of a spring
+PLAUSIBLE_SPRING, PLAUSIBLE_ARMATURE, PLAUSIBLE_REST = 0.06, 0.009, 0.5
+
+
+def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
+    """``n`` bodies (rows of theta) the self thinks possible before any answer: each moving
+    link's mass ``exp(N(0, 0.5))`` and length ``exp(N(0, 0.2))`` times its own (gravity part
+    mass x length, inertial part mass x length^2, a longer upper arm carrying the forearm
+    further out: the elbow point mass), and, each with probability 1/2, a payload in the hand
+    (exponential, mean 0.1 kg), damping (mean 0.03 N m s/rad) and friction (mean 0.02 N m) at
+    every joint, and the extended model class (:data:`shared.estimation.body.EXTENSIONS`): springs at every joint
+    (exponential stiffness, mean ``PLAUSIBLE_SPRING``, each with a rest angle uniform within
+    ``PLAUSIBLE_REST`` of the self's) and rotor inertia (mean ``PLAUSIBLE_ARMATURE``). The first
+    row is the self. The overall scale does not matter to comparisons."""
+    from shared.bodies.robot import LINK_SHARE
+    from shared.estimation.body import LINKS, SELF_MASS, column_names, theta_self
+
+    names = column_names(joints)
+    r = np.random.default_rng(seed)
+    out = np.zeros((n, len(names)))
+    out[0] = theta_self(joints)
+    col = {name: k for k, name in enumerate(names)}
+    for i in range(1, n):
+        mass = {link: float(np.exp(r.normal(0.0, 0.5))) for link in LINKS}
+        length = {link: float(np.exp(r.normal(0.0, 0.2))) for link in LINKS}
+        for link in LINKS:
+            if f"{link}.gravity" in col:
+                out[i, col[f"{link}.gravity"]] = mass[link] * length[link]
+                out[i, col[f"{link}.inertial"]] = mass[link] * length[link] ** 2
+        if "elbow_mass" in col:  # the forearm's mass carried (length - 1) upper arms further out, about
+            forearm_kg = mass["forearm"] * LINK_SHARE["forearm"] * SELF_MASS
+            out[i, col["elbow_mass"]] = max(length["upper_arm"] - 1.0, 0.0) * forearm_kg
+        if "hand_mass" in col and r.random() < 0.5:
+            out[i, col["hand_mass"]] = r.exponential(0.1)
+        for kind, mean in (("damping", 0.03), ("friction", 0.02)):
+            if r.random() < 0.5:
+                for j in joints:
+                    out[i, col[f"{kind}.{j}"]] = r.exponential(mean)
+        if r.random() < 0.5:  # springs, k (q - q0) = k q - k q0: the rest angle's torque on rest_up or rest_down
+            for j in joints:
+                k, q0 = r.exponential(PLAUSIBLE_SPRING), r.uniform(-PLAUSIBLE_REST, PLAUSIBLE_REST)
+                out[i, col[f"spring.{j}"]] = k
+                out[i, col[f"rest_down.{j}" if q0 > 0 else f"rest_up.{j}"]] = k * abs(q0)
+        if r.random() < 0.5:
+            for j in joints:
+                out[i, col[f"armature.{j}"]] = r.exponential(PLAUSIBLE_ARMATURE)
+    return out
+
+
 @lru_cache(maxsize=16)
 def _plausible(joints: tuple[str, ...], n: int) -> np.ndarray:
-    """:func:`shared.estimation.body.plausible_bodies` of a joint set, drawn once per process (the
-    same seed: the same bodies; 1,024 of them take a quarter of a second of Python, asked for by every
-    identification without open answers)."""
-    from shared.estimation.body import plausible_bodies
-
+    """:func:`plausible_bodies` of a joint set, drawn once per process (the same seed: the same
+    bodies; 1,024 of them take a quarter of a second of Python, asked for by every identification
+    without open answers)."""
     out = plausible_bodies(list(joints), n)
     out.flags.writeable = False
     return out
@@ -325,7 +411,7 @@ def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str
     rule: a :class:`shared.estimation.body.BodyEstimate` fitted to ``answers`` (key, regressor,
     k) in ``language`` with the candidate's rule, and :func:`body_samples` of what it leaves
     uncertain. Without answers every candidate gets the same bodies, those the self thinks
-    possible (:func:`shared.estimation.body.plausible_bodies`)."""
+    possible (:func:`plausible_bodies`)."""
     from dataclasses import replace
 
     from shared.estimation.body import BodyEstimate
