@@ -71,21 +71,33 @@ CONVERSE = Endpoint(
     waits=True,
 )
 
+METHOD = F(Str(choices=("thesis", "space", "interval", "body")), "thesis: eq. 3.5 through the space; space: the same "
+           "with the words' bins and every motion talked about in the space; interval: one torque scale; body: the "
+           "regressor on the estimated body", required=False, default="thesis")
+ESTIMATED = {
+    "clip": F(CLIP, "the motion with the estimated torques tau.<joint> as sensor channels"),
+    "g": F(Float(0.0), "F_conv of the estimate"), "k": F(Int(1, 8)), "word": F(Str(max_len=64)),
+}
 ESTIMATE_EP = Endpoint(
     "estimate",
     Message("estimator.estimate", Map({
-        "estimate": ESTIMATE, "clip": F(CLIP, "any motion of the joints, known or not"),
-        "method": F(Str(choices=("thesis", "space", "interval", "body")), "thesis: eq. 3.5 through the space; space: "
-                    "the same with the words' bins and every motion talked about in the space; interval: one "
-                    "torque scale; body: the regressor on the estimated body", required=False,
-                    default="thesis"),
+        "estimate": ESTIMATE, "clip": F(CLIP, "any motion of the joints, known or not"), "method": METHOD,
     })),
-    Message("estimator.estimate.reply", Map({
-        "estimate": ESTIMATE, "method": F(Str(max_len=16)),
-        "clip": F(CLIP, "the motion with the estimated torques tau.<joint> as sensor channels"),
-        "g": F(Float(0.0), "F_conv of the estimate"), "k": F(Int(1, 8)), "word": F(Str(max_len=64)),
-    })),
+    Message("estimator.estimate.reply", Map({"estimate": ESTIMATE, "method": F(Str(max_len=16)), **ESTIMATED})),
     "The other's estimated torques for a motion.",
+)
+
+ESTIMATE_MANY = Endpoint(
+    "estimate_many",
+    Message("estimator.estimate_many", Map({
+        "estimate": ESTIMATE, "clips": F(List(CLIP, min_len=1, max_len=64), "motions of the joints, known or not"),
+        "method": METHOD,
+    })),
+    Message("estimator.estimate_many.reply", Map({
+        "estimate": ESTIMATE, "method": F(Str(max_len=16)),
+        "estimates": F(List(Map(ESTIMATED), max_len=64), "one per motion, in the request's order"),
+    })),
+    "The other's estimated torques for several motions in one request (an evaluation asks dozens).",
 )
 
 IDENTIFY = Endpoint(
@@ -123,7 +135,7 @@ LIST = Endpoint("list", Message("estimator.list", Map({})),
 DELETE = Endpoint("delete", Message("estimator.delete", Map({"estimate": ESTIMATE})),
                   Message("estimator.delete.reply", Map({"estimate": ESTIMATE, "deleted": F(Bool())})), "Delete an estimate.")
 
-ENDPOINTS = {e.verb: e for e in (START, CONVERSE, ESTIMATE_EP, IDENTIFY, INFO_EP, LIST, DELETE)}
+ENDPOINTS = {e.verb: e for e in (START, CONVERSE, ESTIMATE_EP, ESTIMATE_MANY, IDENTIFY, INFO_EP, LIST, DELETE)}
 EVENTS = {"progress": Message("estimator.event.progress", Map({
     "estimate": ESTIMATE, "set": F(Int(1)), "scale": F(Float(0.0)), "consistent": F(Bool()),
     "k_other": F(List(Int(1, 8), max_len=100)), "k_self": F(List(Int(1, 8), max_len=100)),

@@ -45,9 +45,22 @@ def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services,
     r = _ok(est.CONVERSE, c.request("estimator", "converse", {"estimate": "r2", "sets": 3}))
     assert r["completed"] == 3 and r["info"]["sets_done"] == 3 and r["info"]["consistent"]
     assert r["info"]["scale"] == pytest.approx(2.0, rel=0.05)  # the other is twice as heavy
+    from shared.bus.client import RemoteError
+
+    others = [clip_to_wire(m) for m in unknown_motions(3)]
     for method in ("thesis", "space", "interval", "body"):
         e = _ok(est.ESTIMATE_EP, c.request("estimator", "estimate", {"estimate": "r2", "clip": motion, "method": method}))
         assert e["clip"]["sensor"] == ["tau.shoulder_pitch", "tau.shoulder_roll", "tau.elbow"] and e["g"] > 0
+        # several motions in one request: each the estimate one request gives, in the request's order
+        many = _ok(est.ESTIMATE_MANY, c.request("estimator", "estimate_many", {"estimate": "r2", "method": method,
+                                                                              "clips": [motion] + others}))["estimates"]
+        one = [e] + [c.request("estimator", "estimate", {"estimate": "r2", "clip": m, "method": method}) for m in others]
+        assert [x["g"] for x in many] == [x["g"] for x in one] and len({x["g"] for x in many}) > 1
+        assert all(np.array_equal(x["clip"]["data"], y["clip"]["data"]) for x, y in zip(many, one))
+    with pytest.raises(RemoteError) as bad:
+        c.request("estimator", "estimate_many", {"estimate": "r2", "clips": [motion, {**others[0], "channels": [
+            "a", "b", "c"]}]})
+    assert bad.value.code == "bad_request" and "clips[1]" in str(bad.value.details) + bad.value.message
     assert _ok(est.INFO_EP, c.request("estimator", "info", {"estimate": "r2"}))["sets_done"] == 3
     assert {"estimate": "r2", "other": "r2", "sets_done": 3} in _ok(est.LIST, c.request("estimator", "list"))["estimates"]
     deadline = time.monotonic() + 5

@@ -342,16 +342,33 @@ class EstimatorHandlers:
     def estimate(self, req):
         name = req["estimate"]
         stamp, est = self._load(name)
-        motion = clip_from_wire(req["clip"])
+        out = self._estimated(name, est, req["clip"], req["method"], "clip")
+        self.keep(name, stamp, est)  # (this request changes it no more)
+        return {"estimate": name, "method": req["method"], **out}
+
+    def estimate_many(self, req):
+        """:meth:`estimate` of every clip on one loaded estimate (an evaluation asks dozens)."""
+        name = req["estimate"]
+        stamp, est = self._load(name)
+        out = []
+        for i, clip in enumerate(req["clips"]):
+            check_time()
+            out.append(self._estimated(name, est, clip, req["method"], f"clips[{i}]"))
+        self.keep(name, stamp, est)
+        return {"estimate": name, "method": req["method"], "estimates": out}
+
+    def _estimated(self, name: str, est: OtherEstimate, wire: dict, method: str, field: str) -> dict:
+        """One motion's estimate: the clip with its torques, g, k and the word."""
+        motion = clip_from_wire(wire)
         ports = BusPorts(self.bus(), name, est.other, est.language)
         missing = [j for j in est.language.joints if j not in motion.channels]
         if missing:
-            raise BadInput(f"the motion lacks the joints {missing} this estimate is about", field="clip")
+            raise BadInput(f"the motion lacks the joints {missing} this estimate is about", field=field)
         motion = hold(motion, est.language.missing)
         try:
-            tau = est.estimate(motion, ports, req["method"])
+            tau = est.estimate(motion, ports, method)
         except RemoteError as e:  # the space of a fresh estimate (or one pss lost): build it from the saved database
-            if e.code != "not_found" or req["method"] not in ("thesis", "space"):
+            if e.code != "not_found" or method not in ("thesis", "space"):
                 raise
             with self.building_lock:
                 lock = self.building.setdefault(name, threading.Lock())
@@ -359,21 +376,19 @@ class EstimatorHandlers:
                     self.building.pop(next(iter(self.building)))
             with lock:  # one request builds; the others wait for it, then find the space
                 try:
-                    tau = est.estimate(motion, ports, req["method"])
+                    tau = est.estimate(motion, ports, method)
                 except RemoteError as again:
                     if again.code != "not_found":
                         raise
                     for space in SPACES:
                         ports.build(est.database(space), space)
-                    tau = est.estimate(motion, ports, req["method"])
+                    tau = est.estimate(motion, ports, method)
         g = est.language.g(tau)
         k = est.language.k(tau)
         if len(tau) != motion.n_frames:  # the space's estimate is on its own frame rate
             motion = motion.resample(len(tau) / max(motion.duration, 1e-9) if motion.duration > 0 else motion.fps)
         out = with_torques(motion.frames(0, len(tau)), tau[: motion.n_frames], est.language.joints)
-        self.keep(name, stamp, est)  # (this request changes it no more)
-        return {"estimate": name, "method": req["method"], "clip": clip_to_wire(out), "g": float(g), "k": int(k),
-                "word": word(k, est.language.d)}
+        return {"clip": clip_to_wire(out), "g": float(g), "k": int(k), "word": word(k, est.language.d)}
 
     def identify_rule(self, req):
         name = req["estimate"]
@@ -438,7 +453,7 @@ class EstimatorHandlers:
     def handlers(self) -> dict:
         """The verbs of the contract and the methods that answer them."""
         return {"start": self.start, "converse": self.converse, "estimate": self.estimate,
-                "identify_rule": self.identify_rule, "info": self.info, "list": self.list_estimates,
+                "estimate_many": self.estimate_many, "identify_rule": self.identify_rule, "info": self.info, "list": self.list_estimates,
                 "delete": self.delete}
 
 
