@@ -174,7 +174,7 @@ _SCRATCH = threading.local()
 
 def scratch_data(model) -> mujoco.MjData:
     """An ``MjData`` of ``model`` for this thread, reset (as new: warnings cleared), kept for the
-    next call: making one costs about as much as ``mj_inverse`` on 50 frames. The last 32 models
+    next call: making one costs about as much as ``mj_inverse`` on 50 frames. The last 16 models
     a thread used keep theirs."""
     kept = getattr(_SCRATCH, "data", None)
     if kept is None:
@@ -185,7 +185,7 @@ def scratch_data(model) -> mujoco.MjData:
     else:
         mujoco.mj_resetData(model, hit[1])
     kept[id(model)] = hit  # the most recent last
-    while len(kept) > 32:
+    while len(kept) > 16:
         kept.pop(next(iter(kept)))
     return hit[1]
 

@@ -221,7 +221,7 @@ def predicted_answers(g_first: np.ndarray, g_second: np.ndarray, jnd: float) -> 
     return np.where(equal, 2, np.where(a > b, 0, 1))
 
 
-_TABLES: OrderedDict = OrderedDict()  # identify_bodies' prediction tables, the last two (~12 MB each)
+_TABLES: OrderedDict = OrderedDict()  # identify_bodies' prediction tables, the last two (12-35 MB each)
 _TABLES_LOCK = threading.Lock()
 
 
@@ -356,10 +356,11 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
     mass x length, inertial part mass x length^2, a longer upper arm carrying the forearm
     further out: the elbow point mass), and, each with probability 1/2, a payload in the hand
     (exponential, mean 0.1 kg), damping (mean 0.03 N m s/rad) and friction (mean 0.02 N m) at
-    every joint, and the extended model class (:data:`shared.estimation.body.EXTENSIONS`): springs at every joint
-    (exponential stiffness, mean ``PLAUSIBLE_SPRING``, each with a rest angle uniform within
-    ``PLAUSIBLE_REST`` of the self's) and rotor inertia (mean ``PLAUSIBLE_ARMATURE``). The first
-    row is the self. The overall scale does not matter to comparisons."""
+    every joint, and the extended model class (:data:`shared.estimation.body.EXTENSIONS`):
+    springs at every joint (exponential stiffness, mean ``PLAUSIBLE_SPRING``, each with a rest
+    angle uniform within ``PLAUSIBLE_REST`` of the self's) and rotor inertia (mean
+    ``PLAUSIBLE_ARMATURE``). The first row is the self. The overall scale does not matter to
+    comparisons."""
     from shared.bodies.robot import LINK_SHARE
     from shared.estimation.body import LINKS, SELF_MASS, column_names, theta_self
 

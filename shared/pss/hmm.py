@@ -227,7 +227,7 @@ def fit_hmm(
 _TRAINED: OrderedDict = OrderedDict()  # (sequences, settings) -> model, the most recently used last
 _TRAINED_LOCK = threading.Lock()
 _TRAINED_SIZE = [0]  # bytes of the models kept
-TRAINED_CACHE_BYTES = 64 * 2**20  # the models fit_hmm_once keeps per process, at most
+TRAINED_CACHE_BYTES = 16 * 2**20  # the models fit_hmm_once keeps per process, at most
 
 
 def fit_hmm_once(sequences, n_states: int, **settings) -> LeftToRightHMM:
