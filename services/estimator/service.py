@@ -245,18 +245,25 @@ class EstimatorHandlers:
         the file's stamp."""
         if not self.path(name).exists():
             raise NotFound(f"no estimate named {name!r}", estimate=name)
-        st = self.path(name).stat()
-        stamp = (st.st_mtime_ns, st.st_size, st.st_ino)
+        stamp = self._stamp(name)
         with self.loaded_lock:
             hit = self.loaded.get(name)
         if hit is not None and hit[0] == stamp:
             return stamp, copy.deepcopy(hit[1])  # a copy: a handler may change it and then fail before saving
         est = OtherEstimate.load(self.path(name))
+        self._remember(name, stamp, est)
+        return stamp, copy.deepcopy(est)
+
+    def _stamp(self, name: str) -> tuple:
+        st = self.path(name).stat()
+        return st.st_mtime_ns, st.st_size, st.st_ino
+
+    def _remember(self, name: str, stamp: tuple, est: OtherEstimate) -> None:
+        """``est`` is the estimate the file of ``stamp`` holds (the last 64 estimates kept)."""
         with self.loaded_lock:
             self.loaded[name] = (stamp, est)
             while len(self.loaded) > 64:
                 self.loaded.pop(next(iter(self.loaded)))
-        return stamp, copy.deepcopy(est)
 
     def keep(self, name: str, stamp: tuple, est: OtherEstimate) -> None:
         """Keep what a request that changes nothing computed on its copy (the body fit from the
@@ -333,7 +340,11 @@ class EstimatorHandlers:
                 est.save(self.path(name))
                 for space in SPACES:
                     ports.build(est.database(space), space)
+            stamp = self._stamp(name)  # the file as this request left it
         check = est.model_check(ports)  # the body fitted to every answer before the info reads it
+        # the estimate requests that follow start from this fitted body and correction (loaded again, the
+        # saved file would give the same after fitting them anew, once per request in flight)
+        self._remember(name, stamp, est)
         out = {"info": info_of(name, est), "completed": done, "model": model_reply(check)}
         if stopped:
             out["stopped"] = stopped
