@@ -231,6 +231,8 @@ def test_a_model_trained_once_is_the_model_trained_anew_and_its_copy_is_the_call
     trained = []
     real = hmm_module.fit_hmm
     monkeypatch.setattr(hmm_module, "fit_hmm", lambda *a, **k: trained.append(1) or real(*a, **k))
+    monkeypatch.setattr(hmm_module, "_TRAINED", hmm_module.OrderedDict())  # (this test's models only)
+    monkeypatch.setattr(hmm_module, "_TRAINED_SIZE", [0])
     first = hmm_module.fit_hmm_once(reps, 5, var_floor=0.01)
     reference = real(reps, 5, var_floor=0.01)
     for name in ("means", "covars", "stay"):
