@@ -84,13 +84,13 @@ on seeds 13 and 14, in-model and development kinds: the mean of known / unknown 
 
 from __future__ import annotations
 
-import hashlib
 import threading
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear, nnls
 
+from shared.digest import array_digest
 from shared.errors import BadInput
 from shared.motion.clip import Clip
 
@@ -348,12 +348,7 @@ class BodyEstimate:
         the self's mean g: the same for every estimate of one language and shared motions, so
         computed once per process (a loop over columns and motions in Python)."""
         lang = self.language
-        digest = hashlib.blake2b(digest_size=16)
-        for y in shared:
-            y = np.ascontiguousarray(y, dtype=float)
-            digest.update(repr(y.shape).encode())
-            digest.update(y.tobytes())
-        key = (digest.digest(), lang.rule, lang.tau_max, None if lang.weights is None else tuple(lang.weights),
+        key = (array_digest(*shared), lang.rule, lang.tau_max, None if lang.weights is None else tuple(lang.weights),
                tuple(self.theta_self))
         with _SCALES_LOCK:
             kept = _SCALES.get(key)

@@ -51,7 +51,7 @@ def basic_motions(joints: list[str] | None = None) -> list[Clip]:
 
 
 def unknown_motions(n: int = 10, seed: int = UNKNOWN_SEED, joints: list[str] | None = None) -> list[Clip]:
-    return [_clip(name, dict(zip(js, data.T.copy())), list(js))
+    return [Clip(data.copy(), list(js), FPS, name=name, label=name)
             for name, js, data in _unknown_profiles(n, seed, tuple(joints or ARM))]
 
 

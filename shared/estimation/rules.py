@@ -15,7 +15,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -25,6 +24,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
+from shared.digest import array_digest
 from shared.errors import BadInput
 from shared.estimation.motions import ALL, FPS
 from shared.estimation.symbols import f_conv
@@ -230,15 +230,12 @@ def _prediction_tables(candidates, names, regressors, bodies, jnd):
     the same one-hot (C, pairs x answers, N): computed once per process for the same candidates,
     motions, bodies and ``jnd`` (every identification without open answers has the same ones,
     those of the bodies the self thinks possible)."""
-    digest = hashlib.blake2b(digest_size=16)
-    digest.update(repr((jnd, names, [(c.rule, c.weights) for c in candidates])).encode())
     seen: dict = {}
     for array in [regressors[m] for m in names] + [bodies[c.name] for c in candidates]:
         if id(array) not in seen:  # (the candidates share the prior's bodies)
-            seen[id(array)] = hashlib.blake2b(np.ascontiguousarray(array, dtype=float).tobytes(),
-                                              digest_size=16).digest() + repr(np.shape(array)).encode()
-        digest.update(seen[id(array)])
-    key = digest.digest()
+            seen[id(array)] = array_digest(array)
+    key = (jnd, tuple(names), tuple((c.rule, c.weights) for c in candidates),
+           tuple(seen[id(regressors[m])] for m in names), tuple(seen[id(bodies[c.name])] for c in candidates))
     with _TABLES_LOCK:
         if key in _TABLES:
             _TABLES.move_to_end(key)

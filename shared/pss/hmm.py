@@ -26,7 +26,6 @@ after fitting). Tests check that both reach the same log-likelihood.
 
 from __future__ import annotations
 
-import hashlib
 import threading
 import warnings
 from collections import OrderedDict
@@ -36,6 +35,7 @@ import numpy as np
 
 from shared.compiled import kernel
 from shared.deadline import check_time
+from shared.digest import array_digest
 from shared.errors import ModelError
 from shared.pss.likelihood import LOG2PI, as_sequences, emission_logprob, forward_backward, forward_loglik
 
@@ -233,16 +233,11 @@ TRAINED_CACHE_BYTES = 16 * 2**20  # the models fit_hmm_once keeps per process, a
 def fit_hmm_once(sequences, n_states: int, **settings) -> LeftToRightHMM:
     """:func:`fit_hmm`, each distinct (sequences, ``n_states``, settings) trained once per process;
     a copy of the model is returned. Baum-Welch is deterministic: the same bytes and settings give
-    the same model. The estimator's spaces rebuild and associate the same motions over and over
-    (the self's database, the shared motions, the motions it is asked about); the last
+    the same model. Association uses it: the estimator's spaces of one language encode their
+    motions alike and associate the same motions over and over; the last
     :data:`TRAINED_CACHE_BYTES` of models are kept."""
     seqs = as_sequences(sequences)
-    digest = hashlib.blake2b(digest_size=16)
-    for x in seqs:
-        x = np.ascontiguousarray(x, dtype=float)
-        digest.update(repr(x.shape).encode())
-        digest.update(x.tobytes())
-    key = (digest.digest(), int(n_states), tuple(sorted(settings.items())))
+    key = (array_digest(*seqs), int(n_states), tuple(sorted(settings.items())))
     with _TRAINED_LOCK:
         kept = _TRAINED.get(key)
         if kept is not None:

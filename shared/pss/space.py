@@ -31,7 +31,7 @@ from shared.motion.clip import Clip
 from shared.pss import association, growth, spacefile
 from shared.pss.distance import ModelBank, bank_parameters, distance_matrix
 from shared.pss.features import MotionFeatures
-from shared.pss.hmm import LeftToRightHMM, fit_hmm, fit_hmm_once
+from shared.pss.hmm import LeftToRightHMM, fit_hmm
 from shared.pss.mds import Embedding, place_point, smacof
 from shared.pss.rows import spare
 from shared.pss.symbol import (  # the space's parts, named here too (its public API, __all__)
@@ -153,8 +153,8 @@ class ProtoSymbolSpace:
         symbols = []
         for i, (key, members) in enumerate(groups.items()):
             seqs = [features.encode(clips[k]) for k in members]
-            hmm = fit_hmm_once(seqs, n_states, covariance_type=covariance_type, var_floor=var_floor, backend=backend,
-                               n_iter=params.n_iter)  # (a clip the process trained before: not again)
+            hmm = fit_hmm(seqs, n_states, covariance_type=covariance_type, var_floor=var_floor, backend=backend,
+                          n_iter=params.n_iter)
             del seqs
             symbols.append(ProtoSymbol(key, seen[members[0]][1] or key, hmm, [seen[k][0] for k in members],
                                        [seen[k][2] for k in members], [seen[k][3] for k in members]))
@@ -311,9 +311,9 @@ class ProtoSymbolSpace:
         return self._group_models[key]
 
     def with_pose_floor(self, pose_floor: float | None) -> ProtoSymbolSpace:
-        """This space recognising with ``pose_floor`` (its proto-symbols, not trained again)."""
-        return ProtoSymbolSpace.from_symbols(self.params.with_pose_floor(pose_floor), self.features, self.symbols,
-                                             name=self.name)
+        """This space recognising with ``pose_floor``: its proto-symbols, distances and points as they are."""
+        return ProtoSymbolSpace(self.params.with_pose_floor(pose_floor), self.features, self.symbols, self.distances,
+                                self.embedding, name=self.name)
 
     def as_recognised(self, hmm: LeftToRightHMM) -> LeftToRightHMM:
         """``hmm`` (on the recognition groups) as recognition compares it: its variances floored
