@@ -338,45 +338,30 @@ class Ch3:
 
 def run(client, out: Path, sets: int = SETS, echo=print, others: int = OTHERS, kinds=KINDS, outside: bool = True) -> Path:
     """Every section; ``others`` of every kind in ``kinds`` of the population, and as many of
-    every kind outside the estimators' model (``outside``). The figures' sections (a few others
-    each, every one a chain of conversation sets that keeps few requests in flight) run beside
-    the population's, their lines said after them: the cores idle less (each other has its own
-    name, seed and answers, so the numbers do not depend on what runs beside it)."""
+    every kind outside the estimators' model (``outside``)."""
     import json
 
     t0 = time.perf_counter()
     ch = Ch3(client, out, sets, echo, others, kinds)
     res: dict = {"seconds": {}}
-    later: list = []  # the figures' lines, said after the population's
-    figures = Ch3(ch.c, out, sets, lambda *a: later.append(a), others, kinds)
 
-    def section(key, title, work, say=echo):
-        say(title)
+    def section(key, title, work):
+        echo(title)
         t = time.perf_counter()
         res[key] = work()
         res["seconds"][key] = round(time.perf_counter() - t, 1)
 
-    def figure_sections():
-        section("open", "fig. 3.6-3.8: open questions, d = 4, 6, 8", figures.open_questions, figures.echo)
-        section("rules", "fig. 3.14/3.15: right rule versus wrong rule, d = 5 and 7", figures.rules, figures.echo)
-        section("robustness", "answer noise", figures.robustness, figures.echo)
-
-    with worker_pool(ch.c, 1) as beside:
-        done = beside.submit(figure_sections)
-        section("uneven", f"others whose bodies differ: {len(ch.kinds)} kinds x {others}", ch.uneven)
-        if outside:
-            section("outside", f"others outside the estimators' model (never tuned on): {len(OUTSIDE_KINDS)} kinds x {others}",
-                    lambda: ch.uneven(OUTSIDE_KINDS))
-        section("people", "others answering like people: own and drifting words, 10-30 % inconsistent, \"I don't know\"",
-                ch.people)
-        section("identification", "rule identification over the population",
-                lambda: ch.identification(ch.kinds + (list(OUTSIDE_KINDS) if outside else [])))
-        done.result()
-    for line in later:
-        echo(*line)
-    # the sections in the report's order, whatever order they ended in
-    order = ("uneven", "outside", "people", "identification", "open", "rules", "robustness")
-    res = {"seconds": {k: res["seconds"][k] for k in order if k in res}, **{k: res[k] for k in order if k in res}}
+    section("uneven", f"others whose bodies differ: {len(ch.kinds)} kinds x {others}", ch.uneven)
+    if outside:
+        section("outside", f"others outside the estimators' model (never tuned on): {len(OUTSIDE_KINDS)} kinds x {others}",
+                lambda: ch.uneven(OUTSIDE_KINDS))
+    section("people", "others answering like people: own and drifting words, 10-30 % inconsistent, \"I don't know\"",
+            ch.people)
+    section("identification", "rule identification over the population",
+            lambda: ch.identification(ch.kinds + (list(OUTSIDE_KINDS) if outside else [])))
+    section("open", "fig. 3.6-3.8: open questions, d = 4, 6, 8", ch.open_questions)
+    section("rules", "fig. 3.14/3.15: right rule versus wrong rule, d = 5 and 7", ch.rules)
+    section("robustness", "answer noise", ch.robustness)
     # raw numbers, before plotting (the section times apart: the same seed gives the same file)
     (Path(out) / "results.json").write_text(json.dumps({k: v for k, v in res.items() if k != "seconds"}, indent=1,
                                                        default=str))
