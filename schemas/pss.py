@@ -197,12 +197,16 @@ ASSOCIATE = Endpoint(
                        "point -> weights: exact affine (may extrapolate) or convex inverse-distance; absent: "
                        "inverse-distance for missing sensor channels, affine for missing frames",
                        required=False),
+        "whole": F(Bool(), "false: leave the whole generated pattern out of the reply (missing sensor channels "
+                           "only: the aligned channels are the answer; saves generating it)",
+                   required=False, default=True),
     }), doc="the whole pattern from a partial one (eq. 2.8)"),
     Message("pss.associate.reply", Map({
         "space": SPACE,
         "label": F(Str(max_len=64)),
         "point": F(Array(shape=(None,))),
-        "whole": F(CLIP, "the whole generated pattern"),
+        "whole": F(CLIP, "the whole generated pattern (absent when the request said whole: false)",
+                   required=False),
         "aligned": F(CLIP, "the missing channels estimated on the clip's own frames", required=False),
         "progress": F(Float(0.0, 1.0), "how far through the motion the partial clip reaches", required=False),
         "reach": F(Float(0.0), "distance to the nearest proto-symbol over the 95th percentile of the proto-symbols' "

@@ -307,7 +307,7 @@ def test_a_service_stopping_while_a_worker_still_publishes_ends_cleanly(tmp_path
                 go.set()
                 try:
                     for _ in range(200_000):  # bounded: far more than the stop takes
-                        svc.publish("request", {"verb": "x", "ms": 1.0})
+                        svc.publish("requests", {"service": "probe", "requests": [["x", 1.0, "ok"]]})
                         sent[0] += 1
                         if svc._session is None:
                             break

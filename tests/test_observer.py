@@ -93,6 +93,7 @@ def test_request_events_draw_only_the_contracts_verbs(tmp_path, monkeypatch):
     """Malformed requests name verbs of their own; the dashboard's entities (and the observer's
     memory) must not grow with them: every verb outside the service's contract is one entity."""
     from services.observer.service import Observer
+    from shared.errors import BadInput
     from shared.observe.dashboard import Dashboard
     from shared.observe.recording import read
 
@@ -100,7 +101,10 @@ def test_request_events_draw_only_the_contracts_verbs(tmp_path, monkeypatch):
     o, d = Observer(), Dashboard(tmp_path / "r.rrd")
     for i in range(50):
         for service, verb in (("pss", f"nope{i}"), ("pss", "list"), ("intruder", f"x{i}")):
-            o.handle(d, f"mc/events/{service}/request", pack({"service": service, "verb": verb, "ms": 1.0, "code": "ok"}))
+            o.handle(d, f"mc/events/{service}/requests", pack({"service": service, "requests": [[verb, 1.0, "ok"]]}))
+    for bad in ({"service": "pss", "requests": [["list", 1.0]]}, {"service": "pss", "requests": "list"}):
+        with pytest.raises(BadInput):  # refused as a whole (the loop logs it), never half drawn
+            o.handle(d, "mc/events/pss/requests", pack(bad))
     d.close()
     table = read(tmp_path / "r.rrd")["/cluster/latency"][-1]["TextDocument:text"][0]
     rows = [line.split("|")[1:3] for line in table.splitlines() if line.startswith("| pss") or line.startswith("| intr")]

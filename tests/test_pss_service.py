@@ -104,7 +104,12 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     m = motion_only[0]
     a = _checked(contract.ASSOCIATE, c.request("pss", "associate", {"space": "base", "clip": clip_to_wire(m)}))
     assert a["label"] == m.label and a["aligned"]["data"].shape[0] == m.resample(30).n_frames
-    assert a["aligned"]["sensor"] == info["sensor_channels"]
+    assert a["aligned"]["sensor"] == info["sensor_channels"] and a["whole"]["data"].shape[0] > 10
+    # the estimator's form: the sensor channels on the clip's frames alone, the same, without the whole pattern
+    lean = _checked(contract.ASSOCIATE, c.request("pss", "associate", {"space": "base", "clip": clip_to_wire(m),
+                                                                       "whole": False}))
+    assert lean["whole"] is None and np.array_equal(lean["aligned"]["data"], a["aligned"]["data"])
+    assert lean["label"] == a["label"] and np.array_equal(lean["point"], a["point"])
     part = test[0].frames(0, int(0.8 * test[0].n_frames))
     f = _checked(contract.ASSOCIATE, c.request("pss", "associate", {"space": "base", "clip": clip_to_wire(part),
                                                                     "missing": "frames"}))

@@ -134,6 +134,11 @@ def test_g_and_its_gradient_match_f_conv(rule):
     assert np.allclose(gb, [g_and_gradient(v, theta, rule, 0.7, weights)[0] for v in ys])
     assert np.allclose(gradb, [g_and_gradient(v, theta, rule, 0.7, weights)[1] for v in ys])
     assert np.allclose(Batch(ys, lang).g(theta), gb)  # the line search's g without the gradient
+    if rule not in ("eq3.8", "f1"):  # the peaks of all motions at once (padded): motion by motion's, to the bit
+        ys = [r.normal(size=(n, 4, 9)) for n in (1, 3, 40, 17, 64)]
+        gb, gradb = Batch(ys, lang).g_and_gradient(theta)
+        each = [g_and_gradient(v, theta, rule, 0.7, weights) for v in ys]
+        assert np.array_equal(gb, [e[0] for e in each]) and np.array_equal(gradb, [e[1] for e in each])
 
 
 @pytest.mark.parametrize("rule", RULES)

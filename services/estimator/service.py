@@ -117,7 +117,8 @@ class BusPorts:
 
     def associate(self, motion, space: str = "thesis") -> np.ndarray:
         r = self.c.request("pss", "associate", {"space": self.space_of(space), "clip": clip_to_wire(motion),
-                                                "missing": "sensor", "weighting": "inverse_distance"})
+                                                "missing": "sensor", "weighting": "inverse_distance",
+                                                "whole": False})  # the torques on the motion's own frames only
         return self._taus(r["aligned"])
 
 

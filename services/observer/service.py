@@ -1,4 +1,4 @@
-"""The observer: subscribes to every event of the cluster and logs it to rerun
+"""The observer: subscribes to the cluster's events it draws (:data:`DRAWN`) and logs them to rerun
 (``shared.observe.dashboard``). It answers no requests; it declares the liveliness token
 ``<prefix>/alive/observer`` so ``make up`` waits for it and ``status`` lists it.
 
@@ -28,6 +28,10 @@ from shared.errors import BadInput, MirrorcoachError
 from shared.observe.dashboard import MAX_KEPT, Dashboard
 
 log = logging.getLogger("mirrorcoach.observer")
+
+#: the events the observer draws (service/topic; ``*``: every service)
+DRAWN = ("coach/session", "coach/trial", "pss/space", "estimator/progress", "dialogue/transcript", "capture/take",
+         "*/requests")
 
 
 class Observer:
@@ -122,9 +126,13 @@ class Observer:
             dash.transcript(ev)
         elif service == "capture" and topic == "take":
             dash.capture_take(ev)
-        elif topic == "request" and contract is not None:  # the entities stay bounded: a service and
-            verb = ev.get("verb") if ev.get("verb") in contract.ENDPOINTS else "unknown_verb"  # verb each
-            dash.request({**ev, "service": service, "verb": verb})  # of the contracts, never a caller's
+        elif topic == "requests" and contract is not None:  # a service's answered requests (runtime.py)
+            batch = ev.get("requests")
+            if not isinstance(batch, list) or not all(isinstance(r, list) and len(r) == 3 for r in batch):
+                raise BadInput("a requests event holds a list of [verb, ms, code]")
+            for verb, ms, code in batch:  # the entities stay bounded: a service and verb each of the
+                verb = verb if verb in contract.ENDPOINTS else "unknown_verb"  # contracts, never a caller's
+                dash.request({"service": service, "verb": verb, "ms": float(ms), "code": code})
 
     def run(self) -> int:
         import zenoh
@@ -134,7 +142,8 @@ class Observer:
         path = self.recording_path()
         dash = Dashboard(path, os.environ.get("MIRRORCOACH_RERUN_URL") or None)
         session = zenoh.open(client_config(self.s, wait=True))
-        sub = session.declare_subscriber(self.s.key("events", "**"), self.enqueue)
+        # the topics it draws (not the capture's frames, nor events only services listen to)
+        subs = [session.declare_subscriber(self.s.key("events", *topic.split("/")), self.enqueue) for topic in DRAWN]
         token = session.liveliness().declare_token(self.s.key("alive", "observer"))
         log.info("observer up; recording to %s", path)
         limit, next_check, start = self.s.recording_mb * 2**20, 0.0, 0
@@ -166,7 +175,8 @@ class Observer:
                     self.refused += 1
                     log.exception("could not log the event on %s", key)
         finally:
-            sub.undeclare()
+            for sub in subs:
+                sub.undeclare()
             token.undeclare()
             session.close()
             dash.close()

@@ -169,9 +169,11 @@ def make_service(settings: Settings | None = None) -> Service:
     def associate(req):
         space = store.get(req["space"])
         clip = clip_from_wire(req["clip"], space.features.skeleton)
-        a = space.associate(clip, req["missing"], method=req["method"], seed=req["seed"], weighting=req["weighting"])
-        out = {"space": req["space"], "label": a.recognition.label, "point": np.asarray(a.recognition.point, float),
-               "whole": clip_to_wire(a.whole)}
+        a = space.associate(clip, req["missing"], method=req["method"], seed=req["seed"], weighting=req["weighting"],
+                            whole=req["whole"])
+        out = {"space": req["space"], "label": a.recognition.label, "point": np.asarray(a.recognition.point, float)}
+        if a.whole is not None:
+            out["whole"] = clip_to_wire(a.whole)
         if a.aligned is not None:
             out["aligned"] = clip_to_wire(a.aligned, with_skeleton=False)
         if a.progress is not None:

@@ -30,8 +30,9 @@ caller was told is done is on the shared disk when the standby takes over; ``on_
 drop what an instance kept in memory from an earlier term.
 
 The service declares the liveliness token ``<prefix>/alive/<service>``, publishes events on
-``<prefix>/events/<service>/<topic>`` (congestion control BLOCK: events are not dropped) and a
-``request`` event per answered request (verb, milliseconds, code) for the observer. SIGTERM or
+``<prefix>/events/<service>/<topic>`` (congestion control BLOCK: events are not dropped) and, for
+the observer, a ``requests`` event with the answered requests' (verb, milliseconds, code), at most
+every :data:`REQUESTS_EVERY_S`. SIGTERM or
 SIGINT stops it cleanly: the queryable is undeclared, in-flight requests finish (bounded
 wait), ``on_stop`` hooks flush state, and the session is closed.
 """
@@ -72,6 +73,13 @@ PAYLOAD_FACTOR = 7
 #: every request in flight also holds its payload twice (as received and decoded) outside its
 #: reservation, also while it waits for memory
 PAYLOAD_HELD = 2
+#: a request this slow (or failed) gets a line in its service's log; the others only at DEBUG
+SLOW_MS = 1000.0
+#: requests go to the observer (its latency table) as one ``requests`` event per service at most
+#: every REQUESTS_EVERY_S, or at once when REQUESTS_BATCH are waiting: an event per request was
+#: 60 % of the cluster's events in `reproduce ch3` (router, observer and the services' CPU)
+REQUESTS_EVERY_S = 0.5
+REQUESTS_BATCH = 500
 
 
 class Service:
@@ -125,6 +133,9 @@ class Service:
         # ("RuntimeError: Already borrowed"), so both take this lock
         self._publish_lock = threading.Lock()
         self._answered = threading.local()  # per worker: the cost of the request it is answering
+        self._requests: list[list] = []  # [verb, ms, code] of the requests not yet published
+        self._requests_lock = threading.Lock()
+        self._requests_timer: threading.Timer | None = None
 
     def client(self):
         """A client of the cluster for calling other services (opened on first use, closed on stop)."""
@@ -178,7 +189,7 @@ class Service:
             self._wait_pool = ThreadPoolExecutor(self.settings.waiting, thread_name_prefix=f"{self.name}-waiting")
         self._session = zenoh.open(client_config(self.settings, wait=True))
         self.budget.measure_baseline()  # the service as it waits: code, caches, its Zenoh session
-        for topic in list(self.events) + ["request"]:
+        for topic in list(self.events) + ["requests"]:
             self._publishers[topic] = self._session.declare_publisher(
                 self.settings.key("events", self.name, topic), congestion_control=zenoh.CongestionControl.BLOCK)
         if self.settings.identity is None:
@@ -287,6 +298,7 @@ class Service:
             if getattr(self, attr) is not None:
                 getattr(self, attr).undeclare()
                 setattr(self, attr, None)
+        self._publish_requests()  # the last requests' records, before the publishers go
         with self._publish_lock:
             for p in self._publishers.values():
                 p.undeclare()
@@ -383,10 +395,30 @@ class Service:
                 later.daemon = True
                 later.start()
             ms = 1e3 * (time.perf_counter() - t0)
-            log.info("%s %s %.1f ms", verb, code, ms)
+            # a line per request only when it failed or was slow (the observer's latency table has
+            # them all): a line each was 7 % of pss's CPU in `reproduce ch3`
+            log.log(logging.INFO if code != "ok" or ms >= SLOW_MS else logging.DEBUG, "%s %s %.1f ms", verb, code, ms)
+            known = verb if verb in self.endpoints else "(unknown verb)"  # a caller cannot mint names
+            self._report(known, ms, code)
+
+    def _report(self, verb: str, ms: float, code: str) -> None:
+        """Queue a request's record for the next ``requests`` event (:data:`REQUESTS_EVERY_S`)."""
+        with self._requests_lock:
+            self._requests.append([verb, round(ms, 3), code])
+            full = len(self._requests) >= REQUESTS_BATCH
+            if not full and self._requests_timer is None:
+                self._requests_timer = threading.Timer(REQUESTS_EVERY_S, self._publish_requests)
+                self._requests_timer.daemon = True
+                self._requests_timer.start()
+        if full:
+            self._publish_requests()
+
+    def _publish_requests(self) -> None:
+        with self._requests_lock:
+            batch, self._requests, self._requests_timer = self._requests, [], None
+        if batch:
             try:
-                known = verb if verb in self.endpoints else "(unknown verb)"  # a caller cannot mint names
-                self.publish("request", {"service": self.name, "verb": known, "ms": ms, "code": code})
+                self.publish("requests", {"service": self.name, "requests": batch})
             except Exception:  # observability must never break a reply
                 pass
 

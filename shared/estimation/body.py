@@ -272,8 +272,7 @@ class Batch:
     def g_and_gradient(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lang = self.language
         if lang.rule not in ("eq3.8", "f1"):
-            out = [g_and_gradient(y, theta, lang.rule, lang.tau_max, lang.weights) for y in self.ys]
-            return np.array([o[0] for o in out]), np.array([o[1] for o in out])
+            return self._peaks(theta)
         tau = regressor_torques(self.y, theta)  # (sum T, J)
         # each motion's gradient one (T J) . (T J, P) product: BLAS, 2x faster than an einsum over
         # every frame and a sum of its rows
@@ -281,6 +280,37 @@ class Batch:
         flat = self.y.reshape(len(s), -1)
         grad = np.stack([s[lo:hi] @ flat[lo:hi] for lo, hi in self.spans]) / self._norm()[:, None]
         return self._g_of(tau), grad
+
+    def _peaks(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """f2-f4 (eq. 3.14-3.16) of every motion at once: the motions' frames side by side,
+        padded (a padded frame's |tau| is -1, never a peak), each peak found by one argmax.
+        The same numbers as :func:`g_and_gradient` motion by motion, to the bit (tested), 2-3x faster."""
+        rule, n_j = self.language.rule, self.y.shape[1]
+        if getattr(self, "_pad", None) is None:
+            steps = np.arange(int(self.lengths.max()))
+            valid = steps[None, :] < self.lengths[:, None]  # (M, T max)
+            self._pad = np.where(valid, self.starts[:, None] + steps[None, :], 0), valid
+        rows, valid = self._pad
+        # one product per motion: BLAS rounds a row by where it falls in the product
+        tau = np.concatenate([regressor_torques(y, theta) for y in self.ys])
+        w = np.ones(n_j) if self.language.weights is None else np.asarray(self.language.weights, float)
+        s = np.sign(tau) * w / self.language.tau_max  # as g_and_gradient computes them
+        a = np.abs(tau) * w / self.language.tau_max
+        a_pad = np.where(valid[..., None], a[rows], -1.0)  # (M, T max, J)
+        m = np.arange(len(self.lengths))
+        if rule == "f2":  # each joint's peak frame
+            t = self.starts[:, None] + a_pad.argmax(axis=1)  # (M, J) rows of the stacked frames
+            j = np.arange(n_j)[None, :]
+            return a[t, j].sum(axis=1), np.einsum("mj,mjp->mp", s[t, j], self.y[t, j])
+        if rule == "f3":  # the frame of the largest summed torque
+            total = np.where(valid, a_pad.sum(axis=2), -1.0)
+            t = self.starts + total.argmax(axis=1)
+            return a[t].sum(axis=1), (s[t][:, None, :] @ self.y[t])[:, 0]
+        if rule == "f4":  # the one largest torque
+            flat = a_pad.reshape(len(m), -1).argmax(axis=1)
+            t, j = self.starts + flat // n_j, flat % n_j
+            return a[t, j], s[t, j][:, None] * self.y[t, j]
+        raise BadInput(f"unknown conversion rule {rule!r}")
 
     def _g_of(self, tau: np.ndarray) -> np.ndarray:
         """eq. 3.8 (or f1) of every motion from the stacked torques (sum T, J)."""

@@ -552,10 +552,10 @@ class ProtoSymbolSpace:
 
     # ------------------------------------------------------------------ association and the file
     def associate(self, clip: Clip, missing: str = "sensor", *, method: str = "expected", seed: int = 0,
-                  weighting: str | None = None) -> Association:
+                  weighting: str | None = None, whole: bool = True) -> Association:
         """Eq. 2.8: the whole pattern from a partial one (missing sensor channels or missing
         frames); :func:`shared.pss.association.associate` says how."""
-        return association.associate(self, clip, missing, method=method, seed=seed, weighting=weighting)
+        return association.associate(self, clip, missing, method=method, seed=seed, weighting=weighting, whole=whole)
 
     def save(self, path) -> Path:
         """Write the space to one ``.npz`` file, atomically (:func:`shared.pss.spacefile.save`)."""

@@ -70,7 +70,7 @@ class Association:
 
     recognition: Recognition
     weights: np.ndarray
-    whole: Clip
+    whole: Clip | None  # None: not asked for (``associate(..., whole=False)``)
     aligned: Clip | None = None
     progress: float | None = None
     #: the motion's eq. 2.4 distance to its nearest proto-symbol over the 95th percentile of the
