@@ -11,11 +11,10 @@ from shared.agents.population import KINDS, population
 from shared.bodies.body import perform
 from shared.bodies.robot import LINK_SHARE, BodySpec, robot, small_humanoid
 from shared.errors import BadInput
+from shared.estimation.batch import Batch, g_and_gradient
 from shared.estimation.body import (
-    Batch,
     BodyEstimate,
     column_names,
-    g_and_gradient,
     nonnegative_least_squares,
     self_regressor,
 )
@@ -134,7 +133,12 @@ def test_g_and_its_gradient_match_f_conv(rule):
     assert np.allclose(gb, [g_and_gradient(v, theta, rule, 0.7, weights)[0] for v in ys])
     assert np.allclose(gradb, [g_and_gradient(v, theta, rule, 0.7, weights)[1] for v in ys])
     assert np.allclose(Batch(ys, lang).g(theta), gb)  # the line search's g without the gradient
-    if rule not in ("eq3.8", "f1"):  # the peaks of all motions at once (padded): motion by motion's, to the bit
+    if rule in ("eq3.8", "f1"):  # the one-dimensional products: the plain broadcast formula's numbers, to the bit
+        b = Batch(ys, lang)
+        tau = np.concatenate(ys) @ theta
+        norm = b.lengths * (1 if rule == "eq3.8" else 4)
+        assert np.array_equal(b.g(theta), np.add.reduceat((np.abs(tau) * b.w).sum(axis=1), b.starts) / norm)
+    else:  # the peaks of all motions at once (padded): motion by motion's, to the bit
         ys = [r.normal(size=(n, 4, 9)) for n in (1, 3, 40, 17, 64)]
         gb, gradb = Batch(ys, lang).g_and_gradient(theta)
         each = [g_and_gradient(v, theta, rule, 0.7, weights) for v in ys]

@@ -59,7 +59,7 @@ gears and coupling kinds were never run with it).
 **Answers as constraints.** Every open answer "word k" about motion ``m`` says
 ``g_max (k-1)/d <= F_conv(Y_m theta) < g_max k/d`` (eq. 3.4, 3.8). Every rule (eq. 3.8, f1-f4)
 is positively homogeneous of degree 1 in the torques and piecewise linear, so around an
-estimate each answer is a linear constraint on ``theta`` (:func:`g_and_gradient`); the set of
+estimate each answer is a linear constraint on ``theta`` (:func:`shared.estimation.batch.g_and_gradient`); the set of
 bodies every answer allows is an intersection of slabs, narrowed by each answer.
 
 **The estimate** (:class:`BodyEstimate`) is the body nearest to a proportional one (``s`` free)
@@ -92,6 +92,7 @@ from scipy.optimize import least_squares, lsq_linear, nnls
 
 from shared.digest import array_digest
 from shared.errors import BadInput
+from shared.estimation.batch import Batch, g_and_gradient, regressor_torques
 from shared.motion.clip import Clip
 
 LINKS = ("upper_arm", "forearm", "shin")
@@ -202,41 +203,6 @@ def self_regressor(motion: Clip, joints, missing=()) -> np.ndarray:
     return np.stack(cols, axis=-1)
 
 
-def regressor_torques(y: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """``Y theta`` of a regressor (T, J, P) as one matrix-vector product (4x faster than ``y @ theta``)."""
-    y = np.asarray(y, float)
-    return (y.reshape(-1, y.shape[-1]) @ theta).reshape(y.shape[:-1])
-
-
-def g_and_gradient(y: np.ndarray, theta: np.ndarray, rule: str = "eq3.8", tau_max: float = 1.0,
-                   weights=None) -> tuple[float, np.ndarray]:
-    """``g = F_conv(Y theta)`` (eq. 3.8, 3.13-3.16) and its gradient in ``theta`` (exact where
-    no torque changes sign and no maximum changes place; ``g = gradient . theta`` there)."""
-    tau = regressor_torques(y, theta)
-    w = np.ones(tau.shape[1]) if weights is None else np.asarray(weights, float)
-    s = np.sign(tau) * w / tau_max  # d|tau_tj| w_j / tau_max
-    a = np.abs(tau) * w / tau_max
-    if rule in ("eq3.8", "f1"):
-        g = a.sum(axis=1).mean() if rule == "eq3.8" else a.mean()
-        grad = np.einsum("tj,tjp->p", s, y) / (len(tau) if rule == "eq3.8" else tau.size)
-    elif rule == "f2":
-        t = a.argmax(axis=0)
-        j = np.arange(tau.shape[1])
-        g = a[t, j].sum()
-        grad = np.einsum("j,jp->p", s[t, j], y[t, j])
-    elif rule == "f3":
-        t = int(a.sum(axis=1).argmax())
-        g = a[t].sum()
-        grad = s[t] @ y[t]
-    elif rule == "f4":
-        tf, jf = np.unravel_index(int(a.argmax()), a.shape)
-        g = a[tf, jf]
-        grad = s[tf, jf] * y[tf, jf]
-    else:
-        raise BadInput(f"unknown conversion rule {rule!r}")
-    return float(g), grad
-
-
 def nonnegative_least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``argmin ||a x - b||`` with every ``x >= 0``: scipy's compiled NNLS (Lawson and Hanson),
     the same solution as ``lsq_linear(..., method="bvls")`` (the reference it is tested against,
@@ -246,78 +212,6 @@ def nonnegative_least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return nnls(a, b, maxiter=10 * a.shape[1])[0]
     except RuntimeError:
         return lsq_linear(a, b, bounds=(0.0, np.inf), method="bvls").x
-
-
-class Batch:
-    """Many motions' regressors stacked along time, so that ``g`` of all of them and their
-    gradients come from one product (eq. 3.8 and f1 vectorised; f2-f4 one motion at a time)."""
-
-    def __init__(self, ys: list[np.ndarray], language):
-        self.ys = [np.asarray(y, float) for y in ys]
-        self.language = language
-        self.y = np.concatenate(self.ys, axis=0)
-        self.lengths = np.array([len(y) for y in self.ys])
-        self.starts = np.r_[0, np.cumsum(self.lengths)[:-1]]
-        w = np.ones(self.y.shape[1]) if language.weights is None else np.asarray(language.weights, float)
-        self.w = w / language.tau_max
-        j = self.y.shape[1]  # each motion's rows in the (frames x joints) flattened regressor
-        self.spans = [(int(start) * j, int(start + n) * j) for start, n in zip(self.starts, self.lengths)]
-
-    def g(self, theta: np.ndarray) -> np.ndarray:
-        """``g`` of every motion (:meth:`g_and_gradient` without the gradient)."""
-        if self.language.rule not in ("eq3.8", "f1"):
-            return self.g_and_gradient(theta)[0]
-        return self._g_of(regressor_torques(self.y, theta))
-
-    def g_and_gradient(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        lang = self.language
-        if lang.rule not in ("eq3.8", "f1"):
-            return self._peaks(theta)
-        tau = regressor_torques(self.y, theta)  # (sum T, J)
-        # each motion's gradient one (T J) . (T J, P) product: BLAS, 2x faster than an einsum over
-        # every frame and a sum of its rows
-        s = (np.sign(tau) * self.w).reshape(-1)
-        flat = self.y.reshape(len(s), -1)
-        grad = np.stack([s[lo:hi] @ flat[lo:hi] for lo, hi in self.spans]) / self._norm()[:, None]
-        return self._g_of(tau), grad
-
-    def _peaks(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """f2-f4 (eq. 3.14-3.16) of every motion at once: the motions' frames side by side,
-        padded (a padded frame's |tau| is -1, never a peak), each peak found by one argmax.
-        The same numbers as :func:`g_and_gradient` motion by motion, to the bit (tested), 2-3x faster."""
-        rule, n_j = self.language.rule, self.y.shape[1]
-        if getattr(self, "_pad", None) is None:
-            steps = np.arange(int(self.lengths.max()))
-            valid = steps[None, :] < self.lengths[:, None]  # (M, T max)
-            self._pad = np.where(valid, self.starts[:, None] + steps[None, :], 0), valid
-        rows, valid = self._pad
-        # one product per motion: BLAS rounds a row by where it falls in the product
-        tau = np.concatenate([regressor_torques(y, theta) for y in self.ys])
-        w = np.ones(n_j) if self.language.weights is None else np.asarray(self.language.weights, float)
-        s = np.sign(tau) * w / self.language.tau_max  # as g_and_gradient computes them
-        a = np.abs(tau) * w / self.language.tau_max
-        a_pad = np.where(valid[..., None], a[rows], -1.0)  # (M, T max, J)
-        m = np.arange(len(self.lengths))
-        if rule == "f2":  # each joint's peak frame
-            t = self.starts[:, None] + a_pad.argmax(axis=1)  # (M, J) rows of the stacked frames
-            j = np.arange(n_j)[None, :]
-            return a[t, j].sum(axis=1), np.einsum("mj,mjp->mp", s[t, j], self.y[t, j])
-        if rule == "f3":  # the frame of the largest summed torque
-            total = np.where(valid, a_pad.sum(axis=2), -1.0)
-            t = self.starts + total.argmax(axis=1)
-            return a[t].sum(axis=1), (s[t][:, None, :] @ self.y[t])[:, 0]
-        if rule == "f4":  # the one largest torque
-            flat = a_pad.reshape(len(m), -1).argmax(axis=1)
-            t, j = self.starts + flat // n_j, flat % n_j
-            return a[t, j], s[t, j][:, None] * self.y[t, j]
-        raise BadInput(f"unknown conversion rule {rule!r}")
-
-    def _g_of(self, tau: np.ndarray) -> np.ndarray:
-        """eq. 3.8 (or f1) of every motion from the stacked torques (sum T, J)."""
-        return np.add.reduceat((np.abs(tau) * self.w).sum(axis=1), self.starts) / self._norm()
-
-    def _norm(self) -> np.ndarray:
-        return self.lengths * (1 if self.language.rule == "eq3.8" else self.y.shape[1])
 
 
 @dataclass
@@ -591,7 +485,10 @@ class BodyEstimate:
         if targets:
             # how much the answer tells about the motions that matter: the squared correlation,
             # under the same Gaussian, of the probe's g with each target's g, averaged
-            tgrad = Batch(list(targets), lang).g_and_gradient(self.theta)[1]
+            kept = getattr(self, "_targets", None)  # the same arrays as last time: their stack built once
+            if kept is None or len(kept[0]) != len(targets) or any(a is not b for a, b in zip(kept[0], targets)):
+                self._targets = kept = list(targets), Batch(list(targets), lang)
+            tgrad = kept[1].g_and_gradient(self.theta)[1]
             c_tp = tgrad @ cov @ grad.T  # (targets, candidates)
             var_t = np.maximum(np.einsum("tp,pq,tq->t", tgrad, cov, tgrad), 1e-18)
             rho2 = c_tp ** 2 / (var_t[:, None] * sd[None, :] ** 2)

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shared.estimation.body import regressor_torques
+from shared.estimation.batch import regressor_torques
 
 #: the grid of hyperparameters (type-II maximum likelihood over it)
 AMPLITUDES = (0.0, 0.03, 0.1, 0.3)  # a: the residual's typical size, relative to g
