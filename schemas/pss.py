@@ -109,7 +109,8 @@ BUILD = Endpoint(
         "open_set": F(Bool(), "false: a space for association and generation only: recognition's open-set tests "
                               "(the novelty model, the discriminant ratio) are not fitted, its 'none of these' is "
                               "the distance rule alone", required=False, default=True),
-        "replace": F(Bool(), "replace an existing space of that name", required=False, default=False),
+        "replace": F(Bool(), "replace an existing space of that name (a space this same request built, unchanged "
+                             "since, is kept as it is: a build is deterministic)", required=False, default=False),
     }), doc="build a space from clips (eq. 2.5)"),
     Message("pss.build.reply", INFO),
     "Build a named space from clips (eq. 2.5); fails with conflict if it exists and replace is false.",

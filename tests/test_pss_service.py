@@ -120,7 +120,11 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     assert c.request("pss", "distance", {"space": "base", "a": names[0], "b": names[0]})["distance"] == 0
 
     # add, info, list, delete on a copy
-    _checked(contract.BUILD, c.request("pss", "build", {"space": "copy", "clips": [clip_to_wire(x) for x in train[:4]]}))
+    four = {"space": "copy", "clips": [clip_to_wire(x) for x in train[:4]]}
+    first = _checked(contract.BUILD, c.request("pss", "build", four))
+    # the same request again: the space it built is this one (not made again: no event below)
+    again = _checked(contract.BUILD, c.request("pss", "build", {**four, "replace": True}))
+    assert np.array_equal(again["points"], first["points"]) and again["n_proto_symbols"] == 4
     added = _checked(contract.ADD, c.request("pss", "add", {"space": "copy", "clips": [clip_to_wire(train[5])]}))
     assert added["n_proto_symbols"] == 5
     before = _checked(contract.INFO_EP, c.request("pss", "info", {"space": "copy"}))
@@ -134,14 +138,16 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     assert e.value.code == "bad_request" and "as_one needs rebuild" in e.value.message
     listed = _checked(contract.LIST, c.request("pss", "list"))
     assert {s["space"] for s in listed["spaces"]} >= {"base", "copy"} and listed["interrupted"] == []
+    # the space changed since that build: the same request makes it again, of its four clips
+    assert _checked(contract.BUILD, c.request("pss", "build", {**four, "replace": True}))["n_proto_symbols"] == 4
     assert _checked(contract.DELETE, c.request("pss", "delete", {"space": "copy"}))["deleted"] is True
     assert "copy" not in {s["space"] for s in c.request("pss", "list")["spaces"]}
 
     deadline = time.monotonic() + 5
-    while len(events) < 4 and time.monotonic() < deadline:
+    while len(events) < 5 and time.monotonic() < deadline:
         time.sleep(0.05)
     changes = [(e["space"], e["change"]) for e in events]
-    assert changes == [("copy", "built"), ("copy", "added"), ("copy", "added"), ("copy", "deleted")]
+    assert changes == [("copy", "built"), ("copy", "added"), ("copy", "added"), ("copy", "built"), ("copy", "deleted")]
     for e in events:
         contract.EVENTS["space"].validate(e)
     styled = _checked(contract.BUILD, c.request("pss", "build", {"space": "styled", "pose_floor": 0.03,

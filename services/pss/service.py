@@ -7,13 +7,19 @@ clips, calls ``shared.pss`` and shapes the reply. State lives in a :class:`Space
 
 from __future__ import annotations
 
+import hashlib
+import threading
+import weakref
+from collections import OrderedDict
+
 import numpy as np
 
 from schemas import pss as contract
 from schemas.common import clip_from_wire, clip_to_wire
+from shared.bus.codec import pack
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
-from shared.errors import BadInput, Conflict
+from shared.errors import BadInput, Conflict, NotFound
 from shared.pss.space import ProtoSymbolSpace
 from shared.pss.store import SpaceStore
 
@@ -92,16 +98,44 @@ def make_service(settings: Settings | None = None) -> Service:
         space = store.get(req["space"])
         return feature_cost(req.get("clips") or [], space.params.fps, space.features.n_features)
 
+    # name -> (the build request's digest, the space it made): a build with replace of the same clips
+    # and settings as the space it would replace is that space (a build is deterministic); the
+    # estimator rebuilds its spaces whenever a conversation resumes, a third of its builds
+    built: OrderedDict[str, tuple[str, weakref.ref]] = OrderedDict()
+    built_lock = threading.Lock()
+
+    def unchanged(name: str, digest: str):
+        """The stored space when the last build of ``name`` was this request and nothing has
+        changed the space since (add, delete, another build, a promotion: another object)."""
+        with built_lock:
+            last = built.get(name)
+        if last is None or last[0] != digest:
+            return None
+        try:
+            current = store.get(name)
+        except NotFound:
+            return None
+        return current if last[1]() is current else None
+
     @svc.handler("build")
     def build(req):
         name = req["space"]
         if store.exists(name) and not req["replace"]:
             raise Conflict(f"space {name!r} exists; delete it first or build with replace", space=name)
+        digest = hashlib.sha256(pack({k: v for k, v in req.items() if k != "replace"})).hexdigest()
+        same = unchanged(name, digest)
+        if same is not None:
+            return space_info(name, same)
         clips = [clip_from_wire(c) for c in req["clips"]]
         space = write(name, "build", lambda: ProtoSymbolSpace.build(
             clips, n_states=req["n_states"], dim=req["dim"], fps=req["fps"],
             covariance_type=req["covariance_type"], group_by=req["group_by"], name=name, pose_floor=req.get("pose_floor"),
             open_set=req["open_set"]))
+        with built_lock:
+            built[name] = (digest, weakref.ref(space))
+            built.move_to_end(name)
+            while len(built) > 1024:  # bounded: the oldest builds are forgotten (and made again if asked)
+                built.popitem(last=False)
         changed(name, "built", space)
         return space_info(name, space)
 
