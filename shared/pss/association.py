@@ -48,13 +48,13 @@ def associate(space: ProtoSymbolSpace, clip: Clip, missing: str = "sensor", *, m
     extrapolate) or ``"inverse_distance"`` (convex: the estimate stays among the known
     patterns, which is steadier for motions outside the space's hull; ch. 3 uses it).
     ``None``: inverse-distance for missing sensor channels, affine for missing frames.
+    Chosen on HDM05's bd and bk splits (arm torques from motion, eq. 3.9 error against
+    the training mean's: inverse-distance 31 / 24 % below it, affine 17 / 10 %) and
+    reported on dg (32 % below, affine 9 %).
 
     ``whole=False`` (missing sensor channels only): the whole pattern is not generated
     (``Association.whole`` is ``None``): a caller that reads only the sensor channels on the
     clip's own frames (the estimator, ch. 3) saves the generation, a third of the association.
-    Chosen on HDM05's bd and bk splits (arm torques from motion, eq. 3.9 error against
-    the training mean's: inverse-distance 31 / 24 % below it, affine 17 / 10 %) and
-    reported on dg (32 % below, affine 9 %).
     """
     if weighting is None:
         weighting = "inverse_distance" if missing == "sensor" else "affine"
