@@ -246,7 +246,9 @@ LIST = Endpoint(
 
 DELETE = Endpoint(
     "delete",
-    Message("pss.delete", Map({"space": SPACE})),
+    Message("pss.delete", Map({"space": SPACE,
+                               "missing_ok": F(Bool(), "a space that does not exist is no error: deleted is false",
+                                               required=False, default=False)})),
     Message("pss.delete.reply", Map({"space": SPACE, "deleted": F(Bool())})),
     "Delete a space (its file too).",
 )

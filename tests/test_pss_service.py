@@ -142,6 +142,10 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     assert _checked(contract.BUILD, c.request("pss", "build", {**four, "replace": True}))["n_proto_symbols"] == 4
     assert _checked(contract.DELETE, c.request("pss", "delete", {"space": "copy"}))["deleted"] is True
     assert "copy" not in {s["space"] for s in c.request("pss", "list")["spaces"]}
+    assert c.request("pss", "delete", {"space": "copy", "missing_ok": True})["deleted"] is False  # no event
+    with pytest.raises(RemoteError) as gone:
+        c.request("pss", "delete", {"space": "copy"})
+    assert gone.value.code == "not_found"
 
     deadline = time.monotonic() + 5
     while len(events) < 5 and time.monotonic() < deadline:

@@ -238,7 +238,12 @@ def make_service(settings: Settings | None = None) -> Service:
 
     @svc.handler("delete")
     def delete(req):
-        store.delete(req["space"])
+        try:
+            store.delete(req["space"])
+        except NotFound:
+            if not req["missing_ok"]:
+                raise
+            return {"space": req["space"], "deleted": False}
         changed(req["space"], "deleted")
         return {"space": req["space"], "deleted": True}
 
