@@ -145,3 +145,23 @@ def test_an_other_that_fits_no_rule_stops_with_a_reason(identification):
     assert r["rule"] == Candidate("f1") and r["questions"] == []  # nothing to ask
     with pytest.raises(BadInput, match="no candidate rules"):
         identify_bodies([], motions, regs, bodies, lambda a, b: ">")
+
+
+def test_contradictory_answers_give_the_scale_that_violates_their_bounds_least():
+    """scale_of with answers no scale satisfies (noise): the candidate violating the bounds least,
+    the first of a tie, as adding each answer's violation one by one finds it."""
+    from shared.estimation.language import _scale_bounds, scale_of
+
+    lang = Language(d=6, g_max=0.6)
+    rng = np.random.default_rng(5)
+    contradictory = 0
+    for _ in range(200):
+        answers = [(float(rng.uniform(0.05, 0.5)), int(rng.integers(1, 7))) for _ in range(int(rng.integers(2, 30)))]
+        lows, highs = _scale_bounds(answers, lang)
+        if max(lows) <= min(highs):
+            continue  # consistent: the middle of the interval (tested elsewhere)
+        contradictory += 1
+        cands = np.unique(np.r_[lows, [h for h in highs if np.isfinite(h)]])
+        one_by_one = [sum(max(0.0, a - x) + max(0.0, x - b) for a, b in zip(lows, highs)) for x in cands]
+        assert scale_of(answers, lang) == cands[int(np.argmin(one_by_one))]
+    assert contradictory > 100

@@ -73,11 +73,16 @@ def scale_of(answers, language: Language) -> float:
             return lo + 0.5 * language.g_max / language.d / max(max(g for g, _ in answers), 1e-12)
         return 0.5 * (lo + hi)
     cands = np.unique(np.r_[lows, [h for h in highs if np.isfinite(h)]])
+    return float(cands[np.argmin(_violations(cands, lows, highs))])
 
-    def violation(x):
-        return sum(max(0.0, a - x) + max(0.0, x - b) for a, b in zip(lows, highs))
 
-    return float(min(cands, key=violation))
+def _violations(xs: np.ndarray, lows, highs) -> np.ndarray:
+    """How far each ``x`` lies outside every answer's bounds, summed over the answers in
+    their order (a running sum: the same numbers as adding them one by one, so the same
+    ``x`` wins a tie)."""
+    lo, hi = np.asarray(lows, float)[None, :], np.asarray(highs, float)[None, :]
+    x = np.asarray(xs, float)[:, None]
+    return np.cumsum(np.maximum(0.0, lo - x) + np.maximum(0.0, x - hi), axis=1)[:, -1]
 
 
 # ---------------------------------------------------------------------------- evaluation
