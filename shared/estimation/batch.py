@@ -47,7 +47,8 @@ def g_and_gradient(y: np.ndarray, theta: np.ndarray, rule: str = "eq3.8", tau_ma
 
 class Batch:
     """Many motions' regressors stacked along time, so that ``g`` of all of them and their
-    gradients come from one product (eq. 3.8 and f1 vectorised; f2-f4 one motion at a time)."""
+    gradients come from one product (eq. 3.8 and f1), or from one argmax over all their
+    frames (f2-f4: :meth:`_peaks`)."""
 
     def __init__(self, ys: list[np.ndarray], language):
         self.ys = [np.asarray(y, float) for y in ys]
@@ -97,7 +98,6 @@ class Batch:
         s = np.sign(tau) * w / self.language.tau_max  # as g_and_gradient computes them
         a = np.abs(tau) * w / self.language.tau_max
         a_pad = np.where(valid[..., None], a[rows], -1.0)  # (M, T max, J)
-        m = np.arange(len(self.lengths))
         if rule == "f2":  # each joint's peak frame
             t = self.starts[:, None] + a_pad.argmax(axis=1)  # (M, J) rows of the stacked frames
             j = np.arange(n_j)[None, :]
@@ -107,7 +107,7 @@ class Batch:
             t = self.starts + total.argmax(axis=1)
             return a[t].sum(axis=1), (s[t][:, None, :] @ self.y[t])[:, 0]
         if rule == "f4":  # the one largest torque
-            flat = a_pad.reshape(len(m), -1).argmax(axis=1)
+            flat = a_pad.reshape(len(self.lengths), -1).argmax(axis=1)
             t, j = self.starts + flat // n_j, flat % n_j
             return a[t, j], s[t, j][:, None] * self.y[t, j]
         raise BadInput(f"unknown conversion rule {rule!r}")

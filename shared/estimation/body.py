@@ -59,8 +59,9 @@ gears and coupling kinds were never run with it).
 **Answers as constraints.** Every open answer "word k" about motion ``m`` says
 ``g_max (k-1)/d <= F_conv(Y_m theta) < g_max k/d`` (eq. 3.4, 3.8). Every rule (eq. 3.8, f1-f4)
 is positively homogeneous of degree 1 in the torques and piecewise linear, so around an
-estimate each answer is a linear constraint on ``theta`` (:func:`shared.estimation.batch.g_and_gradient`); the set of
-bodies every answer allows is an intersection of slabs, narrowed by each answer.
+estimate each answer is a linear constraint on ``theta``
+(:func:`shared.estimation.batch.g_and_gradient`); the set of bodies every answer allows is an
+intersection of slabs, narrowed by each answer.
 
 **The estimate** (:class:`BodyEstimate`) is the body nearest to a proportional one (``s`` free)
 that satisfies the answers: regularised least squares (``theta >= 0``) with a squared hinge on
