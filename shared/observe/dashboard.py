@@ -149,6 +149,10 @@ class Dashboard:
         self.view_bytes = 0.0  # measured when a layout is written to the file
         self._layout_due, self._layout_sent = False, float("-inf")
         self.rec.log("readme", lay.readme(), static=True)
+        # the failed requests' panel has a line before any request fails: empty, it looked broken
+        self._everywhere()
+        self.rec.log("cluster/warnings", rr.TextLog("recording started: a request that fails is listed here",
+                                                    level="INFO"))
         self._layout()
 
     def close(self) -> None:
