@@ -102,7 +102,8 @@ def test_request_events_draw_only_the_contracts_verbs(tmp_path, monkeypatch):
     for i in range(50):
         for service, verb in (("pss", f"nope{i}"), ("pss", "list"), ("intruder", f"x{i}")):
             o.handle(d, f"mc/events/{service}/requests", pack({"service": service, "requests": [[verb, 1.0, "ok"]]}))
-    for bad in ({"service": "pss", "requests": [["list", 1.0]]}, {"service": "pss", "requests": "list"}):
+    for bad in ({"service": "pss", "requests": [["list", 1.0]]}, {"service": "pss", "requests": "list"},
+                {"service": "pss", "requests": [["list", 1.0, "ok"], ["list", "slow", "ok"]]}):
         with pytest.raises(BadInput):  # refused as a whole (the loop logs it), never half drawn
             o.handle(d, "mc/events/pss/requests", pack(bad))
     d.close()

@@ -1,4 +1,4 @@
-"""The observer: subscribes to the cluster's events it draws (:data:`DRAWN`) and logs them to rerun
+"""The observer: subscribes to the cluster's events it draws (:attr:`Observer.drawers`) and logs them to rerun
 (``shared.observe.dashboard``). It answers no requests; it declares the liveliness token
 ``<prefix>/alive/observer`` so ``make up`` waits for it and ``status`` lists it.
 
@@ -19,6 +19,7 @@ import signal
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 
 from schemas import CONTRACTS
 from schemas.common import clip_from_wire
@@ -28,10 +29,6 @@ from shared.errors import BadInput, MirrorcoachError
 from shared.observe.dashboard import MAX_KEPT, Dashboard
 
 log = logging.getLogger("mirrorcoach.observer")
-
-#: the events the observer draws (service/topic; ``*``: every service)
-DRAWN = ("coach/session", "coach/trial", "pss/space", "estimator/progress", "dialogue/transcript", "capture/take",
-         "*/requests")
 
 
 class Observer:
@@ -48,6 +45,19 @@ class Observer:
         #: a file is closed (0.6-0.7 of the data in rerun 0.41); measured again at every rotation
         self.closing_growth = 1.75
         self.queued_lock = threading.Lock()
+        #: how each event it draws is drawn ("service/topic"; ``*``: every service): what it subscribes to
+        self.drawers: dict[str, Callable[[Dashboard, str, dict], None]] = {
+            "coach/session": lambda dash, _, ev: dash.session_started(ev["session"], clip_from_wire(ev["target"]),
+                                                                      ev.get("learner")),
+            "coach/trial": lambda dash, _, ev: dash.trial(
+                ev, clip_from_wire(ev["attempt"]) if ev.get("attempt") else None,
+                clip_from_wire(ev["emphatic"]) if ev.get("emphatic") else None),
+            "pss/space": self._space,
+            "estimator/progress": lambda dash, _, ev: dash.progress(ev),
+            "dialogue/transcript": lambda dash, _, ev: dash.transcript(ev),
+            "capture/take": lambda dash, _, ev: dash.capture_take(ev),
+            "*/requests": self._requests,
+        }
 
     def enqueue(self, sample) -> None:
         """The Zenoh callback: queue the event for the drawing thread. Events beyond
@@ -108,31 +118,32 @@ class Observer:
         contract = CONTRACTS.get(service)
         if contract is not None and topic in contract.EVENTS:
             ev = contract.EVENTS[topic].validate(ev)  # what its service declared: anything else is refused here
-        if service == "coach" and topic == "session":
-            dash.session_started(ev["session"], clip_from_wire(ev["target"]), ev.get("learner"))
-        elif service == "coach" and topic == "trial":
-            dash.trial(ev, clip_from_wire(ev["attempt"]) if ev.get("attempt") else None,
-                       clip_from_wire(ev["emphatic"]) if ev.get("emphatic") else None)
-        elif service == "pss" and topic == "space":
-            dash.space(ev)
-            self.spaces.pop(ev["space"], None)  # the latest state of each space, for the next recording
-            if ev["change"] != "deleted" and ev.get("info"):
-                self.spaces[ev["space"]] = ev
-                while len(self.spaces) > MAX_KEPT:
-                    self.spaces.popitem(last=False)
-        elif service == "estimator" and topic == "progress":
-            dash.progress(ev)
-        elif service == "dialogue" and topic == "transcript":
-            dash.transcript(ev)
-        elif service == "capture" and topic == "take":
-            dash.capture_take(ev)
-        elif topic == "requests" and contract is not None:  # a service's answered requests (runtime.py)
-            batch = ev.get("requests")
-            if not isinstance(batch, list) or not all(isinstance(r, list) and len(r) == 3 for r in batch):
-                raise BadInput("a requests event holds a list of [verb, ms, code]")
-            for verb, ms, code in batch:  # the entities stay bounded: a service and verb each of the
-                verb = verb if verb in contract.ENDPOINTS else "unknown_verb"  # contracts, never a caller's
-                dash.request({"service": service, "verb": verb, "ms": float(ms), "code": code})
+        draw = self.drawers.get(f"{service}/{topic}") or self.drawers.get(f"*/{topic}")
+        if draw is not None:
+            draw(dash, service, ev)
+
+    def _space(self, dash, service: str, ev: dict) -> None:
+        dash.space(ev)
+        self.spaces.pop(ev["space"], None)  # the latest state of each space, for the next recording
+        if ev["change"] != "deleted" and ev.get("info"):
+            self.spaces[ev["space"]] = ev
+            while len(self.spaces) > MAX_KEPT:
+                self.spaces.popitem(last=False)
+
+    @staticmethod
+    def _requests(dash, service: str, ev: dict) -> None:
+        """A service's answered requests (``shared.bus.runtime``): one latency table row each."""
+        contract = CONTRACTS.get(service)
+        if contract is None:  # the entities stay bounded: a service and verb each of the contracts,
+            return  # never a caller's
+        batch = ev.get("requests")
+        if not isinstance(batch, list) or not all(
+                isinstance(r, list) and len(r) == 3 and isinstance(r[0], str) and isinstance(r[1], (int, float))
+                and not isinstance(r[1], bool) and isinstance(r[2], str) for r in batch):
+            raise BadInput("a requests event holds a list of [verb, ms, code]: a text, a number, a text")
+        for verb, ms, code in batch:
+            dash.request({"service": service, "verb": verb if verb in contract.ENDPOINTS else "unknown_verb",
+                          "ms": float(ms), "code": code})
 
     def run(self) -> int:
         import zenoh
@@ -143,7 +154,8 @@ class Observer:
         dash = Dashboard(path, os.environ.get("MIRRORCOACH_RERUN_URL") or None)
         session = zenoh.open(client_config(self.s, wait=True))
         # the topics it draws (not the capture's frames, nor events only services listen to)
-        subs = [session.declare_subscriber(self.s.key("events", *topic.split("/")), self.enqueue) for topic in DRAWN]
+        subs = [session.declare_subscriber(self.s.key("events", *topic.split("/")), self.enqueue)
+                for topic in self.drawers]
         token = session.liveliness().declare_token(self.s.key("alive", "observer"))
         log.info("observer up; recording to %s", path)
         limit, next_check, start = self.s.recording_mb * 2**20, 0.0, 0

@@ -109,13 +109,14 @@ def make_service(settings: Settings | None = None) -> Service:
         changed the space since (add, delete, another build, a promotion: another object)."""
         with built_lock:
             last = built.get(name)
-        if last is None or last[0] != digest:
+        made = last[1]() if last is not None and last[0] == digest else None
+        if made is None:  # (gone: deleted or forgotten; never loaded from its file just to compare)
             return None
         try:
             current = store.get(name)
         except NotFound:
             return None
-        return current if last[1]() is current else None
+        return current if made is current else None
 
     @svc.handler("build")
     def build(req):
