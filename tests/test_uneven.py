@@ -201,20 +201,31 @@ def test_the_population_replays_and_each_kind_is_what_it_says():
 def test_an_other_keeps_its_bodys_torques_of_a_motion_but_not_what_it_was_handed():
     """An other performs a motion once (its body never changes): what it feels again is what a
     fresh perform gives, changing the returned torques changes nothing it keeps, and the same
-    motion's name with other data is performed anew."""
-    from shared.agents.other import KEPT_MOTIONS
+    motion's name with other data is performed anew. Others of the same body (another name,
+    answer noise or rule) share what was performed; another body does not; the process keeps a
+    bounded number."""
+    from shared.agents.other import _PERFORMED, KEPT_MOTIONS
+    from shared.bodies.body import perform
 
     m = basic_motions(ARM)
-    other = SimulatedOther("x", OtherParams(**population("mass", 1)[0]))
+    params = population("mass", 1)[0]
+    other = SimulatedOther("x", OtherParams(**params))
     first = other.feel(m[0])
     first[:] = 0.0
     again = other.feel(m[0])
-    assert np.array_equal(again, SimulatedOther("y", other.params).feel(m[0])) and np.abs(again).sum() > 0
+    fresh, _ = perform(SimulatedOther("fresh", other.params).body, m[0])
+    assert np.array_equal(again, fresh.select([f"tau.{j}" for j in other.params.joints])) and np.abs(again).sum() > 0
     louder = m[0].with_data(m[0].data * 1.5)  # the same name, another motion
     assert not np.allclose(other.feel(louder), again)
-    for i in range(KEPT_MOTIONS + 5):  # bounded
-        other.feel(m[0].with_data(m[0].data * (1 + 0.001 * i)))
-    assert len(other._kept) == KEPT_MOTIONS
+    kept = len(_PERFORMED.table)
+    twin = SimulatedOther("twin", OtherParams(**{**params, "noise": 0.2, "rule": "f2"}))
+    assert np.array_equal(twin.feel(m[0]), again) and len(_PERFORMED.table) == kept and twin._body is None
+    heavier = SimulatedOther("heavier", OtherParams(**{**params, "mass": params["mass"] * 1.5}))
+    assert not np.allclose(heavier.feel(m[0]), again) and len(_PERFORMED.table) == kept + 1
+    short = m[0].frames(0, 20)  # bounded
+    for i in range(KEPT_MOTIONS + 5):
+        other.feel(short.with_data(short.data * (1 + 0.001 * i)))
+    assert len(_PERFORMED.table) == KEPT_MOTIONS
 
 
 def test_others_outside_the_estimators_model_are_what_they_say():

@@ -22,6 +22,9 @@ replays identically.
 
 from __future__ import annotations
 
+import json
+import threading
+from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -173,7 +176,38 @@ def transmitted(tau: np.ndarray, motion: Clip, joints, t: dict | None, asked: in
     return felt * (1.0 + float(t.get("fatigue", 0.0)) * asked)
 
 
-KEPT_MOTIONS = 64  # motions an other keeps its body's torques of (SimulatedOther._torques)
+#: motions whose torques the process keeps, per body (:class:`_Performed`): the same body performs the
+#: same motions again in every identification configuration (its population again with other noise)
+KEPT_MOTIONS = 1024
+
+
+class _Performed:
+    """A body's torques of a motion, kept for the last ``KEPT_MOTIONS`` (body, joints, motion) of
+    the process: a body never changes, rule identification asks about pairs of the same 20 motions
+    again and again (two inverse dynamics a question before), and others of the same body (the same
+    population with another answer noise or rule) share them. Copies in and out: what a caller
+    does to its torques changes nothing kept."""
+
+    def __init__(self, limit: int):
+        self.table: OrderedDict = OrderedDict()
+        self.lock = threading.Lock()
+        self.limit = limit
+
+    def get(self, key, compute) -> np.ndarray:
+        with self.lock:
+            tau = self.table.get(key)
+            if tau is not None:
+                self.table.move_to_end(key)
+                return tau.copy()
+        tau = compute()  # outside the lock: two workers may both compute a new motion (the same numbers)
+        with self.lock:
+            self.table[key] = tau
+            while len(self.table) > self.limit:
+                self.table.popitem(last=False)
+        return tau.copy()
+
+
+_PERFORMED = _Performed(KEPT_MOTIONS)
 
 
 class SimulatedOther:
@@ -182,9 +216,16 @@ class SimulatedOther:
     def __init__(self, name: str, params: OtherParams | None = None, asked: int = 0):
         self.name = name
         self.params = (params or OtherParams()).check()
-        self.body = small_humanoid(self.params.body_spec(), name=f"other:{name}")
         self.asked = asked
-        self._kept: dict = {}  # the body's torques of the latest motions (_torques)
+        self._body = None  # built at its first perform (its torques may all be kept already)
+        # what the body is: the key of its kept torques
+        self._body_key = json.dumps([self.params.mass, self.params.body], sort_keys=True, default=str)
+
+    @property
+    def body(self):
+        if self._body is None:
+            self._body = small_humanoid(self.params.body_spec(), name=f"other:{self.name}")
+        return self._body
 
     def feel(self, motion: Clip) -> np.ndarray:
         """The torques (T x joints) this other's body produces performing ``motion``, as it
@@ -192,17 +233,14 @@ class SimulatedOther:
         return transmitted(self._torques(motion), motion, self.params.joints, self.params.transmission, self.asked)
 
     def _torques(self, motion: Clip) -> np.ndarray:
-        """The body's torques of ``motion`` (a copy), kept for the last ``KEPT_MOTIONS`` motions:
-        its body never changes, and rule identification asks about pairs of the same 20 motions
-        again and again (two inverse dynamics a question before)."""
-        key = motion.fingerprint()
-        tau = self._kept.get(key)
-        if tau is None:
+        """The body's torques of ``motion`` (a copy), kept (:class:`_Performed`)."""
+        joints = tuple(self.params.joints)
+
+        def compute():
             performed, _ = perform(self.body, motion)
-            tau = self._kept[key] = performed.select([f"tau.{j}" for j in self.params.joints])
-            while len(self._kept) > KEPT_MOTIONS:
-                self._kept.pop(next(iter(self._kept)))
-        return tau.copy()
+            return performed.select([f"tau.{j}" for j in joints])
+
+        return _PERFORMED.get((self._body_key, joints, motion.fingerprint()), compute)
 
     def g(self, motion: Clip) -> float:
         p = self.params
