@@ -26,6 +26,7 @@ import json
 import threading
 from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -217,7 +218,7 @@ class SimulatedOther:
         self.name = name
         self.params = (params or OtherParams()).check()
         self.asked = asked
-        self._body = None  # built at its first perform (its torques may all be kept already)
+        self._body: Any = None  # built at its first perform (its torques may all be kept already)
         # what the body is: the key of its kept torques
         self._body_key = json.dumps([self.params.mass, self.params.body], sort_keys=True, default=str)
 
