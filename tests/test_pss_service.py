@@ -154,6 +154,21 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
     assert changes == [("copy", "built"), ("copy", "added"), ("copy", "added"), ("copy", "built"), ("copy", "deleted")]
     for e in events:
         contract.EVENTS["space"].validate(e)
+    # two spaces built from the same clips under two names (the estimator's spaces of the self's
+    # torques): the same association, each answer naming its own space; once one has changed, its
+    # answers are its own again
+    for name in ("twin-a", "twin-b"):
+        c.request("pss", "build", {**four, "space": name})
+    ask = {"clip": clip_to_wire(m), "whole": False}
+    ta, tb = (c.request("pss", "associate", {**ask, "space": name}) for name in ("twin-a", "twin-b"))
+    assert (ta["space"], tb["space"]) == ("twin-a", "twin-b") and ta["label"] == tb["label"]
+    assert np.array_equal(ta["aligned"]["data"], tb["aligned"]["data"]) and np.array_equal(ta["point"], tb["point"])
+    c.request("pss", "add", {"space": "twin-a", "clips": [clip_to_wire(train[5])]})
+    changed_a, same_b = (c.request("pss", "associate", {**ask, "space": name}) for name in ("twin-a", "twin-b"))
+    assert not np.array_equal(changed_a["point"], ta["point"]) and np.array_equal(same_b["point"], tb["point"])
+    assert np.array_equal(c.request("pss", "associate", {**ask, "space": "twin-a"})["point"], changed_a["point"])
+    for name in ("twin-a", "twin-b"):
+        c.request("pss", "delete", {"space": name})
     styled = _checked(contract.BUILD, c.request("pss", "build", {"space": "styled", "pose_floor": 0.03,
                                                                  "clips": [clip_to_wire(x) for x in train[:4]]}))
     assert styled["params"]["recognition_pose_floor"] == 0.03  # a space for other styles

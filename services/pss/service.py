@@ -118,12 +118,28 @@ def make_service(settings: Settings | None = None) -> Service:
             return None
         return current if made is current else None
 
+    def content_digest(req) -> str:
+        """What a build request makes, whatever the space's name: the estimator's spaces of the
+        self's own torques are the same clips under the name of every estimate."""
+        return hashlib.sha256(pack({k: v for k, v in req.items() if k not in ("replace", "space")})).hexdigest()
+
+    # (what the space is, the association request without the space's name) -> the reply: an
+    # association is deterministic (its seed is in the request), so a space built from the same
+    # clips answers the same; bounded, the oldest forgotten
+    associations: OrderedDict[tuple[str, str], dict] = OrderedDict()
+
+    def made_by(name: str, space) -> str | None:
+        """The content digest of the build that made ``space`` (``None``: added to, loaded, promoted)."""
+        with built_lock:
+            last = built.get(name)
+        return last[0] if last is not None and last[1]() is space else None
+
     @svc.handler("build")
     def build(req):
         name = req["space"]
         if store.exists(name) and not req["replace"]:
             raise Conflict(f"space {name!r} exists; delete it first or build with replace", space=name)
-        digest = hashlib.sha256(pack({k: v for k, v in req.items() if k != "replace"})).hexdigest()
+        digest = content_digest(req)
         same = unchanged(name, digest)
         if same is not None:
             return space_info(name, same)
@@ -203,6 +219,13 @@ def make_service(settings: Settings | None = None) -> Service:
     @svc.handler("associate")
     def associate(req):
         space = store.get(req["space"])
+        made = made_by(req["space"], space)
+        key = None if made is None else (made, hashlib.sha256(pack({k: v for k, v in req.items() if k != "space"})).hexdigest())
+        if key is not None:
+            with built_lock:
+                kept = associations.get(key)
+            if kept is not None:
+                return {**kept, "space": req["space"]}
         clip = clip_from_wire(req["clip"], space.features.skeleton)
         a = space.associate(clip, req["missing"], method=req["method"], seed=req["seed"], weighting=req["weighting"],
                             whole=req["whole"])
@@ -215,6 +238,11 @@ def make_service(settings: Settings | None = None) -> Service:
             out["progress"] = float(a.progress)
         if np.isfinite(a.reach):
             out["reach"], out["extrapolating"] = float(a.reach), a.extrapolating
+        if key is not None:
+            with built_lock:
+                associations[key] = out
+                while len(associations) > 2048:
+                    associations.popitem(last=False)
         return out
 
     @svc.handler("distance")
