@@ -85,7 +85,7 @@ def test_what_the_selfs_body_gives_is_computed_once_and_a_failure_is_asked_again
     key at once wait for one computation; a failed one is not kept; the table is bounded."""
     import threading
 
-    from services.estimator.service import Once
+    from shared.once import Once
 
     once, calls, asked = Once(limit=3), [], threading.Semaphore(0)
 

@@ -41,6 +41,7 @@ from shared.estimation.rules import (
     weighted_candidates,
 )
 from shared.estimation.symbols import word
+from shared.once import Once
 from shared.pss.store import check_name
 
 
@@ -159,37 +160,6 @@ def model_reply(check: dict) -> dict:
         verdict = (f"{check['agreement']:.0%} of {check['answers']} answers agree with the estimated body; the other's "
                    f"repeated answers differ {check['repeat_disagreement']:.0%} of the time")
     return {**check, "verdict": verdict}
-
-
-class Once:
-    """What the self's fixed body gives for a motion, computed once for every estimate: requests
-    asking for the same key at once wait for one answer; a failed one is asked again next time;
-    past ``limit`` keys the oldest are forgotten."""
-
-    def __init__(self, limit: int = 4096):
-        self.table: dict = {}
-        self.lock = threading.Lock()
-        self.limit = limit
-
-    def once(self, key, compute, timeout: float):
-        from concurrent.futures import Future
-
-        with self.lock:
-            fut = self.table.get(key)
-            mine = fut is None
-            if mine:
-                fut = self.table[key] = Future()
-                while len(self.table) > self.limit:
-                    self.table.pop(next(iter(self.table)))
-        if mine:
-            try:
-                fut.set_result(compute())
-            except BaseException as e:
-                with self.lock:
-                    self.table.pop(key, None)
-                fut.set_exception(e)
-                raise
-        return fut.result(timeout=timeout)
 
 
 _REGRESSORS = Once()  # (motion, joints, missing) -> the self's regressor Y

@@ -104,13 +104,18 @@ def make_service(settings: Settings | None = None) -> Service:
     built: OrderedDict[str, tuple[str, weakref.ref]] = OrderedDict()
     built_lock = threading.Lock()
 
+    def last_build(name: str):
+        """The content digest of the last build of ``name`` and the space it made (``None`` when
+        that space is gone: deleted or forgotten)."""
+        with built_lock:
+            last = built.get(name)
+        return (None, None) if last is None else (last[0], last[1]())
+
     def unchanged(name: str, digest: str):
         """The stored space when the last build of ``name`` was this request and nothing has
         changed the space since (add, delete, another build, a promotion: another object)."""
-        with built_lock:
-            last = built.get(name)
-        made = last[1]() if last is not None and last[0] == digest else None
-        if made is None:  # (gone: deleted or forgotten; never loaded from its file just to compare)
+        last, made = last_build(name)
+        if made is None or last != digest:  # (never loaded from its file just to compare)
             return None
         try:
             current = store.get(name)
@@ -127,12 +132,6 @@ def make_service(settings: Settings | None = None) -> Service:
     # association is deterministic (its seed is in the request), so a space built from the same
     # clips answers the same; bounded, the oldest forgotten
     associations: OrderedDict[tuple[str, str], dict] = OrderedDict()
-
-    def made_by(name: str, space) -> str | None:
-        """The content digest of the build that made ``space`` (``None``: added to, loaded, promoted)."""
-        with built_lock:
-            last = built.get(name)
-        return last[0] if last is not None and last[1]() is space else None
 
     @svc.handler("build")
     def build(req):
@@ -219,8 +218,8 @@ def make_service(settings: Settings | None = None) -> Service:
     @svc.handler("associate")
     def associate(req):
         space = store.get(req["space"])
-        made = made_by(req["space"], space)
-        key = None if made is None else (made, hashlib.sha256(pack({k: v for k, v in req.items() if k != "space"})).hexdigest())
+        digest, made = last_build(req["space"])  # a space added to, loaded or promoted since: not kept
+        key = None if made is not space else (digest, hashlib.sha256(pack({k: v for k, v in req.items() if k != "space"})).hexdigest())
         if key is not None:
             with built_lock:
                 kept = associations.get(key)

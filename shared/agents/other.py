@@ -23,8 +23,6 @@ replays identically.
 from __future__ import annotations
 
 import json
-import threading
-from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -35,6 +33,7 @@ from shared.bodies.robot import JOINTS, BodySpec, small_humanoid
 from shared.errors import BadInput
 from shared.estimation.symbols import RULES, WORDS, compare, f_conv, f_div, word
 from shared.motion.clip import Clip
+from shared.once import Once
 
 ARM = ["shoulder_pitch", "shoulder_roll", "elbow"]
 BEHAVIOURS = ("honest", "nonsense", "contradict", "silent")
@@ -177,38 +176,13 @@ def transmitted(tau: np.ndarray, motion: Clip, joints, t: dict | None, asked: in
     return felt * (1.0 + float(t.get("fatigue", 0.0)) * asked)
 
 
-#: motions whose torques the process keeps, per body (:class:`_Performed`): the same body performs the
-#: same motions again in every identification configuration (its population again with other noise)
-KEPT_MOTIONS = 1024
+KEPT_MOTIONS = 1024  # (body, joints, motion) whose torques the process keeps (_PERFORMED)
 
 
-class _Performed:
-    """A body's torques of a motion, kept for the last ``KEPT_MOTIONS`` (body, joints, motion) of
-    the process: a body never changes, rule identification asks about pairs of the same 20 motions
-    again and again (two inverse dynamics a question before), and others of the same body (the same
-    population with another answer noise or rule) share them. Copies in and out: what a caller
-    does to its torques changes nothing kept."""
-
-    def __init__(self, limit: int):
-        self.table: OrderedDict = OrderedDict()
-        self.lock = threading.Lock()
-        self.limit = limit
-
-    def get(self, key, compute) -> np.ndarray:
-        with self.lock:
-            tau = self.table.get(key)
-            if tau is not None:
-                self.table.move_to_end(key)
-                return tau.copy()
-        tau = compute()  # outside the lock: two workers may both compute a new motion (the same numbers)
-        with self.lock:
-            self.table[key] = tau
-            while len(self.table) > self.limit:
-                self.table.popitem(last=False)
-        return tau.copy()
-
-
-_PERFORMED = _Performed(KEPT_MOTIONS)
+#: (body, joints, motion) -> the body's torques: a body never changes, rule identification asks about
+#: pairs of the same 20 motions again and again (two inverse dynamics a question before), and others of
+#: the same body (the same population with another answer noise or rule) share them
+_PERFORMED = Once(KEPT_MOTIONS)
 
 
 class SimulatedOther:
@@ -234,14 +208,15 @@ class SimulatedOther:
         return transmitted(self._torques(motion), motion, self.params.joints, self.params.transmission, self.asked)
 
     def _torques(self, motion: Clip) -> np.ndarray:
-        """The body's torques of ``motion`` (a copy), kept (:class:`_Performed`)."""
+        """The body's torques of ``motion``, kept (``_PERFORMED``); a copy: what a caller does to
+        it changes nothing kept."""
         joints = tuple(self.params.joints)
 
         def compute():
             performed, _ = perform(self.body, motion)
             return performed.select([f"tau.{j}" for j in joints])
 
-        return _PERFORMED.get((self._body_key, joints, motion.fingerprint()), compute)
+        return _PERFORMED.once((self._body_key, joints, motion.fingerprint()), compute).copy()
 
     def g(self, motion: Clip) -> float:
         p = self.params
