@@ -198,7 +198,7 @@ def test_rebuild_from_a_modified_database(dev_space, dev_split):
 
 def test_space_refuses_bad_clips(dev_space, dev_split):
     c = dev_split[1][0]
-    with pytest.raises(BadInput, match="fewer than"):
+    with pytest.raises(BadInput, match=r"lasts 0\.06 s .* at least 0\.2\d s"):  # 8 frames at 120 fps
         dev_space.recognize(c.frames(0, 8))
     bad = c.with_data(c.data.copy())
     bad.data[5, 10] = np.nan
@@ -209,6 +209,25 @@ def test_space_refuses_bad_clips(dev_space, dev_split):
         dev_space.recognize(wrong)
     with pytest.raises(BadInput):
         ProtoSymbolSpace.build([])
+
+
+def test_a_short_motion_played_faster_keeps_its_label(dev_space, dev_split):
+    """The states are 85 % of the shortest training clip's frames, so a hop as short played 1.2x as
+    fast had fewer frames at the space's rate than states and was refused: it is read at a higher
+    rate (a frame per state) and keeps its nearest label (here hops played 1.8x as fast); a motion
+    under half the states' time is refused, saying how long it must last."""
+    from shared.pss.symbol import shortest_seconds
+
+    fps, states = dev_space.params.fps, dev_space.params.n_states
+    hops = [c for c in dev_split[1] if c.label == "hopBothLegs1hops"]
+    fast = [c.with_data(c.data, fps=c.fps * 1.8).resample(c.fps) for c in hops]
+    short = [f for f in fast if f.resample(fps).n_frames < states]
+    assert short  # (the case: before, each of these was refused as having fewer frames than states)
+    assert [dev_space.recognize(f).nearest_label for f in short] == ["hopBothLegs1hops"] * len(short)
+    assert all(f.duration >= shortest_seconds(states, fps) for f in short)
+    tiny = hops[0].frames(0, int(shortest_seconds(states, fps) * hops[0].fps) - 1)
+    with pytest.raises(BadInput, match="at least"):
+        dev_space.recognize(tiny)
 
 
 @pytest.mark.slow

@@ -18,9 +18,11 @@ SPACE_RATIO = 1.0  # a stretch's recognition distance to the target's motion / t
 
 
 def shortest(n_states: int, fps: float) -> float:
-    """Seconds: the shortest clip a space of HMMs of ``n_states`` states at ``fps`` reads (its
-    frames at that rate one more than the states, so that resampling never leaves too few)."""
-    return (n_states + 1) / fps
+    """Seconds: the shortest clip a space of HMMs of ``n_states`` states at ``fps`` reads
+    (:func:`shared.pss.symbol.shortest_seconds`: a shorter one at its rate is read faster)."""
+    from shared.pss.symbol import shortest_seconds
+
+    return shortest_seconds(n_states, fps)
 
 
 class SpaceNamer:
@@ -64,7 +66,7 @@ class Named:
     def ratio(self, s: int, e: int) -> float:
         if (s, e) not in self.seen:
             part = self.take.frames(int(round(s * self.step)), int(round(e * self.step)))
-            if part.duration < self.namer.shortest:  # fewer frames than the space's HMMs have states
+            if part.duration < self.namer.shortest:  # too short for the space's HMMs
                 self.seen[s, e] = np.inf  # no motion the space could name
             else:
                 labels, d = self.namer.nearest(part.with_data(part.data, name="stretch"))

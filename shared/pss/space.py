@@ -45,6 +45,7 @@ from shared.pss.symbol import (  # the space's parts, named here too (its public
     ProtoSymbol,
     Recognition,
     SpaceParams,
+    at_space_rate,
     default_n_states,
     performer,
 )
@@ -250,8 +251,7 @@ class ProtoSymbolSpace:
 
     # ------------------------------------------------------------------ recognition
     def _sequences(self, clip_or_clips, groups=("motion", "position", "sensor"), min_frames: int | None = None) -> list[np.ndarray]:
-        """Feature frames of the clips at the space's rate; each needs ``min_frames`` frames
-        (default: the space's state count)."""
+        """Feature frames of the clips at the space's rate (:func:`at_space_rate`), ``min_frames`` each (default: states)."""
         clips = [clip_or_clips] if isinstance(clip_or_clips, Clip) else list(clip_or_clips)
         if not clips:
             raise BadInput("nothing to recognise")
@@ -259,12 +259,8 @@ class ProtoSymbolSpace:
         for c in clips:
             if not np.all(np.isfinite(c.data)):
                 raise BadInput(f"clip {c.name!r} contains NaN or Inf")
-            c = c.resample(self.params.fps)
             need = self.params.n_states if min_frames is None else min_frames
-            if c.n_frames < need:
-                raise BadInput(f"clip {c.name!r} has {c.n_frames} frames at {self.params.fps:g} fps, fewer than the "
-                               f"{need} {'HMM states of the space' if min_frames is None else 'frames needed'}",
-                               frames=c.n_frames, states=self.params.n_states)
+            c = at_space_rate(c, self.params.fps, need, "HMM states, a frame each" if min_frames is None else "frames")
             seqs.append(self.features.encode(c, groups))
         return seqs
 

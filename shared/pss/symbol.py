@@ -156,6 +156,36 @@ RECOGNITION_VAR_CEILING = 0.05
 STYLE_POSE_FLOOR = 0.03
 
 
+#: a motion with fewer frames at a space's rate than its HMMs have states is read at a higher rate when
+#: it lasts at least this share of that many frames' time (:func:`at_space_rate`)
+SHORT_SHARE = 0.5
+
+
+def shortest_seconds(n_states: int, fps: float) -> float:
+    """Seconds: the shortest motion a space of ``n_states``-state HMMs at ``fps`` reads (:func:`at_space_rate`)."""
+    return SHORT_SHARE * (n_states - 1) / fps
+
+
+def at_space_rate(clip: Clip, fps: float, need: int, what: str = "HMM states, a frame each") -> Clip:
+    """``clip`` at a space's rate ``fps``; a motion with fewer than ``need`` frames there (one per
+    HMM state) that lasts at least :func:`shortest_seconds` at the higher rate that gives it
+    ``need``. The default state count is 85 % of the shortest training clip's frames
+    (:func:`default_n_states`), so the space's shortest motion played 1.2x as fast had too few
+    frames and was refused; now a motion up to about twice as fast as the shortest the space
+    reads at its own rate is read. Nothing else changes with the rate: eq. 2.3-2.4 compare the
+    HMMs' states, not their transitions, and the features' velocities are per second. A shorter
+    motion is refused (:class:`BadInput`, saying how long it must last; ``what`` the ``need`` are)."""
+    c = clip.resample(fps)
+    if c.n_frames >= need:
+        return c
+    least = shortest_seconds(need, fps)
+    if clip.n_frames < 2 or clip.duration < least:
+        raise BadInput(f"clip {clip.name!r} lasts {clip.duration:.2f} s ({c.n_frames} frames at {fps:g} fps): the space "
+                       f"reads motions of at least {least:.2f} s ({need} {what})",
+                       frames=c.n_frames, states=need)
+    return clip.resample((need - 0.75) / clip.duration)  # round(duration * rate) + 1 = need frames
+
+
 def default_n_states(min_frames: int) -> int:
     """85 % of the frames of the shortest repetition, between 2 and 15 states.
 
