@@ -42,8 +42,8 @@ GOAL_OPEN_OUT = 0.90
 GOAL_OPEN_IN = 0.05
 GOAL_MS = 5.0
 #: each clip's time is the fastest of this many runs of the method on it, for every method alike (as
-#: ``timeit`` advises: what else the machine does only ever adds; one run's median moved 4.5 -> 7.1 ms
-#: between two runs of the same code an hour apart on this 2-core VM)
+#: ``timeit`` advises: what else the machine does only ever adds; on this 2-core VM the worst split's
+#: median of one run each was 5.0 and 7.1 ms in two runs of the same code minutes apart)
 TIMING_RUNS = 3
 
 
