@@ -4,16 +4,18 @@ torques of a motion in the simulator."""
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 from concurrent.futures import Future
 from typing import Any
 
 
 class Once:
     """A value computed once per key: requests asking for the same key at once wait for one
-    answer; a failed one is asked again next time; past ``limit`` keys the oldest are forgotten."""
+    answer; a failed one is asked again next time; past ``limit`` keys the least recently asked
+    are forgotten."""
 
     def __init__(self, limit: int = 4096):
-        self.table: dict[Any, Future] = {}
+        self.table: OrderedDict[Any, Future] = OrderedDict()
         self.lock = threading.Lock()
         self.limit = limit
 
@@ -25,7 +27,9 @@ class Once:
             if mine:
                 self.table[key] = fut
                 while len(self.table) > self.limit:
-                    self.table.pop(next(iter(self.table)))
+                    self.table.popitem(last=False)
+            else:
+                self.table.move_to_end(key)
         if mine:
             try:
                 fut.set_result(compute())

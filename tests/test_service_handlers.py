@@ -116,6 +116,9 @@ def test_what_the_selfs_body_gives_is_computed_once_and_a_failure_is_asked_again
     for i in range(5):
         once.once(i, lambda i=i: i, 10.0)
     assert len(once.table) == 3
+    once.once(2, lambda: "again", 10.0)  # kept: asked again, it becomes the most recent
+    once.once(5, lambda: 5, 10.0)
+    assert list(once.table) == [4, 2, 5]  # the least recently asked (3) forgotten, not the oldest kept (2)
 
 
 def test_the_estimators_kept_loads_under_many_workers_at_once(tmp_path):

@@ -53,12 +53,12 @@ class _SpaceOnBus:
     TOP = 100
 
     def __init__(self, client, space: str):
-        from shared.capture.naming import shortest
+        from shared.pss.symbol import shortest_seconds
 
         self.client, self.space = client, space
         info = client.request("pss", "info", {"space": space}, timeout=30)
         self.labels = [row["label"] for row in info["proto_symbols"]]
-        self.shortest = shortest(info["params"]["n_states"], info["params"]["fps"])
+        self.shortest = shortest_seconds(info["params"]["n_states"], info["params"]["fps"])
         self.sensor_channels = list(info["sensor_channels"])
 
     def _recognize(self, clip) -> dict:

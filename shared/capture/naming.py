@@ -13,16 +13,9 @@ import numpy as np
 
 from shared.errors import BadInput
 from shared.motion.clip import Clip
+from shared.pss.symbol import shortest_seconds
 
 SPACE_RATIO = 1.0  # a stretch's recognition distance to the target's motion / to the nearest other, at most
-
-
-def shortest(n_states: int, fps: float) -> float:
-    """Seconds: the shortest clip a space of HMMs of ``n_states`` states at ``fps`` reads
-    (:func:`shared.pss.symbol.shortest_seconds`: a shorter one at its rate is read faster)."""
-    from shared.pss.symbol import shortest_seconds
-
-    return shortest_seconds(n_states, fps)
 
 
 class SpaceNamer:
@@ -33,7 +26,7 @@ class SpaceNamer:
 
     def __init__(self, space):
         self.space, self.labels = space, list(space.labels)
-        self.shortest = shortest(space.params.n_states, space.params.fps)
+        self.shortest = shortest_seconds(space.params.n_states, space.params.fps)
         self.sensor_channels = list(space.features.sensor_channels)
 
     def nearest(self, clip: Clip) -> tuple[np.ndarray, np.ndarray]:
