@@ -80,6 +80,12 @@ def test_the_open_set_verdict_is_computed(out_rejected, in_rejected, word):
     text = report_markdown(res)
     assert f"| p | {10 * out_rejected:.1f} % | {float(in_rejected):.1f} % |" in text.splitlines()
     assert "| q | " + f"{10 * out_rejected:.1f} % | 100.0 % |" in text.splitlines()
+    # the goal holds on every test performer, not on the pooled rates (5 + 10 of 200 in-class is 7.5 %
+    # pooled, 5 % and 10 % per performer: the one at 10 % misses it whatever the pooled rate)
+    res["open_set"]["q"]["rows"][0]["pss"]["in"] = [10, 100]
+    assert verdicts(res)["open_set"] is False
+    res["open_set"]["q"]["rows"][0]["pss"]["in"] = [in_rejected, 100]
+    assert verdicts(res)["open_set"] is (word == "met")
 
 
 def test_the_report_gives_the_confidence_on_motions_the_space_does_not_hold():

@@ -3,6 +3,7 @@ confidence, "none of these", old space files, and the compiled forward kinematic
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -376,24 +377,30 @@ def test_the_novelty_model_is_saved_with_the_space_and_older_files_keep_their_ru
 
 # ---------------------------------------------------------------------------- the discriminant ratio (open set)
 def test_the_discriminant_ratio_is_scikit_learns_shrinkage_lda(dev_space):
-    """The projection solved in the proto-symbols' span gives the class-mean distance ratios of
-    scikit-learn's LDA with the same shrunk covariance (the reference; on a slice of the real
-    features so that scikit-learn's full eigenproblem stays quick)."""
+    """The projection solved in the proto-symbols' span gives the class-mean distances of
+    scikit-learn's LDA with the same shrunk covariance (the reference: squared distances differ
+    between classes as twice its decision values do; on a slice of the real features so that
+    scikit-learn's full covariance stays quick), on features over their within-class spread."""
     from sklearn.covariance import ShrunkCovariance
     from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
-    from sklearn.preprocessing import StandardScaler
 
-    from shared.pss.recognition import DiscriminantRatio, _mean_ratios
+    from shared.pss.recognition import DiscriminantRatio
 
     x = dev_space._symbol_features()[:, ::8]
     y = np.array(dev_space.labels)
     m = DiscriminantRatio.fit(x, y, dev_space.performers)
     assert 0 < m.shrinkage < 1 and m.projection.shape == (x.shape[1], len(set(y)) - 1)
-    scaler = StandardScaler().fit(x)
-    lda = LinearDiscriminantAnalysis(solver="eigen", covariance_estimator=ShrunkCovariance(shrinkage=m.shrinkage))
-    z = lda.fit(scaler.transform(x), y).transform(scaler.transform(x))
-    centres = np.stack([z[y == c].mean(axis=0) for c in m.classes])
-    assert np.allclose(m.ratios(x), _mean_ratios(z, centres), rtol=1e-4, atol=1e-6)
+    within = x - np.stack([x[y == c].mean(axis=0) for c in m.classes])[np.searchsorted(m.classes, y)]
+    varies = within.std(axis=0) > 1e-6 * x.std(axis=0).max()
+    assert varies.mean() > 0.5 and np.allclose(m.scale[varies], within.std(axis=0)[varies])
+    assert np.allclose(m.scale[~varies], np.where(x.std(axis=0) > 1e-12, x.std(axis=0), 1.0)[~varies])
+    scaled = (x - m.mean) / m.scale
+    lda = LinearDiscriminantAnalysis(solver="lsqr", covariance_estimator=ShrunkCovariance(shrinkage=m.shrinkage))
+    lda.fit(scaled, y)  # priors: the class shares, so its covariance is the pooled within-class one
+    assert list(lda.classes_) == m.classes
+    decision = lda.decision_function(scaled) - np.log(lda.priors_)  # equal priors, as the class means are compared
+    d2 = np.stack([m.class_distances(v, m.classes) for v in x]) ** 2
+    assert np.allclose(d2 - d2[:, :1], -2 * (decision - decision[:, :1]), rtol=1e-4, atol=1e-6 * np.abs(d2).max())
 
 
 def test_discriminant_ratio_as_documented():
@@ -425,6 +432,27 @@ def test_discriminant_ratio_as_documented():
     assert inside.label == "c0" and inside.distance_novelty == 0.0 and 0 < inside.ratio_novelty < 1
     between = decide(d, ["c0", "c1", "c2"], c, None, sample(3, 2, 1)[0], m)
     assert between.label is None and between.ratio_novelty > 1 and between.novelty == between.ratio_novelty
+    # the label: eq. 2.4's nearest class unless the discriminant, every class holding 2 or more
+    # proto-symbols, puts the motion nearer another class's mean by more than eq. 2.4 separates them
+    assert m.smallest_class == 40
+    c1 = sample(1, 2, 1)[0]
+    near = np.array([1.0, 1.05, 5.0])  # eq. 2.4: c0 barely before c1
+    de = m.class_distances(c1, c.classes)
+    assert de.argmin() == 1 and de[0] / de[1] > 1.05
+    assert decide(near, ["c0", "c1", "c2"], c, None, c1, m).nearest_label == "c1"
+    assert decide(near, ["c0", "c1", "c2"], c, None, c1, dataclasses.replace(m, smallest_class=1)).nearest_label == "c0"
+    assert decide(near, ["c0", "c1", "c2"], c).nearest_label == "c0"
+
+
+def test_the_label_weighs_eq_2_4_and_the_discriminant_as_documented():
+    from shared.pss.recognition import nearest_class
+
+    dc, de = np.array([1.0, 1.1, 3.0]), np.array([3.0, 1.0, 2.0])
+    assert nearest_class(dc, de, 0.0) == 0 and nearest_class(dc, de, 1.0) == 1  # 1 + 3 against 1.1 + 1
+    assert nearest_class(dc, np.array([2.0, 1.0, 1.5]), 0.05) == 0  # 1 + 0.1 against 1.1 + 0.05
+    assert nearest_class(2.0 * dc, 10.0 * de, 1.0) == nearest_class(dc, de, 1.0)  # neither scale counts
+    assert nearest_class(np.array([0.0, 1.0]), np.array([2.0, 1.0])) == 0  # a motion on a proto-symbol
+    assert nearest_class(np.array([1.0, np.inf]), np.array([1.0, np.inf])) == 0  # a class the space lacks
 
 
 def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_their_rule(dev_space, dev_split, tmp_path):

@@ -158,7 +158,8 @@ def report_markdown(res: dict) -> str:
             if r is not None:
                 lines.append(f"| {w} | {100 * r[0]:.1f} % | {100 * r[1]:.1f} % |")
         lines += ["", f"Goal: at least {100 * GOAL_OPEN_OUT:.0f} % out-of-class rejected, at most "
-                      f"{100 * GOAL_OPEN_IN:.0f} % in-class rejected: **{_word(v['open_set'])}**.", "",
+                      f"{100 * GOAL_OPEN_IN:.0f} % in-class rejected, on every test performer: "
+                      f"**{_word(v['open_set'])}**.", "",
                   "| held-out class | " + " | ".join(f"{w}: rejected" for w in who) + " |", "|---|" + "---|" * len(who)]
         for k, cls in enumerate(res["classes"]):
             cells = []
