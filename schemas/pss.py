@@ -147,7 +147,8 @@ RECOGNIZE = Endpoint(
                    required=False),
         "known": F(Bool(), "false: the motion is none of the space's classes (open-set rejection)", required=False,
                    default=True),
-        "nearest_label": F(Str(max_len=64), "class of the nearest proto-symbol on the recognition channels",
+        "nearest_label": F(Str(max_len=64), "the nearest class on the recognition channels (eq. 2.4, and the discriminant "
+                           "where every class has two or more proto-symbols); the label unless the motion is none of them",
                            required=False),
         "confidence": F(Float(0.0, 1.0), "calibrated probability of nearest_label among the space's classes",
                         required=False),

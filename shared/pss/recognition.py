@@ -297,7 +297,7 @@ def _class_spread(nearest_same: np.ndarray, truth: np.ndarray, k: int, skip: int
 @dataclass
 class Decision:
     label: str | None  # None: "none of these" (open-set rejection)
-    nearest_label: str
+    nearest_label: str  # the nearest class (:func:`nearest_class`), the label unless the open set rejects
     confidence: float  # calibrated probability of nearest_label among the space's classes; for a motion the
     # tests reject, at most its credibility (the chance a known motion looks this unusual)
     novelty: float  # the largest of the tests' (> 1: unknown)

@@ -92,9 +92,10 @@ def timed(run, clips: list[Clip], clock=time.perf_counter) -> tuple[list, list[f
 
 
 def pss_recognition(space: ProtoSymbolSpace, test: list[Clip], use: str = "label") -> RecognitionResult:
-    """The space's own recognition: the class of the nearest proto-symbol on the recognition
-    channels (``use="label"``, closed set: the nearest class even when the open-set rule would
-    say "none of these") or of the nearest point in the space (``use="point"``, eq. 2.6)."""
+    """The space's own recognition: the nearest class on the recognition channels (eq. 2.4 and the
+    discriminant, :func:`shared.pss.recognition.nearest_class`; ``use="label"``, closed set: the
+    nearest class even when the open-set rule would say "none of these") or the class of the
+    nearest point in the space (``use="point"``, eq. 2.6)."""
     recs, secs = timed(space.recognize, test)
     pred = [r.nearest_label if use == "label" else r.label_in_space for r in recs]
     return _summarise(f"PSS ({use})", [c.label for c in test], pred, secs)

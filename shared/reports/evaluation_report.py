@@ -64,7 +64,7 @@ def _word(ok: bool) -> str:
 def report_markdown(res: dict) -> str:
     """The report's text; every verdict word comes from :func:`verdicts`."""
     splits = res["splits"]
-    names = {"pss": "PSS: nearest proto-symbol on positions (ours, closed set)",
+    names = {"pss": "PSS: nearest class on positions, eq. 2.4 and the discriminant (ours, closed set)",
              "pss_shown": "PSS as `space recognize` shows it (open set on: \"none of these\" is not recognised)",
              "pss_point": "PSS: nearest point in the 3-D space (eq. 2.6)",
              "minirocket": "MiniRocket + ridge (aeon)", "dtw": "1-NN DTW (aeon, band 0.1), positions",
