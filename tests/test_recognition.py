@@ -467,10 +467,15 @@ def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_the
     assert all(r.decision.ratio_novelty > 0 for r in before)
     back = ProtoSymbolSpace.load(dev_space.save(tmp_path / "d.npz"))
     assert np.array_equal(back.discriminant.projection, m.projection) and back.discriminant.threshold == m.threshold
+    assert back.discriminant.smallest_class == m.smallest_class >= 2  # every class has two performers' clips
     assert [back.recognize(c).novelty for c in clips] == pytest.approx([r.novelty for r in before])
     with np.load(tmp_path / "d.npz", allow_pickle=False) as z:
         arrays = {k: np.array(z[k]) for k in z.files}
     header = json.loads(str(arrays["header"]))
+    # written before the label weighed the discriminant: the nearest proto-symbol alone labels
+    older = {**header, "discriminant": {k: v for k, v in header["discriminant"].items() if k != "smallest_class"}}
+    np.savez(tmp_path / "older.npz", **{**arrays, "header": np.array(json.dumps(older))})
+    assert ProtoSymbolSpace.load(tmp_path / "older.npz").discriminant.smallest_class == 1
     # damaged: a projection that does not fit its classes, a header without its threshold, a
     # model of fewer features than the space's motions have
     fewer = {f"discriminant_{k}": getattr(m, k)[:100] for k in ("mean", "scale", "projection")}
