@@ -74,12 +74,9 @@ _UP = np.array([0.0, 1.0, 0.0])
 #: seconds the position group's travel velocities are averaged over (every new space). Chosen on
 #: the game studio's 8 training styles of bench.styles' half split (leave one style out: closed
 #: set 44.3 % raw, 52.3 % at 0.5 s, 58.0 % at 1 s and 2 s, 56.8 % at 3 s; ties to the shorter
-#: window) with HDM05's dev split (dg) held at 100 % closed set. Not clean: the idea came from the
-#: half split's confusions, whose test styles were scored at four windows before this choice (best
-#: there 2 s, not the 1 s chosen), and HDM05's bd and bk splits at 0, 1 and 2 s (2 s lost a bd clip).
-#: Those numbers are the nearest proto-symbol's label; since the label also weighs the discriminant
-#: (``shared.pss.recognition.nearest_class``) the windows score 84.1 % (0, 0.5, 1 s) and 85.2 %
-#: (2, 3 s), one clip of 88 apart, and the 1 s stays.
+#: window; dg held at 100 %; scored by the nearest proto-symbol's label, 84.1-85.2 % with the
+#: discriminant in it: docs/pss.md). Not clean: the held-out styles were scored at four windows
+#: before (best 2 s), HDM05's bd and bk splits at 0, 1 and 2 s (2 s lost a bd clip).
 TRAVEL_WINDOW = 1.0
 #: the position group's outputs of how the body travels over the floor (the rest of the group is its pose)
 TRAVEL_FEATURES = ("pos(root).v_forward", "pos(root).v_lateral", "pos(root).yaw_rate")
