@@ -332,10 +332,14 @@ def test_novelty_model_as_documented():
     known = np.array([m.novelty(v) for c in range(3) for v in sample(c, 2, 30)])
     unknown = np.array([m.novelty(v) for v in sample(3, 2, 30)])
     assert (known > 1).mean() <= 0.1 and (unknown > 1).mean() >= 0.9
-    # one performer: calibrated leave-one-out; one class: nothing to tell apart
+    # one performer: calibrated leave-one-out; 30 margins are too few for the default level (a
+    # 97 % bound needs 32: it never rejects) and enough for 95 %; one class: nothing to tell apart
     solo = [i for i, p in enumerate(perf) if p == "p0"]
     m1 = NoveltyModel.fit(x[solo], [labels[i] for i in solo], None)
-    assert m1.scheme == "leave one out" and len(m1.scores) == len(solo) and np.isfinite(m1.threshold)
+    assert m1.scheme == "leave one out" and len(m1.scores) == len(solo) == 30 and m1.threshold == -np.inf
+    assert m1.novelty(sample(3, 2, 1)[0]) == 0.0
+    m95 = NoveltyModel.fit(x[solo], [labels[i] for i in solo], None, quantile=0.95)
+    assert np.isfinite(m95.threshold) and m95.threshold == pytest.approx(-conformal_threshold(-np.array(m95.scores), 0.95))
     assert NoveltyModel.fit(x[:10], labels[:10], perf[:10]) is None
     # decide: either test rejects (the distance rule's thresholds here never do)
     c = Calibration(["c0", "c1", "c2"], 1.0, threshold=np.inf, ratio_threshold=np.inf, n_calibration=0,
