@@ -18,8 +18,9 @@ pose floor a space for other styles may be built with (``STYLE_POSE_FLOOR``, ``-
 its rows are the space built with it), each on the
 half split's 8 training styles (leave one style out) with HDM05's dev split held at 100 %, so
 the half split's 7 test styles are held out from every choice (but the travel window's idea came
-from their confusions, and they were scored at a few windows before it was chosen); the
-'normal -> others' test clips include those 8 styles. For each
+from their confusions, and they were scored at a few windows before it was chosen; the
+discriminant's weight and within-class scaling were explored with their scores printed beside
+the choice set's); the 'normal -> others' test clips include those 8 styles. For each
 split: PSS closed set (nearest class), PSS *as shown* (what ``space recognize`` prints: a
 "none of these" counts as not recognised), MiniRocket + ridge (aeon) and 1-NN DTW (aeon) on
 the same position features, and what the wrong PSS answers were ("none of these" or a wrong
@@ -110,13 +111,30 @@ def _leave_one_style_out(train: list, pose_floor: float | None = None) -> tuple[
     return closed / n, shown / n, n
 
 
-def choose_discriminant_weight(train: list, hdm05: Path, weights=(0.0, 0.25, 0.5, 1.0, 2.0, 4.0, np.inf)) -> list[dict]:
+def _dev_split(hdm05: Path) -> tuple[list, list]:
+    """HDM05's dev split: bd's and bk's clips (the space) and dg's (the test)."""
+    from shared.io import find_clips
+
+    dev = [load_clip(f) for f in find_clips([hdm05 / "amc"])]
+    return [c for c in dev if "_dg_" not in c.name], [c for c in dev if "_dg_" in c.name]
+
+
+def _recognition_features(space, r):
+    """The recognised motion's HMM as the discriminant and the novelty model read it."""
+    from shared.pss.recognition import hmm_features
+
+    hr = space.as_recognised(r.hmm.marginal(space.features.group_indices(space.recognition_groups)))
+    return hmm_features(hr.means, hr.covars)
+
+
+def choose_discriminant_weight(train: list, dev: tuple[list, list],
+                               weights=(0.0, 0.25, 0.5, 1.0, 2.0, 4.0, np.inf)) -> list[dict]:
     """How ``DISCRIMINANT_WEIGHT`` was chosen: closed set for each candidate weight of the
     discriminant in the label (:func:`shared.pss.recognition.nearest_class`; ``inf``: the
     discriminant alone) on the training styles only (leave one style out), and HDM05's dev split
-    (bd + bk -> dg) closed set, which must stay at 100 %. Ties go to the smaller weight."""
-    from shared.io import find_clips
-    from shared.pss.recognition import class_distances, hmm_features, nearest_class
+    (bd + bk -> dg, :func:`_dev_split`) closed set, which must stay at 100 %. Ties go to the
+    smaller weight."""
+    from shared.pss.recognition import class_distances, nearest_class
 
     def closed_sets(space, test) -> list[int]:
         hits = [0] * len(weights)
@@ -124,8 +142,7 @@ def choose_discriminant_weight(train: list, hdm05: Path, weights=(0.0, 0.25, 0.5
         for c in test:
             r = space.recognize(c)
             dc = class_distances(r.recognition_distances, np.asarray(space.labels), classes)
-            hr = space.as_recognised(r.hmm.marginal(space.features.group_indices(space.recognition_groups)))
-            de = disc.class_distances(hmm_features(hr.means, hr.covars), classes)
+            de = disc.class_distances(_recognition_features(space, r), classes)
             for i, w in enumerate(weights):
                 k = int(np.argmin(de)) if w == np.inf else nearest_class(dc, de, w)
                 hits[i] += classes[k] == c.label
@@ -137,9 +154,8 @@ def choose_discriminant_weight(train: list, hdm05: Path, weights=(0.0, 0.25, 0.5
         test = [c for s, c in train if s == style]
         styles_hits = [a + b for a, b in zip(styles_hits, closed_sets(space, test))]
         n += len(test)
-    dev = [load_clip(f) for f in find_clips([hdm05 / "amc"])]
-    dg = [c for c in dev if "_dg_" in c.name]
-    dg_hits = closed_sets(ProtoSymbolSpace.build([c for c in dev if "_dg_" not in c.name]), dg)
+    rest, dg = dev
+    dg_hits = closed_sets(ProtoSymbolSpace.build(rest), dg)
     rows = [{"weight": w if np.isfinite(w) else "alone", "closed": h / n, "clips": n, "dg_closed": d / len(dg)}
             for w, h, d in zip(weights, styles_hits, dg_hits)]
     for r in rows:
@@ -147,16 +163,14 @@ def choose_discriminant_weight(train: list, hdm05: Path, weights=(0.0, 0.25, 0.5
     return rows
 
 
-def choose_novelty_level(train: list, hdm05: Path, levels=(0.9, 0.95, 0.96, 0.97, 0.98, 0.99)) -> list[dict]:
+def choose_novelty_level(train: list, dev: tuple[list, list], levels=(0.9, 0.95, 0.96, 0.97, 0.98, 0.99)) -> list[dict]:
     """How ``NOVELTY_QUANTILE`` was chosen: for each level of the novelty model's threshold, as
     shown on the training styles (leave one style out), and on HDM05's dev split (bd + bk -> dg)
     as shown and, every class held out in turn, unknown and known clips rejected. The level is
     the one with the most as shown on the styles among those keeping dg at 90 % unknown and 5 %
     known rejected. Each space is built once; a level changes only the model's threshold,
     computed from its calibration margins as :meth:`NoveltyModel.fit` does."""
-    from shared.io import find_clips
     from shared.pss.conformal import conformal_threshold
-    from shared.pss.recognition import hmm_features
 
     def rejections(space, test, known_label=None) -> list[list[tuple[bool, bool]]]:
         """Per level, per clip: (rejected, right) where right is the nearest class being the label
@@ -167,8 +181,7 @@ def choose_novelty_level(train: list, hdm05: Path, levels=(0.9, 0.95, 0.96, 0.97
         for c in test:
             r = space.recognize(c)
             d = r.decision
-            hr = space.as_recognised(r.hmm.marginal(space.features.group_indices(space.recognition_groups)))
-            margin = float(nm.margins(hmm_features(hr.means, hr.covars))[0])
+            margin = float(nm.margins(_recognition_features(space, r))[0])
             right = r.nearest_label == c.label if known_label is None else c.label != known_label
             for i, cut in enumerate(cuts):
                 out[i].append((d.distance_novelty > 1 or d.ratio_novelty > 1 or margin < cut, right))
@@ -181,11 +194,10 @@ def choose_novelty_level(train: list, hdm05: Path, levels=(0.9, 0.95, 0.96, 0.97
         per = rejections(ProtoSymbolSpace.build([c for s, c in train if s != style]), test)
         shown += [sum(ok and not rej for rej, ok in clips) for clips in per]
         n += len(test)
-    dev = [load_clip(f) for f in find_clips([hdm05 / "amc"])]
-    dg, rest = [c for c in dev if "_dg_" in c.name], [c for c in dev if "_dg_" not in c.name]
+    rest, dg = dev
     dg_shown = [sum(ok and not rej for rej, ok in clips) / len(dg) for clips in rejections(ProtoSymbolSpace.build(rest), dg)]
     unknown, known = np.zeros((len(levels), 2)), np.zeros((len(levels), 2))
-    for held in sorted({c.label for c in dev}):
+    for held in sorted({c.label for c in rest}):
         per = rejections(ProtoSymbolSpace.build([c for c in rest if c.label != held]), dg, known_label=held)
         for i, clips in enumerate(per):
             unknown[i] += [sum(rej for rej, isknown in clips if not isknown), sum(not k for _, k in clips)]
@@ -198,19 +210,16 @@ def choose_novelty_level(train: list, hdm05: Path, levels=(0.9, 0.95, 0.96, 0.97
     return rows
 
 
-def choose_pose_floor(train: list, hdm05: Path, floors=(None, 0.02, 0.03, 0.04, 0.05)) -> list[dict]:
+def choose_pose_floor(train: list, dev: tuple[list, list], floors=(None, 0.02, 0.03, 0.04, 0.05)) -> list[dict]:
     """How ``STYLE_POSE_FLOOR`` was chosen: each candidate on the training styles only (leave one
     style out), with HDM05's dev split (bd + bk -> dg) closed set as the constraint (it must stay
     at 100 %). The rows; ``STYLE_POSE_FLOOR`` is the largest closed set among the floors that keep
     the constraint."""
-    from shared.io import find_clips
-
-    dev = [load_clip(f) for f in find_clips([hdm05 / "amc"])]
-    test = [c for c in dev if "_dg_" in c.name]
+    rest, test = dev
     rows = []
     for floor in floors:
         closed, shown, n = _leave_one_style_out(train, floor)
-        space = ProtoSymbolSpace.build([c for c in dev if "_dg_" not in c.name], pose_floor=floor)
+        space = ProtoSymbolSpace.build(rest, pose_floor=floor)
         dg = sum(space.recognize(c).nearest_label == c.label for c in test) / len(test)
         rows.append({"floor": floor, "closed": closed, "as_shown": shown, "clips": n, "dg_closed": dg})
         print(rows[-1], flush=True)
@@ -254,7 +263,9 @@ def main(argv=None) -> int:
           "discriminant's weight in the label and the novelty model's level, were chosen on "
           "the half split's training styles (leave one style out) and HDM05's dev split: the half split's test "
           "styles are held out from every choice (but the travel window's idea came from their confusions, and "
-          "they were scored at a few windows before it was chosen), the 'normal' split's test clips include the "
+          "they were scored at a few windows before it was chosen; the discriminant's weight and within-class "
+          "scaling were explored with their scores printed beside the choice set's), the 'normal' split's test "
+          "clips include the "
           "styles they were chosen on. As shown: what `space recognize` prints, "
           "\"none of these\" counts as not recognised. Peers on the same position features, in the same run. The "
           "rows with `--pose-floor` are a space built for other styles (not the default: docs/pss.md), its floor "
@@ -279,7 +290,8 @@ def main(argv=None) -> int:
                      "was the nearest proto-symbol's: with the discriminant in it the windows lie within a clip of each "
                      "other, docs/pss.md):", ["window", "closed set", "as shown"],
                      [[f"{r['window_s']:g} s", _pct(r["closed"]), _pct(r["as_shown"])] for r in res["window_choice"]])
-        res["pose_floor_choice"] = choose_pose_floor([(s, c) for s, c in clips if s in half], args.hdm05)
+        dev = _dev_split(args.hdm05)  # read once for the three choices below
+        res["pose_floor_choice"] = choose_pose_floor([(s, c) for s, c in clips if s in half], dev)
         md += _table(f"The pose floor of a space for other styles (`--pose-floor`, {STYLE_POSE_FLOOR:g}), chosen on the "
                      "same training styles (leave one style out) with HDM05's dev split held at 100 % closed set (chosen "
                      "when the label was the nearest proto-symbol's; with the discriminant in it none to 0.03 tie):",
@@ -288,7 +300,7 @@ def main(argv=None) -> int:
                        _pct(r["dg_closed"])] for r in res["pose_floor_choice"]])
         from shared.pss.recognition import DISCRIMINANT_WEIGHT
 
-        res["weight_choice"] = choose_discriminant_weight([(s, c) for s, c in clips if s in half], args.hdm05)
+        res["weight_choice"] = choose_discriminant_weight([(s, c) for s, c in clips if s in half], dev)
         md += _table(f"The discriminant's weight in the label (`DISCRIMINANT_WEIGHT`, {DISCRIMINANT_WEIGHT:g}; "
                      "`shared.pss.recognition.nearest_class`), chosen on the same training styles (leave one style out; "
                      "ties go to the smaller weight) with HDM05's dev split held at 100 % closed set:",
@@ -297,7 +309,7 @@ def main(argv=None) -> int:
                        _pct(r["dg_closed"])] for r in res["weight_choice"]])
         from shared.pss.novelty import NOVELTY_QUANTILE
 
-        res["novelty_level_choice"] = choose_novelty_level([(s, c) for s, c in clips if s in half], args.hdm05)
+        res["novelty_level_choice"] = choose_novelty_level([(s, c) for s, c in clips if s in half], dev)
         md += _table(f"The novelty model's level (`NOVELTY_QUANTILE`, {NOVELTY_QUANTILE:g}), chosen on the same training "
                      "styles (leave one style out: the most as shown) among the levels that keep HDM05's dev split, every "
                      "class held out in turn, at 90 % unknown and at most 5 % known clips rejected:",

@@ -148,3 +148,11 @@ def test_a_clip_s_time_is_its_fastest_run_and_its_answer_the_first():
     assert TIMING_RUNS >= 2 and calls == ["a"] * TIMING_RUNS + ["b"] * TIMING_RUNS
     assert answers == ["a1", f"b{TIMING_RUNS + 1}"]
     assert secs == [min(1.0 + 0.5 * (k % TIMING_RUNS) for k in range(2, TIMING_RUNS + 1))] * 2
+
+
+def test_the_novelty_model_row_names_the_level_its_results_were_made_at():
+    res = _result(9, 5)
+    res["verdicts"] = verdicts(res)
+    assert "novelty model alone (ridge on the HMMs, level 0.95)" in report_markdown(res)  # written before it was kept
+    res["novelty_level"] = 0.97
+    assert "novelty model alone (ridge on the HMMs, level 0.97)" in report_markdown(res)

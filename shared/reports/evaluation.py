@@ -32,6 +32,7 @@ import numpy as np
 
 from shared.errors import BadInput
 from shared.motion.clip import Clip
+from shared.pss.novelty import NOVELTY_QUANTILE
 from shared.pss.space import STYLE_POSE_FLOOR, ProtoSymbolSpace, performer
 
 PEER_FRAMES = 64
@@ -357,7 +358,7 @@ def evaluate(clips: list[Clip], *, peers: bool = True, open_set_test: bool = Tru
         raise BadInput("the recognition report needs clips of at least two performers (skeletons)")
     avail = peers_available() if peers else {"minirocket": "not asked for (--no-peers)", "dtw": "not asked for (--no-peers)"}
     res: dict = {"performers": performers, "n_clips": len(clips), "classes": sorted({c.label for c in clips}),
-                 "peers": avail, "splits": {}, "open_set": {}}
+                 "peers": avail, "splits": {}, "open_set": {}, "novelty_level": NOVELTY_QUANTILE}
     for who in performers:
         train = [c for c in clips if performer(c) != who]
         test = [c for c in clips if performer(c) == who]
