@@ -13,10 +13,12 @@ is the single declaration services and contract tests import.
 
 from __future__ import annotations
 
+import math
 import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -40,6 +42,12 @@ class Spec(ABC):
     def describe(self) -> str: ...
 
 
+@cache
+def _compiled(pattern: str) -> re.Pattern:
+    """A field's pattern compiled once (``re``'s own cache is a lookup and a lock per call)."""
+    return re.compile(pattern)
+
+
 def _fail(path: str, problem: str, **details):
     raise BadInput(f"{path}: {problem}" if path else problem, field=path, **details)
 
@@ -58,7 +66,7 @@ class Str(Spec):
             _fail(path, f"is longer than {self.max_len} characters")
         if self.choices is not None and value not in self.choices:
             _fail(path, f"must be one of {', '.join(self.choices)}; got {value!r}")
-        if self.pattern is not None and not re.fullmatch(self.pattern, value):
+        if self.pattern is not None and not _compiled(self.pattern).fullmatch(value):
             _fail(path, f"{value!r} is not a valid name (letters, digits, '_', '.', '-'; no '/' or leading '.')")
         return value
 
@@ -109,7 +117,7 @@ class Float(Spec):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             _fail(path, f"must be a number, got {type(value).__name__}")
         value = float(value)
-        if not np.isfinite(value):
+        if not math.isfinite(value):
             _fail(path, "must be finite (no NaN or Inf)")
         return _in_range(value, self.min, self.max, path)
 
@@ -248,11 +256,14 @@ class Map(Spec):
     def check(self, value, path):
         if not isinstance(value, dict):
             _fail(path, f"must be a map, got {type(value).__name__}")
-        odd = [k for k in value if not isinstance(k, str)]
-        if odd:  # msgpack keeps bytes keys as bytes: a map of field names has text keys only
-            _fail(path, f"field names must be text, got {type(odd[0]).__name__} {odd[0]!r:.40}")
-        unknown = sorted(set(value) - set(self.fields))
-        if unknown:
+        names = self.__dict__.get("_names")
+        if names is None:  # the fields' names as a set, made once (a message is checked on every request)
+            names = self.__dict__["_names"] = frozenset(self.fields)
+        if not value.keys() <= names:  # a key that names no field: which, and why
+            odd = [k for k in value if not isinstance(k, str)]
+            if odd:  # msgpack keeps bytes keys as bytes: a map of field names has text keys only
+                _fail(path, f"field names must be text, got {type(odd[0]).__name__} {odd[0]!r:.40}")
+            unknown = sorted(set(value) - names)
             _fail(path, f"unknown field(s) {', '.join(map(str, unknown))}; expected {', '.join(self.fields)}")
         out = {}
         for name, f in self.fields.items():

@@ -153,3 +153,20 @@ def test_arrays_decode_to_lists_without_numpy_alike():
     assert back["x"] == a.tolist() and back["b"] == [True, False] and back["i"] == [-3, 5]
     with pytest.raises(BadInput):
         unpack(pack({"__nd__": True, "dtype": "<f8", "shape": [2], "data": b"\x00" * 8}), arrays="lists")
+
+
+def test_a_message_names_its_unknown_field_bad_name_and_non_finite_number():
+    """The checks kept on the fast path (the fields' names as a set, patterns compiled once,
+    finiteness of a plain float): each bad message names the field and the reason."""
+    from schemas import dialogue
+
+    spec = dialogue.EVENTS["transcript"]
+    good = {"t": 1, "dialogue": "ch3-mass-1", "speaker": "self", "kind": "question", "text": "how heavy?"}
+    assert spec.validate(good)["t"] == 1.0 and isinstance(spec.validate(good)["t"], float)
+    with pytest.raises(BadInput, match=r"unknown field\(s\) colour, size; expected t, dialogue"):
+        spec.validate({**good, "size": 3, "colour": "red"})
+    with pytest.raises(BadInput, match="dialogue: '../x' is not a valid name"):
+        spec.validate({**good, "dialogue": "../x"})
+    for bad in (float("nan"), float("inf")):
+        with pytest.raises(BadInput, match="t: must be finite"):
+            spec.validate({**good, "t": bad})
