@@ -168,23 +168,25 @@ def choose_novelty_level(train: list, dev: tuple[list, list], levels=(0.9, 0.95,
     shown on the training styles (leave one style out), and on HDM05's dev split (bd + bk -> dg)
     as shown and, every class held out in turn, unknown and known clips rejected. The level is
     the one with the most as shown on the styles among those keeping dg at 90 % unknown and 5 %
-    known rejected. Each space is built once; a level changes only the model's threshold,
-    computed from its calibration margins as :meth:`NoveltyModel.fit` does."""
-    from shared.pss.conformal import conformal_threshold
+    known rejected. Each space is built once; a level changes only the model's threshold
+    (:func:`shared.pss.novelty.margin_threshold` on its calibration margins, as its fit does)."""
+    from dataclasses import replace
+
+    from shared.pss.novelty import margin_threshold
 
     def rejections(space, test, known_label=None) -> list[list[tuple[bool, bool]]]:
         """Per level, per clip: (rejected, right) where right is the nearest class being the label
         (or, with ``known_label`` given, the clip being of a class the space holds)."""
         nm = space.novelty_model
-        cuts = [-conformal_threshold(-np.asarray(nm.scores), q) for q in levels]
+        models = [replace(nm, threshold=margin_threshold(nm.scores, q), quantile=q) for q in levels]
         out: list[list[tuple[bool, bool]]] = [[] for _ in levels]
         for c in test:
             r = space.recognize(c)
             d = r.decision
-            margin = float(nm.margins(_recognition_features(space, r))[0])
+            features = _recognition_features(space, r)
             right = r.nearest_label == c.label if known_label is None else c.label != known_label
-            for i, cut in enumerate(cuts):
-                out[i].append((d.distance_novelty > 1 or d.ratio_novelty > 1 or margin < cut, right))
+            for i, m in enumerate(models):  # any test rejecting, as decide() says
+                out[i].append((d.distance_novelty > 1 or d.ratio_novelty > 1 or m.novelty(features) > 1, right))
         return out
 
     shown = np.zeros(len(levels))

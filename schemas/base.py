@@ -116,7 +116,10 @@ class Float(Spec):
     def check(self, value, path):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             _fail(path, f"must be a number, got {type(value).__name__}")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # an integer beyond a float's range
+            _fail(path, "must be finite (no NaN or Inf)")
         if not math.isfinite(value):
             _fail(path, "must be finite (no NaN or Inf)")
         return _in_range(value, self.min, self.max, path)

@@ -52,6 +52,12 @@ def _ridge(x: np.ndarray, y: np.ndarray, alpha: float | None = None, loo: bool =
     return scaler, model
 
 
+def margin_threshold(margins, quantile: float) -> float:
+    """The split-conformal threshold at level ``quantile`` on calibration margins (a smaller
+    margin is more unusual); ``-inf`` (never rejects) without margins or with too few of them."""
+    return -conformal_threshold(-np.asarray(margins, float), quantile) if len(margins) else -np.inf
+
+
 def _margins(scores: np.ndarray) -> np.ndarray:
     """Winning class's score minus the runner-up's (one column: a two-class ridge, +-d)."""
     s = np.atleast_2d(scores)
@@ -137,7 +143,7 @@ class NoveltyModel:
             scheme = "leave one out"
             _, m = _ridge(x, y, alpha, loo=True)
             scores = list(_margins(m.cv_results_[:, :, 0]))
-        threshold = -conformal_threshold(-np.asarray(scores), quantile) if scores else -np.inf
+        threshold = margin_threshold(scores, quantile)
         coef = np.atleast_2d(model.coef_)
         return cls([str(c) for c in model.classes_], scaler.mean_.copy(), scaler.scale_.copy(), coef.copy(),
                    np.atleast_1d(model.intercept_).copy(), float(threshold), [float(v) for v in scores], quantile,

@@ -24,7 +24,7 @@ THESIS: dict[str, Any] = {"known_error": 0.10, "unknown_error": 0.20, "match": {
           "identification": 1.0, "wrong_rule_error": (0.45, 0.60), "right_rule_error": 0.10}
 GOALS: dict[str, Any] = {"known": 0.05, "unknown": 0.10, "identification": 1.0, "identification_noisy": 0.95,
          "match": {4: 0.8, 6: 0.7, 8: 0.3}}
-WORKERS = 8  # others conversing at a time (each waits on the services most of the time; 4: 187-195 s, 8: 170-180 s)
+WORKERS = 8  # others conversing at a time (each waits on the services most of the time; 4 took 187-195 s where 8 took 173-180 s, interleaved)
 THESIS_LEVEL = 0.05  # within 5 points of the thesis's figure is "at the thesis's level"
 
 
