@@ -341,6 +341,10 @@ def test_novelty_model_as_documented():
     m95 = NoveltyModel.fit(x[solo], [labels[i] for i in solo], None, quantile=0.95)
     assert np.isfinite(m95.threshold) and m95.threshold == pytest.approx(-conformal_threshold(-np.array(m95.scores), 0.95))
     assert NoveltyModel.fit(x[:10], labels[:10], perf[:10]) is None
+    # two classes: one calibration margin per proto-symbol (a two-class ridge scores a vector)
+    two = [i for i, lab in enumerate(labels) if lab in ("c0", "c1")]
+    m2 = NoveltyModel.fit(x[two], [labels[i] for i in two], [perf[i] for i in two])
+    assert len(m2.scores) == len(two) and np.isfinite(m2.threshold)
     # decide: either test rejects (the distance rule's thresholds here never do)
     c = Calibration(["c0", "c1", "c2"], 1.0, threshold=np.inf, ratio_threshold=np.inf, n_calibration=0,
                     scheme="across performers")

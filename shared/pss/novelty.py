@@ -59,8 +59,10 @@ def margin_threshold(margins, quantile: float) -> float:
 
 
 def _margins(scores: np.ndarray) -> np.ndarray:
-    """Winning class's score minus the runner-up's (one column: a two-class ridge, +-d)."""
-    s = np.atleast_2d(scores)
+    """Winning class's score minus the runner-up's, per row (one column, or a vector from a
+    two-class ridge's ``decision_function``: +-d)."""
+    s = np.asarray(scores, float)
+    s = s[:, None] if s.ndim == 1 else s
     if s.shape[1] == 1:
         return 2.0 * np.abs(s[:, 0])
     top = np.sort(s, axis=1)
