@@ -144,7 +144,7 @@ def test_space_build_recognize_generate(bundled, tmp_path):
     r = run("offline", "build", tmp_path / "lazy.npz", bundled / "amc/squat1Reps", bundled / "amc/kickLFront1Reps",
             "--hold-mb", "0")
     assert r.returncode == 0, r.stderr
-    from shared.pss.space import ProtoSymbolSpace
+    from shared.pss.space import ONE_EXAMPLE_POSE_FLOOR, ProtoSymbolSpace
 
     a, b = ProtoSymbolSpace.load(space), ProtoSymbolSpace.load(tmp_path / "lazy.npz")
     assert b.names == a.names and np.allclose(b.distances, a.distances, rtol=1e-10) and np.allclose(b.points, a.points)
@@ -156,9 +156,16 @@ def test_space_build_recognize_generate(bundled, tmp_path):
     assert a.params.recognition_pose_floor is None
     r = run("offline", "recognize", tmp_path / "styles.npz", held, "--json")
     assert r.returncode == 0 and json.loads(r.stdout)["label"] == "squat1Reps", r.stderr
-    r = run("offline", "build", tmp_path / "zero.npz", bundled / "amc/squat1Reps", "--pose-floor", "0")
-    assert r.returncode == 2 and "pose floor must be a positive variance" in r.stderr and "Traceback" not in r.stderr
-    assert not (tmp_path / "zero.npz").exists()
+    # one clip per motion: the floor such a space recognises other styles best with, unless 0 says none
+    ones = [next((bundled / "amc" / m).glob("HDM_bd_*.amc")) for m in ("squat1Reps", "kickLFront1Reps")]
+    r = run("offline", "build", tmp_path / "one.npz", *ones)
+    assert r.returncode == 0, r.stderr
+    assert ProtoSymbolSpace.load(tmp_path / "one.npz").params.recognition_pose_floor == ONE_EXAMPLE_POSE_FLOOR
+    r = run("offline", "build", tmp_path / "zero.npz", *ones, "--pose-floor", "0")
+    assert r.returncode == 0, r.stderr
+    assert ProtoSymbolSpace.load(tmp_path / "zero.npz").params.recognition_pose_floor is None
+    r = run("offline", "build", tmp_path / "bad.npz", *ones, "--pose-floor", "-1")
+    assert r.returncode == 2 and "Traceback" not in r.stderr and not (tmp_path / "bad.npz").exists()
 
 
 def test_errors_are_one_line_without_traceback(bundled, tmp_path):

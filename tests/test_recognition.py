@@ -251,6 +251,29 @@ def test_a_space_file_written_before_the_class_spreads_keeps_its_raw_threshold(d
 
 
 # ---------------------------------------------------------------------------- files of 0.1
+def test_a_space_of_one_clip_per_motion_gets_the_one_example_pose_floor_by_default(bundled):
+    """``default_pose_floor`` (what ``offline build`` and ``space build`` give a space when no floor
+    is asked for): the one-example floor when most motions hold one clip, else none; with it every
+    pose output of every proto-symbol is compared at the ceiling, the travel velocities as trained."""
+    from shared.pss.space import ONE_EXAMPLE_POSE_FLOOR, RECOGNITION_VAR_CEILING, default_pose_floor
+    from shared.pss.symbol import pose_indices
+
+    assert default_pose_floor(["a", "b", "c"]) == ONE_EXAMPLE_POSE_FLOOR
+    assert default_pose_floor(["a", "a", "b", "c", "d"]) == ONE_EXAMPLE_POSE_FLOOR  # most hold one
+    assert default_pose_floor(["a", "a", "b", "b", "c"]) is None
+    assert default_pose_floor([]) is None
+    firsts = [load_clip(next(iter(find_clips([d])))) for d in sorted((bundled / "amc").iterdir()) if d.is_dir()]
+    floor = default_pose_floor([c.label for c in firsts])
+    assert floor == ONE_EXAMPLE_POSE_FLOOR >= RECOGNITION_VAR_CEILING
+    space = ProtoSymbolSpace.build(firsts, pose_floor=floor)
+    f = space.features
+    rg = f.group_indices(space.recognition_groups)
+    pose = np.isin(rg, pose_indices(f))
+    seen = np.stack([m.covars for m in space.recognition_models()])
+    assert np.all(seen[:, :, pose] == RECOGNITION_VAR_CEILING)
+    assert seen[:, :, ~pose].min() < RECOGNITION_VAR_CEILING
+
+
 def test_a_space_file_of_format_1_still_loads_generates_and_recognises(bundled, tmp_path):
     space = ProtoSymbolSpace.load(FORMAT1)
     assert space.format == "mirrorcoach.space/1" and not space.features.has_position

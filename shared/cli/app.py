@@ -24,6 +24,7 @@ from shared.cli.common import (
     offline_app,
     parse_mix,
     parse_point,
+    pose_floor_for,
     read_clip,
     recognition_text,
 )
@@ -113,7 +114,9 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
                               on_read=lambda _: prog.advance(reading))
         assert clips is not None  # (read, or to be read one at a time)
         task = prog.add_task("training proto-symbols", total=len(clips))
-        space = ProtoSymbolSpace.build(clips, dim=dim, n_states=states, group_by=group_by, name=out.stem, pose_floor=pose_floor,
+        labels = [f.parent.name for f in files] if lazy else [c.label or c.name for c in clips]
+        space = ProtoSymbolSpace.build(clips, dim=dim, n_states=states, group_by=group_by, name=out.stem,
+                                       pose_floor=pose_floor_for(pose_floor, labels),
                                        progress=lambda done, total: prog.update(task, completed=done, total=total))
     space.save(out)
     i = space.info()

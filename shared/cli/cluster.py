@@ -23,6 +23,7 @@ from shared.cli.common import (
     load_clips,
     parse_mix,
     parse_point,
+    pose_floor_for,
     read_clip,
     recognition_text,
     wire,
@@ -56,8 +57,9 @@ def space_build(name: str = typer.Argument(..., help="Name of the space (letters
     req = {"space": name, "clips": [wire(c) for c in clips], "dim": dim, "group_by": group_by, "replace": replace}
     if states is not None:
         req["n_states"] = states
-    if pose_floor is not None:
-        req["pose_floor"] = pose_floor
+    floor = pose_floor_for(pose_floor, [c.label or c.name for c in clips])
+    if floor is not None:
+        req["pose_floor"] = floor
     with client() as c, busy(f"building space {name} from {len(clips)} clips"):
         info = c.request("pss", "build", req, timeout=timeout)
     if as_json:

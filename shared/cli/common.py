@@ -31,8 +31,19 @@ SPACE_HELP = ("A space of the cluster's pss service (`space build`) holding the 
               "motion only once leaves the decision to --background when given.")
 LABEL_HELP = "With --space: the target's motion in it (default: the target's own label, else what the space recognises it as)."
 POSE_FLOOR_HELP = ("Recognition's variance floor on the pose outputs, for a space that must recognise motions done "
-                   "in styles it does not hold (0.03 was chosen on a game studio's styles; it costs clips across "
-                   "HDM05's performers, so none by default; docs/pss.md).")
+                   "in styles it does not hold (0.03 was chosen on a game studio's styles for a space of several "
+                   "performances per motion). Default: 0.05 when most motions have one clip (what recognises other "
+                   "styles best there), else none; 0: none. docs/pss.md.")
+
+
+def pose_floor_for(asked: float | None, labels) -> float | None:
+    """The pose floor a space of clips labelled ``labels`` is built with: ``asked`` (0: none), or
+    when not asked :func:`shared.pss.symbol.default_pose_floor` (a floor for one clip per motion)."""
+    from shared.pss.symbol import default_pose_floor
+
+    if asked is None:
+        return default_pose_floor(labels)
+    return asked or None
 
 
 def say_if_unguarded(background, space) -> None:

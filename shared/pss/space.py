@@ -38,6 +38,7 @@ from shared.pss.symbol import (  # the space's parts, named here too (its public
     FORMAT,
     GEOMETRY_GROUPS,
     MAX_STATES,
+    ONE_EXAMPLE_POSE_FLOOR,
     READABLE_FORMATS,
     RECOGNITION_VAR_CEILING,
     STYLE_POSE_FLOOR,
@@ -47,6 +48,7 @@ from shared.pss.symbol import (  # the space's parts, named here too (its public
     SpaceParams,
     at_space_rate,
     default_n_states,
+    default_pose_floor,
     performer,
 )
 from shared.pss.synthesis import combine, generate, point_weights
@@ -56,7 +58,7 @@ if TYPE_CHECKING:  # annotations only: recognition's decision is imported where 
 
 __all__ = ["ProtoSymbolSpace", "ProtoSymbol", "SpaceParams", "Recognition", "Association", "default_n_states",
            "performer", "FORMAT", "READABLE_FORMATS", "GEOMETRY_GROUPS", "MAX_STATES", "RECOGNITION_VAR_CEILING",
-           "STYLE_POSE_FLOOR"]
+           "STYLE_POSE_FLOOR", "ONE_EXAMPLE_POSE_FLOOR", "default_pose_floor"]
 
 
 class _AtRate(Sequence):
@@ -117,7 +119,8 @@ class ProtoSymbolSpace:
         pose_floor : float, optional
             Recognition's variance floor on the position group's pose outputs (diagonal spaces):
             for a space that must recognise motions done in styles it does not hold
-            (:data:`STYLE_POSE_FLOOR`; none by default).
+            (:data:`STYLE_POSE_FLOOR`; none by default here; ``offline build`` and ``space build``
+            give a space of one clip per motion :func:`default_pose_floor`).
         open_set : bool
             False: for association and generation only, "none of these" by the distance rule alone
             (the novelty model and discriminant ratio not fitted: most of saving a small space).
