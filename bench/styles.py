@@ -232,19 +232,19 @@ def choose_pose_floor(train: list, dev: tuple[list, list], floors=(None, 0.02, 0
     return rows
 
 
-def _one_clip_spaces(hdm05: Path) -> dict:
-    """HDM05's spaces of one clip per motion: each performer's first clip of every class, built once."""
-    from shared.io import find_clips
+def _one_clip_spaces(dev: tuple[list, list]) -> dict:
+    """HDM05's spaces of one clip per motion (each performer's first clip of every class, built
+    once) and each performer's clips, from the dev split's clips (:func:`_dev_split`)."""
+    from shared.pss.space import performer
 
     clips: dict[str, dict[str, list]] = {}
-    for f in find_clips([hdm05 / "amc"]):
-        c = load_clip(f)
-        clips.setdefault(f.name.split("_")[1], {}).setdefault(c.label, []).append(c)
+    for c in [*dev[0], *dev[1]]:
+        clips.setdefault(performer(c), {}).setdefault(c.label, []).append(c)
     return {p: (ProtoSymbolSpace.build([v[0] for v in by_class.values()]), [c for v in by_class.values() for c in v])
             for p, by_class in sorted(clips.items())}
 
 
-def choose_one_example_floor(train: list, hdm05: Path, floors=(None, 0.01, 0.02, 0.03, 0.05, 0.08)) -> list[dict]:
+def choose_one_example_floor(train: list, dev: tuple[list, list], floors=(None, 0.01, 0.02, 0.03, 0.05, 0.08)) -> list[dict]:
     """How ``ONE_EXAMPLE_POSE_FLOOR`` was chosen: spaces of one clip per motion, each of the
     training styles alone recognising the other training styles (closed set; a one-clip space
     rejects none, so as shown is the same), with HDM05's one-clip spaces of the two tuning
@@ -255,8 +255,8 @@ def choose_one_example_floor(train: list, hdm05: Path, floors=(None, 0.01, 0.02,
     styles = sorted({s for s, _ in train})
     spaces = [(ProtoSymbolSpace.build([c for s, c in train if s == style]), [c for s, c in train if s != style])
               for style in styles]
-    one = _one_clip_spaces(hdm05)
-    pairs = {"tuning": [("bd", "bk"), ("bk", "bd")], "dg": [("bd", "dg"), ("bk", "dg")]}
+    one = _one_clip_spaces(dev)
+    pairs = {"tuning": [("HDM_bd", "HDM_bk"), ("HDM_bk", "HDM_bd")], "dg": [("HDM_bd", "HDM_dg"), ("HDM_bk", "HDM_dg")]}
 
     def hits(pairs_of) -> tuple[int, int]:
         right = n = 0
@@ -358,7 +358,7 @@ def main(argv=None) -> int:
                      ["floor", "closed set", "as shown", "HDM05 dev split (dg), closed set"],
                      [["none" if r["floor"] is None else format(r["floor"], "g"), _pct(r["closed"]), _pct(r["as_shown"]),
                        _pct(r["dg_closed"])] for r in res["pose_floor_choice"]])
-        res["one_example_floor_choice"] = choose_one_example_floor([(s, c) for s, c in clips if s in half], args.hdm05)
+        res["one_example_floor_choice"] = choose_one_example_floor([(s, c) for s, c in clips if s in half], dev)
         md += _table(f"The pose floor of a space of one clip per motion (`ONE_EXAMPLE_POSE_FLOOR`, {ONE_EXAMPLE_POSE_FLOOR:g}, "
                      "what `offline build` and `space build` give such a space: the 'normal' split's default rows), chosen "
                      "on the same training styles, each alone as the space recognising the other seven (the most; ties to "

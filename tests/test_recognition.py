@@ -250,7 +250,6 @@ def test_a_space_file_written_before_the_class_spreads_keeps_its_raw_threshold(d
             ProtoSymbolSpace.load(tmp_path / "bad.npz")
 
 
-# ---------------------------------------------------------------------------- files of 0.1
 def test_a_space_of_one_clip_per_motion_gets_the_one_example_pose_floor_by_default(bundled):
     """``default_pose_floor`` (what ``offline build`` and ``space build`` give a space when no floor
     is asked for): the one-example floor when most motions hold one clip, else none; with it every
@@ -274,6 +273,7 @@ def test_a_space_of_one_clip_per_motion_gets_the_one_example_pose_floor_by_defau
     assert seen[:, :, ~pose].min() < RECOGNITION_VAR_CEILING
 
 
+# ---------------------------------------------------------------------------- files of 0.1
 def test_a_space_file_of_format_1_still_loads_generates_and_recognises(bundled, tmp_path):
     space = ProtoSymbolSpace.load(FORMAT1)
     assert space.format == "mirrorcoach.space/1" and not space.features.has_position

@@ -114,10 +114,12 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
                               on_read=lambda _: prog.advance(reading))
         assert clips is not None  # (read, or to be read one at a time)
         task = prog.add_task("training proto-symbols", total=len(clips))
-        labels = [f.parent.name for f in files] if lazy else [c.label or c.name for c in clips]
         space = ProtoSymbolSpace.build(clips, dim=dim, n_states=states, group_by=group_by, name=out.stem,
-                                       pose_floor=pose_floor_for(pose_floor, labels),
+                                       pose_floor=pose_floor or None,
                                        progress=lambda done, total: prog.update(task, completed=done, total=total))
+    if pose_floor is None:  # the default for the labels of the clips as read (an NPZ clip carries its own)
+        floor = pose_floor_for(None, [s.label for s in space.symbols for _ in s.clips])
+        space = space if floor is None else space.with_pose_floor(floor)
     space.save(out)
     i = space.info()
     typer.echo(f"wrote {out}: {i['n_proto_symbols']} proto-symbols, {len(i['labels'])} labels, "
