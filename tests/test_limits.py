@@ -147,6 +147,36 @@ def test_an_interrupted_replace_beside_an_intact_space_is_said_once(tmp_path, de
     assert [x["space"] for x in SpaceStore(tmp_path).interrupted()] == ["never"]  # said once: the marker is gone
 
 
+def test_a_standby_leaves_the_leaders_write_in_progress_and_recovers_when_it_leads(tmp_path, dev_split):
+    """Deployed, a standby pss opens the store both hosts mount while the leader writes: it must
+    not clear the leader's temporary file or marker (CI once lost a build that way: the rename
+    found no file). When it starts to lead it clears what is old enough to be a dead process's
+    and leaves a temporary file written moments ago (a stepped-down leader's write finishing)."""
+    import os
+    import time
+
+    from shared.pss import store as store_module
+    from shared.pss.space import ProtoSymbolSpace
+    from shared.pss.store import SpaceStore
+
+    leader = SpaceStore(tmp_path)
+    leader.commit("a", ProtoSymbolSpace.build(dev_split[0][:3], dim=2))
+    writing = tmp_path / ".b.npz.in_progress"
+    writing.write_bytes(b"half")
+    (tmp_path / "a.pending.json").write_text(json.dumps({"operation": "add", "started": 1.0}))
+    standby = SpaceStore(tmp_path, recover=False)
+    assert writing.exists() and (tmp_path / "a.pending.json").exists()
+    dead = tmp_path / ".c.npz.killed"
+    dead.write_bytes(b"half")
+    old = time.time() - store_module.TAKE_OVER_GRACE_S - 1
+    os.utime(dead, (old, old))
+    standby.take_over()
+    assert not dead.exists() and writing.exists()  # the old one was a dead process's; the young one may finish
+    assert not (tmp_path / "a.pending.json").exists() and standby.get("a").symbols  # the space as it was
+    SpaceStore(tmp_path)  # a single instance's start clears every temporary file
+    assert not writing.exists()
+
+
 def test_a_line_the_full_disk_cut_is_taken_back(small_disk):
     """The disk takes the first part of a line (the file's last page has room) and refuses the
     rest: the file is cut back to where it was, and the error is raised."""

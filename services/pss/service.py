@@ -74,7 +74,8 @@ def make_service(settings: Settings | None = None) -> Service:
     import sklearn.linear_model  # noqa: F401
 
     _warm()
-    store = SpaceStore(settings.data_dir("pss"))
+    # deployed, every instance starts as a standby: it recovers the store when it starts to lead
+    store = SpaceStore(settings.data_dir("pss"), recover=settings.identity is None)
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings, workers=settings.workers)
 
     def changed(name, change, space=None):
@@ -276,5 +277,5 @@ def make_service(settings: Settings | None = None) -> Service:
         return {"space": req["space"], "deleted": True}
 
     svc.store = store
-    svc.on_promote.append(store.forget)
+    svc.on_promote.append(store.take_over)
     return svc

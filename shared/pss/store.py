@@ -13,7 +13,10 @@ into the file when it reaches ``JOURNAL_MAX`` entries or a quarter of the space.
 A build or add first writes ``<name>.pending.json``; the marker is removed once the new space
 is on disk, or at once when the operation fails or is refused (the old file is intact). A
 marker found when the store opens belongs to an operation the previous process never finished:
-:meth:`interrupted` reports it until the space is built again or deleted.
+:meth:`interrupted` reports it until the space is built again or deleted. Deployed with a standby
+on the same volume, only the instance that leads recovers (when it starts to lead,
+:meth:`take_over`): a standby that cleared "half-written" files at its start would delete the
+leader's write in progress.
 
 Readers never wait for writers: a space object is never modified in place, a write replaces
 it. Two writes to the same space at once are refused (``conflict``); writes to different
@@ -48,6 +51,7 @@ def _operation(marker: Path) -> str:
 
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 JOURNAL_MAX = 32  # entries beside a space's file before the next change rewrites it whole
+TAKE_OVER_GRACE_S = 120.0  # SpaceStore.take_over: a temporary file younger than this may be a write in progress
 
 
 def check_name(name: str) -> str:
@@ -60,18 +64,38 @@ def check_name(name: str) -> str:
 class SpaceStore:
     """The spaces of one PSS service, in ``root``."""
 
-    def __init__(self, root):
+    def __init__(self, root, recover: bool = True):
+        """``recover``: clear what a killed process left (:meth:`recover`) now; a standby on storage
+        another instance writes to passes False and recovers when it starts to lead
+        (:meth:`take_over`)."""
         self.root = Path(root)
         self.root.mkdir(parents=True, exist_ok=True)
         self._cache: dict[str, ProtoSymbolSpace] = {}
         self._busy: set[str] = set()
         self._lock = threading.Lock()
-        for pattern in (".*.npz.*", ".*.add.*"):  # half-written temporary files of a killed process
+        if recover:
+            self.recover()
+
+    def recover(self, older_than_s: float = 0.0) -> None:
+        """Remove the temporary files a killed process left half-written (those not written to for
+        ``older_than_s``) and settle the markers of operations it never finished (module
+        docstring). Only the instance that writes may call it: on a shared volume another
+        instance's write in progress is a temporary file too."""
+        now = time.time()
+        for pattern in (".*.npz.*", ".*.add.*"):
             for tmp in self.root.glob(pattern):
-                tmp.unlink(missing_ok=True)
+                try:
+                    if now - tmp.stat().st_mtime >= older_than_s:
+                        tmp.unlink(missing_ok=True)
+                except FileNotFoundError:  # renamed by its writer meanwhile
+                    pass
         for m in self.root.glob("*.pending.json"):
             name = m.name[: -len(".pending.json")]
-            if m.stat().st_size == 0:  # a marker an older version could not finish writing (a full disk):
+            try:
+                empty = m.stat().st_size == 0
+            except FileNotFoundError:  # its operation ended meanwhile (a stepped-down leader's)
+                continue
+            if empty:  # a marker an older version could not finish writing (a full disk):
                 m.unlink(missing_ok=True)  # written before any work, so no operation began
             elif NAME_RE.fullmatch(name) and self.path(name).exists():
                 # a replace or an add the previous process never finished: the space is as it was
@@ -80,6 +104,14 @@ class SpaceStore:
                 log.warning("space %r: a %s started before the service last stopped never finished; the space is "
                             "as it was before it", name, _operation(m))
                 m.unlink(missing_ok=True)
+
+    def take_over(self) -> None:
+        """A standby starts to lead (shared/bus/runtime.py): drop the spaces kept in memory (another
+        instance may have changed the files) and recover, leaving the temporary files written
+        in the last ``TAKE_OVER_GRACE_S``: a leader that lost its router steps down, but a write it
+        had begun may still be finishing."""
+        self.forget()
+        self.recover(older_than_s=TAKE_OVER_GRACE_S)
 
     def forget(self) -> None:
         """Drop the spaces kept in memory: the files are the truth (a standby that starts to lead,
