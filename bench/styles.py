@@ -10,7 +10,10 @@ is who-knows-what the space has never seen. Splits:
 
 The 'normal' split's space holds one clip of most motions, so it is built as ``offline build``
 and ``space build`` build such a space: with ``ONE_EXAMPLE_POSE_FLOOR``
-(:func:`choose_one_example_floor`, one training style at a time); a row without it beside.
+(:func:`choose_one_example_floor`, one training style at a time); a row without it beside. Such a
+space has no rows to fit its confidence's temperature on: it takes ``ONE_EXAMPLE_TEMPERATURE``
+(:func:`choose_one_example_temperature`, on the same spaces); the table gives each split's mean
+confidence and calibration error.
 
 Nothing is tuned on these splits' test clips except where said: the space's defaults, its
 calibration from its own proto-symbols. Four defaults were chosen with this dataset:
@@ -43,7 +46,7 @@ import numpy as np
 from bench.common import parse_args, write_results
 from shared.io import load_clip
 from shared.pss.space import ProtoSymbolSpace
-from shared.reports.evaluation import dtw_recognition, minirocket_recognition
+from shared.reports.evaluation import dtw_recognition, expected_calibration_error, minirocket_recognition
 
 NAME = re.compile(r"dataset-1_(?P<content>[a-z-]+)_(?P<style>[a-z-]+)_(?P<id>\d+)\.bvh$")
 
@@ -76,7 +79,9 @@ def split(space_clips, test_clips, name: str, pose_floor: float | None = None) -
             wrong[f"wrong label, confidence {'>= 0.5' if r.confidence >= 0.5 else '< 0.5'}"] += 1
     truth = [c.label for c in test_clips]
     confusions = Counter(f"{t} -> {p}" for t, p in zip(truth, nearest) if t != p)
+    right = np.array([t == p for t, p in zip(truth, nearest)])
     row = {"split": name, "space_clips": len(space_clips), "test_clips": len(test_clips), "build_s": build_s,
+           "mean_confidence": float(np.mean(conf)), "ece": expected_calibration_error(np.array(conf), right),
            "pss_closed": float(np.mean([t == p for t, p in zip(truth, nearest)])),
            "pss_as_shown": float(np.mean([t == p for t, p in zip(truth, shown)])),
            "rejected": int(sum(p is None for p in shown)),
@@ -244,6 +249,58 @@ def _one_clip_spaces(dev: tuple[list, list]) -> dict:
             for p, by_class in sorted(clips.items())}
 
 
+#: HDM05's one-clip spaces (:func:`_one_clip_spaces`) and the performers they recognise: the two tuning
+#: performers each other, and performer dg (reported, never chosen on)
+ONE_CLIP_PAIRS = {"tuning": [("HDM_bd", "HDM_bk"), ("HDM_bk", "HDM_bd")], "dg": [("HDM_bd", "HDM_dg"), ("HDM_bk", "HDM_dg")]}
+
+
+def _one_example_spaces(train: list, dev: tuple[list, list]) -> tuple[list, dict]:
+    """The one-example choices' spaces: each training style alone (and the other training styles'
+    clips), and HDM05's one-clip spaces (:func:`_one_clip_spaces`)."""
+    styles = sorted({s for s, _ in train})
+    spaces = [(ProtoSymbolSpace.build([c for s, c in train if s == style]), [c for s, c in train if s != style])
+              for style in styles]
+    return spaces, _one_clip_spaces(dev)
+
+
+def choose_one_example_temperature(train: list, dev: tuple[list, list], grid: int = 301) -> list[dict]:
+    """How ``ONE_EXAMPLE_TEMPERATURE`` was chosen: the same one-clip spaces as
+    :func:`choose_one_example_floor` (at ``ONE_EXAMPLE_POSE_FLOOR``), the training styles each alone
+    recognising the others and HDM05's of bd and bk each other's clips; for each clip its
+    distance to every class's nearest proto-symbol (eq. 2.4) and the space's median distance ``m``;
+    the temperature ``k * m`` whose softmax gives the true classes the smallest mean negative
+    log-likelihood, ``k`` on a log grid from 0.01 to 10. Rows: the optimum and the likelihood there
+    and at the constant as set, over all clips and over each source alone."""
+    from shared.pss.recognition import ONE_EXAMPLE_TEMPERATURE, class_distances
+    from shared.pss.space import ONE_EXAMPLE_POSE_FLOOR
+
+    spaces, one = _one_example_spaces(train, dev)
+    pairs = [(sp, test, "studio") for sp, test in spaces]
+    pairs += [(one[a][0], one[b][1], "HDM05") for a, b in ONE_CLIP_PAIRS["tuning"]]
+    seen = []  # (source, class distances / m, index of the true class)
+    for sp, test, source in pairs:
+        sp = sp.with_pose_floor(ONE_EXAMPLE_POSE_FLOOR)
+        m = float(np.median(sp.recognition_matrix[np.triu_indices(len(sp.symbols), 1)]))
+        classes, labels = sorted(set(sp.labels)), np.asarray(sp.labels)
+        for c in (c for c in test if c.label in classes):
+            dc = class_distances(np.asarray(sp.recognize(c).recognition_distances), labels, classes)
+            seen.append((source, (dc - dc.min()) / m, classes.index(c.label)))
+
+    def nll(k: float, source: str | None = None) -> float:
+        return float(np.mean([np.log(np.exp(-z / k).sum()) + z[t] / k for src, z, t in seen if source in (None, src)]))
+
+    ks = np.exp(np.linspace(np.log(0.01), np.log(10.0), grid))
+    rows = []
+    for source in (None, "studio", "HDM05"):
+        values = [nll(k, source) for k in ks]
+        best = float(ks[int(np.argmin(values))])
+        rows.append({"clips": "all" if source is None else source, "optimum": best, "nll_optimum": min(values),
+                     "nll_constant": nll(ONE_EXAMPLE_TEMPERATURE, source),
+                     "n": sum(source in (None, src) for src, _, _ in seen)})
+        print(rows[-1], flush=True)
+    return rows
+
+
 def choose_one_example_floor(train: list, dev: tuple[list, list], floors=(None, 0.01, 0.02, 0.03, 0.05, 0.08)) -> list[dict]:
     """How ``ONE_EXAMPLE_POSE_FLOOR`` was chosen: spaces of one clip per motion, each of the
     training styles alone recognising the other training styles (closed set; a one-clip space
@@ -252,11 +309,7 @@ def choose_one_example_floor(train: list, dev: tuple[list, list], floors=(None, 
     no floor); the most on the styles, ties to the smaller floor. Also printed, never chosen on:
     the same spaces recognising performer dg. Each space is built once; a floor changes only how
     it recognises (``with_pose_floor``)."""
-    styles = sorted({s for s, _ in train})
-    spaces = [(ProtoSymbolSpace.build([c for s, c in train if s == style]), [c for s, c in train if s != style])
-              for style in styles]
-    one = _one_clip_spaces(dev)
-    pairs = {"tuning": [("HDM_bd", "HDM_bk"), ("HDM_bk", "HDM_bd")], "dg": [("HDM_bd", "HDM_dg"), ("HDM_bk", "HDM_dg")]}
+    spaces, one = _one_example_spaces(train, dev)
 
     def hits(pairs_of) -> tuple[int, int]:
         right = n = 0
@@ -268,7 +321,7 @@ def choose_one_example_floor(train: list, dev: tuple[list, list], floors=(None, 
     rows = []
     for floor in floors:
         st, n = hits([(sp.with_pose_floor(floor), test) for sp, test in spaces])
-        hd = {k: hits([(one[a][0].with_pose_floor(floor), one[b][1]) for a, b in v]) for k, v in pairs.items()}
+        hd = {k: hits([(one[a][0].with_pose_floor(floor), one[b][1]) for a, b in v]) for k, v in ONE_CLIP_PAIRS.items()}
         rows.append({"floor": floor, "closed": st / n, "clips": n, "hdm05_tuning": hd["tuning"][0] / hd["tuning"][1],
                      "hdm05_tuning_clips": hd["tuning"][1], "hdm05_dg": hd["dg"][0] / hd["dg"][1]})
         print(rows[-1], flush=True)
@@ -330,12 +383,16 @@ def main(argv=None) -> int:
           "below; the idea came after its test clips had been scored at `--pose-floor 0.03`); `--pose-floor 0` is the "
           "same space without a floor (the default before). 'The styles no choice saw' are the 6 that are neither "
           "'normal' nor among the half split's training styles.", "",
-          "| split | space / test clips | PSS closed set | PSS as shown | rejected | MiniRocket (aeon) | 1-NN DTW (aeon) |",
-          "|---|---|---|---|---|---|---|"]
+          "| split | space / test clips | PSS closed set | PSS as shown | rejected | PSS mean confidence | PSS calibration "
+          "error (ECE) | MiniRocket (aeon) | 1-NN DTW (aeon) |",
+          "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         md.append(f"| {r['split']} | {r['space_clips']} / {r['test_clips']} | {100 * r['pss_closed']:.1f} % | "
-                  f"{100 * r['pss_as_shown']:.1f} % | {r['rejected']} | {100 * r['minirocket']:.1f} % | "
-                  f"{100 * r['dtw']:.1f} % |")
+                  f"{100 * r['pss_as_shown']:.1f} % | {r['rejected']} | {r['mean_confidence']:.2f} | {r['ece']:.2f} | "
+                  f"{100 * r['minirocket']:.1f} % | {100 * r['dtw']:.1f} % |")
+    md += ["", "Confidence: the nearest class's, as `--json` gives it; its calibration error against the closed set "
+           "(10 bins). A space of one clip per motion takes its temperature from `ONE_EXAMPLE_TEMPERATURE` "
+           "(chosen below, on one training style at a time and HDM05's tuning performers)."]
     md += ["", "PSS's wrong answers as shown, and its most frequent confusions (nearest class):", ""]
     for r in rows:
         md.append(f"- {r['split']}: " + ("; ".join(f"{k} {v}" for k, v in r["wrong_answers"].items()) or "none")
@@ -368,6 +425,17 @@ def main(argv=None) -> int:
                       "HDM05 bd, bk -> dg, one clip per class (reported)"],
                      [["none" if r["floor"] is None else format(r["floor"], "g"), _pct(r["closed"]), _pct(r["hdm05_tuning"]),
                        _pct(r["hdm05_dg"])] for r in res["one_example_floor_choice"]])
+        from shared.pss.recognition import ONE_EXAMPLE_TEMPERATURE
+
+        res["one_example_temperature_choice"] = choose_one_example_temperature([(s, c) for s, c in clips if s in half], dev)
+        md += _table(f"The confidence temperature of a space of one clip per motion (`ONE_EXAMPLE_TEMPERATURE`, "
+                     f"{ONE_EXAMPLE_TEMPERATURE:g} of its median distance), chosen on the same one-clip spaces (at "
+                     f"`ONE_EXAMPLE_POSE_FLOOR`) recognising the other training styles and HDM05's bd and bk each other's "
+                     "clips: the smallest mean negative log-likelihood of the true class (log grid 0.01-10; the optimum "
+                     "over all clips, rounded). The 'normal' split and dg were never scored here:",
+                     ["clips", "n", "optimum", "NLL at the optimum", "NLL at the constant"],
+                     [[r["clips"], str(r["n"]), f"{r['optimum']:.3f}", f"{r['nll_optimum']:.3f}",
+                       f"{r['nll_constant']:.3f}"] for r in res["one_example_temperature_choice"]])
         from shared.pss.recognition import DISCRIMINANT_WEIGHT
 
         res["weight_choice"] = choose_discriminant_weight([(s, c) for s, c in clips if s in half], dev)

@@ -63,8 +63,8 @@ INFO = Map({
     "mds_converged": F(Bool()),
     "hmm_converged": F(Int(0), "how many HMMs met the convergence tolerance"),
     "format": F(Str(max_len=64), "the space file's format (mirrorcoach.space/1 or /2)", required=False),
-    "recognition": F(Str(max_len=200), "how recognition decides a label in this space", required=False),
-    "open_set": F(Str(max_len=200), "how recognition decides 'none of these' in this space", required=False),
+    "recognition": F(Str(max_len=400), "how recognition decides a label in this space", required=False),
+    "open_set": F(Str(max_len=400), "how recognition decides 'none of these' in this space", required=False),
 })
 
 NEAREST = Map({"name": F(Str(max_len=64)), "label": F(Str(max_len=64)), "distance": F(Float(0.0), "eq. 2.4 distance")})

@@ -232,6 +232,14 @@ def test_a_space_file_written_before_the_class_spreads_keeps_its_raw_threshold(d
     np.savez(tmp_path / "old.npz", **arrays)
     old = ProtoSymbolSpace.load(tmp_path / "old.npz")
     assert old.calibration.class_scales is None and "one spread for all classes" in old.info()["open_set"]
+    del header["novelty"]  # the oldest file: its summary names every rule it lacks, and still fits the contract
+    np.savez(tmp_path / "oldest.npz", **{**{k: v for k, v in arrays.items() if not k.startswith("novelty_")},
+                                         "header": np.array(json.dumps(header))})
+    from schemas.pss import INFO_EP
+    from services.pss.service import space_info
+
+    oldest = space_info("oldest", ProtoSymbolSpace.load(tmp_path / "oldest.npz"))
+    assert "without the novelty model" in oldest["open_set"] and INFO_EP.reply.validate(oldest)["open_set"] == oldest["open_set"]
     from shared.pss.recognition import class_distances
 
     r = old.recognize(clip)
@@ -271,6 +279,34 @@ def test_a_space_of_one_clip_per_motion_gets_the_one_example_pose_floor_by_defau
     seen = np.stack([m.covars for m in space.recognition_models()])
     assert np.all(seen[:, :, pose] == RECOGNITION_VAR_CEILING)
     assert seen[:, :, ~pose].min() < RECOGNITION_VAR_CEILING
+
+
+def test_a_space_of_one_clip_per_motion_borrows_its_confidence_temperature(bundled):
+    """A space whose motions hold one clip each (one of them two) has two rows to fit a temperature
+    on; fitted on them it read 0.9995 on its wrong labels. It takes ``ONE_EXAMPLE_TEMPERATURE`` times
+    its median distance instead, and its wrong labels read less sure than its right ones. Its open
+    set cannot reject (nothing to calibrate on), and its summary says so."""
+    from shared.pss.recognition import ONE_EXAMPLE_TEMPERATURE, can_reject
+    from shared.pss.space import default_pose_floor, performer
+
+    clips = [load_clip(f) for f in find_clips([bundled / "amc"])]
+    wrong, right = [], []
+    for who in ("HDM_bd", "HDM_bk"):
+        mine = [c for c in clips if performer(c) == who]
+        firsts = list({c.label: c for c in reversed(mine)}.values())
+        extra = next(c for c in mine if all(c is not f for f in firsts))
+        chosen = [*firsts, extra]
+        space = ProtoSymbolSpace.build(chosen, pose_floor=default_pose_floor([c.label for c in chosen]))
+        cal = space.calibration
+        median = np.median(space.recognition_matrix[np.triu_indices(len(space.symbols), 1)])
+        assert cal.scheme == "one proto-symbol per motion" and cal.n_calibration == 2
+        assert not can_reject(cal, space.discriminant, space.novelty_model)
+        assert "it never rejects: 2 known motions to calibrate on, too few" in space.info()["open_set"]
+        assert cal.temperature == pytest.approx(ONE_EXAMPLE_TEMPERATURE * median)
+        for c in (c for c in clips if performer(c) != who):
+            r = space.recognize(c)
+            (right if r.nearest_label == c.label else wrong).append(r.confidence)
+    assert wrong and right and max(wrong) < 0.9 and np.mean(wrong) < np.mean(right)
 
 
 # ---------------------------------------------------------------------------- files of 0.1
@@ -489,7 +525,9 @@ def test_the_label_weighs_eq_2_4_and_the_discriminant_as_documented():
 def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_their_rule(dev_space, dev_split, tmp_path):
     one = ProtoSymbolSpace.build([c for c in dev_split[0] if c.label == "squat1Reps"][:4])
     assert one.discriminant is None and one.novelty_model is None
-    assert one.info()["open_set"] == "none of these: the distance rule alone (one class: no other class to be nearer to)"
+    assert one.info()["open_set"].startswith("none of these: the distance rule alone (one class: no other class to be "
+                                             "nearer to); it never rejects:")  # four of one class
+    assert "never" not in dev_space.info()["open_set"]
     m = dev_space.discriminant
     assert m is not None and m.scheme == "across performers" and m.classes == sorted(set(dev_space.labels))
     assert "the discriminant ratio" in dev_space.info()["open_set"]

@@ -26,6 +26,7 @@ from shared.cli.common import (
     pose_floor_for,
     read_clip,
     recognition_text,
+    say_if_never_rejects,
     wire,
 )
 
@@ -37,6 +38,7 @@ def _print_info(info: dict) -> None:
     typer.echo(f"space {info['space']}: {info['n_proto_symbols']} proto-symbols, {len(info['labels'])} labels, "
                f"dim {info['params']['dim']}, {info['params']['n_states']} HMM states, "
                f"{info['n_features']} features, stress-1 {info['stress1']:.3f}")
+    say_if_never_rejects(info.get("open_set"))
 
 
 # ---------------------------------------------------------------------------- space

@@ -46,6 +46,16 @@ def pose_floor_for(asked: float | None, labels) -> float | None:
     return asked or None
 
 
+def say_if_never_rejects(open_set: str | None) -> None:
+    """Tell the user a space will never answer "none of these" (its summary's ``open_set``, from
+    :meth:`shared.pss.space.ProtoSymbolSpace.info`): every motion will get its nearest label."""
+    mark = "it never rejects: "
+    if open_set and mark in open_set:
+        why = open_set[open_set.index(mark) + len(mark):]
+        typer.echo(f"note: this space never answers \"none of these\" ({why}): every motion gets its nearest label, "
+                   "however far; build it from several performances of each motion for that")
+
+
 def say_if_unguarded(background, space) -> None:
     """With neither other motions nor a space, only the target's first cost tells a repetition from
     a different motion that resembles it: said once, on stderr."""

@@ -24,8 +24,9 @@ On top of the label:
   the nearest proto-symbol of class ``c``; the temperature ``T`` maximises the likelihood of
   the space's own proto-symbols recognised *across performers* (each proto-symbol against the
   proto-symbols of other performers, a performer being the skeleton its clips came with; plain
-  leave-one-out when the space has only one performer). A motion the open set rejects keeps
-  at most its *credibility* as confidence: the smallest of the tests' split-conformal p-values
+  leave-one-out when the space has only one performer; a space of one clip per motion, with
+  nothing to fit it on, takes :data:`ONE_EXAMPLE_TEMPERATURE` of its median distance). A motion
+  the open set rejects keeps at most its *credibility* as confidence: the smallest of the tests' split-conformal p-values
   (:func:`conformal_p_value`), how often the space's own known motions (the calibration) look
   at least as unusual, so the confidence falls on motions the space does not hold (about
   ``1 - known_quantile`` and below where a test rejects) instead of staying the softmax's
@@ -75,9 +76,10 @@ import numpy as np
 from shared.compiled import kernel
 from shared.pss.conformal import KNOWN_QUANTILE, conformal_p_value, conformal_threshold
 from shared.pss.novelty import NOVELTY_QUANTILE, NoveltyModel, hmm_features
+from shared.pss.symbol import one_clip_per_motion
 
-__all__ = ["decide", "rejected_by", "Decision", "TESTS", "calibrate", "Calibration", "channel_weights", "class_distances",
-           "softmax_confidence", "DiscriminantRatio", "NoveltyModel", "hmm_features", "NOVELTY_QUANTILE",
+__all__ = ["decide", "can_reject", "open_set_text", "rejected_by", "Decision", "TESTS", "calibrate", "Calibration",
+           "channel_weights", "class_distances", "softmax_confidence", "DiscriminantRatio", "NoveltyModel", "hmm_features", "NOVELTY_QUANTILE",
            "conformal_threshold", "conformal_p_value", "KNOWN_QUANTILE"]
 
 
@@ -155,6 +157,14 @@ class Calibration:
     scores: list[float] | None = None
 
 
+#: The confidence temperature of a space of one clip per motion (one proto-symbol for most motions,
+#: :func:`shared.pss.symbol.one_clip_per_motion`), as a share of its median distance: such a space has
+#: no rows (or two) to fit one on. Chosen by the likelihood of the true class on one-clip spaces kept
+#: apart from the reports (the game studio's 8 training styles, each alone recognising the other 7;
+#: HDM05's bd and bk each other's clips: optimum 0.112; ``bench.styles --choose``); docs/pss.md, step 3.
+ONE_EXAMPLE_TEMPERATURE = 0.11
+
+
 def class_distances(distances: np.ndarray, labels: np.ndarray, classes: list[str]) -> np.ndarray:
     """Per class, the distance to its nearest proto-symbol (``inf`` for a class not in ``labels``)."""
     out = np.full(len(classes), np.inf)
@@ -230,9 +240,12 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     reach = np.isfinite(nearest_other)
     ratios = list(near[reach] / np.maximum(nearest_other[reach], 1e-12))
     scheme = "across performers" if across else "leave one out"
-    if not len(y):  # one proto-symbol per class: nothing to calibrate against
+    if not len(y) or one_clip_per_motion(labels_a):  # nothing (or a class or two) to calibrate against
         scale = float(np.median(d[np.triu_indices(len(d), 1)])) if len(d) > 1 else 1.0
-        return Calibration(classes, max(scale, 1e-6), np.inf, np.inf, 0, scheme)
+        borrowed = ONE_EXAMPLE_TEMPERATURE * max(scale, 1e-6)
+        if not len(y):  # (with one performer, no row means one proto-symbol per class)
+            why = "one proto-symbol per motion" if one_clip_per_motion(labels_a) else "no class of two performers"
+            return Calibration(classes, borrowed, np.inf, np.inf, 0, why)
 
     def nll(log_t):
         t = np.exp(log_t)
@@ -241,14 +254,18 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
         lse = np.log(np.exp(z).sum(axis=1))
         return float(np.mean(lse - z[np.arange(len(y)), y]))
 
-    scale = float(np.median(near)) or 1.0
-    res = minimize_scalar(nll, bounds=(np.log(scale) - 8, np.log(scale) + 8), method="bounded")
+    if one_clip_per_motion(labels_a):
+        temperature, scheme = borrowed, "one proto-symbol per motion"
+    else:
+        scale = float(np.median(near)) or 1.0
+        res = minimize_scalar(nll, bounds=(np.log(scale) - 8, np.log(scale) + 8), method="bounded")
+        temperature = float(np.exp(res.x))
     # each calibration score divided by its class's spread without itself, as a new motion's is
     # divided by a spread it had no part in
     own = _class_spreads_without_each(near, y)
     threshold = conformal_threshold(near / own, known_quantile)
     ratio_threshold = conformal_threshold(ratios, known_quantile) if ratios else np.inf
-    return Calibration(classes, float(np.exp(res.x)), threshold, ratio_threshold, len(y), scheme,
+    return Calibration(classes, temperature, threshold, ratio_threshold, len(y), scheme,
                        [_class_spread(near, y, k) for k in range(len(classes))], [float(v) for v in near / own])
 
 
@@ -321,6 +338,34 @@ def rejected_by(d: Decision) -> list[str]:
     clearly nearer to one class than to the next), ``model`` (the novelty model finds it
     between classes)."""
     return [name for name, v in zip(TESTS, (d.distance_novelty, d.ratio_novelty, d.model_novelty)) if v > 1.0]
+
+
+def can_reject(cal: Calibration, discriminant: DiscriminantRatio | None, novelty_model: NoveltyModel | None) -> bool:
+    """Whether any of :func:`decide`'s open-set tests can say "none of these": each is
+    split-conformal and has no bound (never rejects) without enough known motions to calibrate on."""
+    def bounds(t) -> bool:  # as :func:`decide` reads a threshold
+        return bool(np.isfinite(t) and t > 0)
+
+    return (bounds(cal.threshold) or bounds(discriminant.threshold if discriminant is not None else cal.ratio_threshold)
+            or (novelty_model is not None and bounds(novelty_model.threshold)))
+
+
+def open_set_text(cal: Calibration, n_classes: int, ratio_on_distances: bool, without_model: bool,
+                  rejects: bool) -> str:
+    """How a space says "none of these", for its summary: the tests it has (``ratio_on_distances``:
+    a file written before the discriminant ratio; ``without_model``: without the novelty model),
+    and whether they can reject at all (:func:`can_reject`)."""
+    if n_classes <= 1:
+        tests = " alone (one class: no other class to be nearer to)"
+    else:
+        tests = (" with the ratio on eq. 2.4 distances (a file written before the discriminant ratio)"
+                 if ratio_on_distances else ", the discriminant ratio") + (
+            " (without the novelty model: a file written before it, or built without the open set)"
+            if without_model else " or the novelty model")
+    return ("none of these: the distance rule"
+            + (" (one spread for all classes: a file written before the class spreads)"
+               if cal.n_calibration and not cal.class_scales else "") + tests
+            + ("" if rejects else f"; it never rejects: {cal.n_calibration} known motions to calibrate on, too few"))
 
 
 def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_model: NoveltyModel | None = None,

@@ -588,12 +588,12 @@ class ProtoSymbolSpace:
                             else "nearest proto-symbol on the angle channels (format 1: rebuild the space from its "
                                  "clips for position-based recognition)" if self.format != FORMAT
                             else "nearest proto-symbol on the motion channels (no skeleton)"),
-            "open_set": "none of these: the distance rule" + (
-                " (one spread for all classes: a file written before the class spreads)"
-                if self.calibration.n_calibration and not self.calibration.class_scales else "") + ((
-                " with the ratio on eq. 2.4 distances (a file written before the discriminant ratio)"
-                if self._discriminant is False else ", the discriminant ratio") + (
-                " (without the novelty model: a file written before it, or built without the open set)"
-                if self._novelty is False else " or the novelty model")
-                if len(set(self.labels)) > 1 else " alone (one class: no other class to be nearer to)"),
+            "open_set": self._open_set_info(),
         }
+
+    def _open_set_info(self) -> str:
+        from shared.pss.recognition import can_reject, open_set_text
+
+        old_ratio, no_model = self._discriminant is False, self._novelty is False  # as saved, before a fit
+        return open_set_text(self.calibration, len(set(self.labels)), old_ratio, no_model,
+                             can_reject(self.calibration, self.discriminant, self.novelty_model))

@@ -172,12 +172,20 @@ STYLE_POSE_FLOOR = 0.03
 ONE_EXAMPLE_POSE_FLOOR = 0.05
 
 
+def one_clip_per_motion(labels) -> bool:
+    """Whether most motions of a space of clips labelled ``labels`` hold one clip (the median
+    count per label is 1): a space with no second performance of most motions, which cannot
+    learn from itself how far a new one may lie (its pose floor, :func:`default_pose_floor`, and
+    its confidence's temperature, :data:`shared.pss.recognition.ONE_EXAMPLE_TEMPERATURE`)."""
+    counts = sorted(Counter(labels).values())
+    return bool(counts) and counts[len(counts) // 2] <= 1
+
+
 def default_pose_floor(labels) -> float | None:
     """The pose floor ``offline build`` and ``space build`` give a space of clips labelled
-    ``labels`` when none is asked for: :data:`ONE_EXAMPLE_POSE_FLOOR` when most of its motions
-    hold one clip (the median count per label is 1), else none."""
-    counts = sorted(Counter(labels).values())
-    return ONE_EXAMPLE_POSE_FLOOR if counts and counts[len(counts) // 2] <= 1 else None
+    ``labels`` when none is asked for: :data:`ONE_EXAMPLE_POSE_FLOOR` for one clip per motion
+    (:func:`one_clip_per_motion`), else none."""
+    return ONE_EXAMPLE_POSE_FLOOR if one_clip_per_motion(labels) else None
 
 
 #: a motion with fewer frames at a space's rate than its HMMs have states is read at a higher rate when
