@@ -79,7 +79,7 @@ def split(space_clips, test_clips, name: str, pose_floor: float | None = None) -
             wrong[f"wrong label, confidence {'>= 0.5' if r.confidence >= 0.5 else '< 0.5'}"] += 1
     truth = [c.label for c in test_clips]
     confusions = Counter(f"{t} -> {p}" for t, p in zip(truth, nearest) if t != p)
-    right = np.array([t == p for t, p in zip(truth, nearest)])
+    right = np.array([t == p for t, p in zip(truth, shown)])  # as shown: "none of these" is not right
     row = {"split": name, "space_clips": len(space_clips), "test_clips": len(test_clips), "build_s": build_s,
            "mean_confidence": float(np.mean(conf)), "ece": expected_calibration_error(np.array(conf), right),
            "pss_closed": float(np.mean([t == p for t, p in zip(truth, nearest)])),
@@ -390,8 +390,8 @@ def main(argv=None) -> int:
         md.append(f"| {r['split']} | {r['space_clips']} / {r['test_clips']} | {100 * r['pss_closed']:.1f} % | "
                   f"{100 * r['pss_as_shown']:.1f} % | {r['rejected']} | {r['mean_confidence']:.2f} | {r['ece']:.2f} | "
                   f"{100 * r['minirocket']:.1f} % | {100 * r['dtw']:.1f} % |")
-    md += ["", "Confidence: the nearest class's, as `--json` gives it; its calibration error against the closed set "
-           "(10 bins). A space of one clip per motion takes its temperature from `ONE_EXAMPLE_TEMPERATURE` "
+    md += ["", "Confidence: as `--json` gives it (a motion called \"none of these\" keeps at most its credibility); "
+           "its calibration error against the answer shown (\"none of these\" is not right; 10 bins). A space of one clip per motion takes its temperature from `ONE_EXAMPLE_TEMPERATURE` "
            "(chosen below, on one training style at a time and HDM05's tuning performers)."]
     md += ["", "PSS's wrong answers as shown, and its most frequent confusions (nearest class):", ""]
     for r in rows:

@@ -65,6 +65,8 @@ INFO = Map({
     "format": F(Str(max_len=64), "the space file's format (mirrorcoach.space/1 or /2)", required=False),
     "recognition": F(Str(max_len=400), "how recognition decides a label in this space", required=False),
     "open_set": F(Str(max_len=400), "how recognition decides 'none of these' in this space", required=False),
+    "rejects": F(Bool(), "whether any open-set test can say 'none of these' (false: too few known motions to "
+                         "calibrate on, every motion gets its nearest label)", required=False),
 })
 
 NEAREST = Map({"name": F(Str(max_len=64)), "label": F(Str(max_len=64)), "distance": F(Float(0.0), "eq. 2.4 distance")})

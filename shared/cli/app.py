@@ -125,7 +125,7 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
     i = space.info()
     typer.echo(f"wrote {out}: {i['n_proto_symbols']} proto-symbols, {len(i['labels'])} labels, "
                f"{space.params.n_states} states, stress-1 {i['stress1']:.3f}")
-    say_if_never_rejects(i["open_set"])
+    say_if_never_rejects(i)
 
 
 @offline_app.command("recognize")

@@ -38,7 +38,7 @@ def _print_info(info: dict) -> None:
     typer.echo(f"space {info['space']}: {info['n_proto_symbols']} proto-symbols, {len(info['labels'])} labels, "
                f"dim {info['params']['dim']}, {info['params']['n_states']} HMM states, "
                f"{info['n_features']} features, stress-1 {info['stress1']:.3f}")
-    say_if_never_rejects(info.get("open_set"))
+    say_if_never_rejects(info)
 
 
 # ---------------------------------------------------------------------------- space

@@ -46,14 +46,13 @@ def pose_floor_for(asked: float | None, labels) -> float | None:
     return asked or None
 
 
-def say_if_never_rejects(open_set: str | None) -> None:
-    """Tell the user a space will never answer "none of these" (its summary's ``open_set``, from
+def say_if_never_rejects(info: dict) -> None:
+    """Tell the user a space will never answer "none of these" (its summary's ``rejects``, from
     :meth:`shared.pss.space.ProtoSymbolSpace.info`): every motion will get its nearest label."""
-    mark = "it never rejects: "
-    if open_set and mark in open_set:
-        why = open_set[open_set.index(mark) + len(mark):]
-        typer.echo(f"note: this space never answers \"none of these\" ({why}): every motion gets its nearest label, "
-                   "however far; build it from several performances of each motion for that")
+    if info.get("rejects") is False:
+        typer.echo("note: this space never answers \"none of these\" (too few known motions to calibrate its tests "
+                   "on): every motion gets its nearest label, however far; build it from several performances of "
+                   "each motion for that")
 
 
 def say_if_unguarded(background, space) -> None:

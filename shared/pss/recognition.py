@@ -209,8 +209,6 @@ def softmax_confidence(dc: np.ndarray, temperature: float) -> np.ndarray:
 def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: list[str],
               known_quantile: float = KNOWN_QUANTILE) -> Calibration:
     """Fit the confidence temperature and the open-set threshold (see module docstring)."""
-    from scipy.optimize import minimize_scalar
-
     d = np.asarray(recognition_distances, float)
     labels_a = np.asarray(labels)
     perf = np.asarray(performers) if performers and len(performers) == len(labels) else None
@@ -240,26 +238,15 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     reach = np.isfinite(nearest_other)
     ratios = list(near[reach] / np.maximum(nearest_other[reach], 1e-12))
     scheme = "across performers" if across else "leave one out"
-    if not len(y) or one_clip_per_motion(labels_a):  # nothing (or a class or two) to calibrate against
+    one_clip = one_clip_per_motion(labels_a)
+    if one_clip or not len(y):  # nothing (or a class or two) to fit a temperature on: borrowed
         scale = float(np.median(d[np.triu_indices(len(d), 1)])) if len(d) > 1 else 1.0
-        borrowed = ONE_EXAMPLE_TEMPERATURE * max(scale, 1e-6)
-        if not len(y):  # (with one performer, no row means one proto-symbol per class)
-            why = "one proto-symbol per motion" if one_clip_per_motion(labels_a) else "no class of two performers"
-            return Calibration(classes, borrowed, np.inf, np.inf, 0, why)
-
-    def nll(log_t):
-        t = np.exp(log_t)
-        z = -(dc_all - dc_all.min(axis=1, keepdims=True)) / t
-        z = np.where(np.isfinite(z), z, -np.inf)
-        lse = np.log(np.exp(z).sum(axis=1))
-        return float(np.mean(lse - z[np.arange(len(y)), y]))
-
-    if one_clip_per_motion(labels_a):
-        temperature, scheme = borrowed, "one proto-symbol per motion"
+        temperature = ONE_EXAMPLE_TEMPERATURE * max(scale, 1e-6)
+        scheme = "one proto-symbol per motion" if one_clip else "no class of two performers"
+        if not len(y):
+            return Calibration(classes, temperature, np.inf, np.inf, 0, scheme)
     else:
-        scale = float(np.median(near)) or 1.0
-        res = minimize_scalar(nll, bounds=(np.log(scale) - 8, np.log(scale) + 8), method="bounded")
-        temperature = float(np.exp(res.x))
+        temperature = _fitted_temperature(dc_all, y, float(np.median(near)) or 1.0)
     # each calibration score divided by its class's spread without itself, as a new motion's is
     # divided by a spread it had no part in
     own = _class_spreads_without_each(near, y)
@@ -267,6 +254,20 @@ def calibrate(recognition_distances: np.ndarray, labels: list[str], performers: 
     ratio_threshold = conformal_threshold(ratios, known_quantile) if ratios else np.inf
     return Calibration(classes, temperature, threshold, ratio_threshold, len(y), scheme,
                        [_class_spread(near, y, k) for k in range(len(classes))], [float(v) for v in near / own])
+
+
+def _fitted_temperature(dc: np.ndarray, y: np.ndarray, scale: float) -> float:
+    """The softmax temperature that maximises the likelihood of the true classes ``y`` given the
+    rows' class distances ``dc``, searched within ``scale`` * e^(+-8)."""
+    from scipy.optimize import minimize_scalar
+
+    def nll(log_t):
+        z = -(dc - dc.min(axis=1, keepdims=True)) / np.exp(log_t)
+        z = np.where(np.isfinite(z), z, -np.inf)
+        return float(np.mean(np.log(np.exp(z).sum(axis=1)) - z[np.arange(len(y)), y]))
+
+    res = minimize_scalar(nll, bounds=(np.log(scale) - 8, np.log(scale) + 8), method="bounded")
+    return float(np.exp(res.x))
 
 
 def _class_spreads_without_each(nearest_same: np.ndarray, truth: np.ndarray) -> np.ndarray:

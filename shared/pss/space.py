@@ -588,12 +588,13 @@ class ProtoSymbolSpace:
                             else "nearest proto-symbol on the angle channels (format 1: rebuild the space from its "
                                  "clips for position-based recognition)" if self.format != FORMAT
                             else "nearest proto-symbol on the motion channels (no skeleton)"),
-            "open_set": self._open_set_info(),
+            **self._open_set_info(),
         }
 
-    def _open_set_info(self) -> str:
+    def _open_set_info(self) -> dict:
         from shared.pss.recognition import can_reject, open_set_text
 
         old_ratio, no_model = self._discriminant is False, self._novelty is False  # as saved, before a fit
-        return open_set_text(self.calibration, len(set(self.labels)), old_ratio, no_model,
-                             can_reject(self.calibration, self.discriminant, self.novelty_model))
+        rejects = can_reject(self.calibration, self.discriminant, self.novelty_model)
+        return {"open_set": open_set_text(self.calibration, len(set(self.labels)), old_ratio, no_model, rejects),
+                "rejects": rejects}
