@@ -42,7 +42,7 @@ def test_a_replayed_take_is_recorded_published_and_cut(capture_service, client_o
     c.subscribe("events/capture/take", lambda k, m: takes.append(m) if m["take"] == "t1" else None)
     time.sleep(0.3)
     take, truth = join([squats[1]] * 3, seed=4)
-    started = c.request("capture", "record", {"take": "t1", "replay": [clip_to_wire(take)], "idle": 0.5})
+    started = c.request("capture", "record", {"take": "t1", "replay": [clip_to_wire(take)]})
     assert started["state"] == "recording" and started["source"] == "replay of 1 clip(s)"
     info = _wait_done(c, "t1")
     assert info["state"] == "done" and info["frames"] == take.n_frames and info["dropped"] == 0, info
@@ -99,7 +99,7 @@ def test_a_take_recorded_with_other_motions_is_cut_with_them(capture_service, cl
     c = client_of(env)
     take, truth = join([squats[1]] * 2, seed=6)
     for name, background in (("told", [clip_to_wire(squats[1])]), ("plain", [])):
-        c.request("capture", "record", {"take": name, "replay": [clip_to_wire(take)], "idle": 0.5,
+        c.request("capture", "record", {"take": name, "replay": [clip_to_wire(take)],
                                         "target": clip_to_wire(squats[0]), "expected": 2, "background": background})
         assert _wait_done(c, name)["state"] == "done"
     told = c.request("capture", "segment", {"take": "told", "target": clip_to_wire(squats[0]), "expected": 2})
@@ -141,7 +141,7 @@ def test_a_space_of_the_pss_service_names_another_performers_repetitions(capture
                                              "background": [clip_to_wire(clips("dg", "squat1Reps")[0])]}, timeout=120)
     assert len(plain["repetitions"]) == 4  # the space it was recorded with still decides
     squats, _ = join(clips("bk", "squat1Reps") * 2, seed=8)
-    c.request("capture", "record", {"take": "squats", "replay": [clip_to_wire(squats)], "idle": 0.5})
+    c.request("capture", "record", {"take": "squats", "replay": [clip_to_wire(squats)]})
     _wait_done(c, "squats")
     none = c.request("capture", "segment", {"take": "squats", "target": target, "space": "moves"}, timeout=120)
     assert none["repetitions"] == [] and none["verdict"].startswith("not the target"), none["verdict"]
@@ -182,7 +182,7 @@ def test_refusals_are_coded_errors(capture_service, client_of, squats, tmp_path)
     info = _wait_done(c, "gone")
     assert info["state"] == "failed" and "no live source" in info["error"], info
     assert code("clip", {"take": "gone"})[0] == "conflict"
-    c.request("capture", "record", {"take": "once", "replay": [clip_to_wire(squats[0])], "idle": 0.3})
+    c.request("capture", "record", {"take": "once", "replay": [clip_to_wire(squats[0])]})
     _wait_done(c, "once")
     assert code("record", {"take": "once", "replay": [clip_to_wire(squats[0])]})[0] == "conflict"
     again = c.request("capture", "record", {"take": "once", "replay": [clip_to_wire(squats[0])], "replace": True})
@@ -210,7 +210,7 @@ def test_the_cli_records_a_take_on_the_service_and_cuts_it_into_files(capture_se
         return subprocess.run([sys.executable, "-m", "shared.cli", *args], cwd=REPO, env=env, capture_output=True,
                               text=True, timeout=300)
 
-    r = cli("capture", "take", "cli1", "--replay", str(tmp_path / "take.bvh"), "--idle", "0.5")
+    r = cli("capture", "take", "cli1", "--replay", str(tmp_path / "take.bvh"), "--idle", "5")
     assert r.returncode == 0 and "cli1: done" in r.stdout, r.stdout + r.stderr
     r = cli("capture", "cut", "cli1", "--target", str(tmp_path / "target.bvh"), "--expected", "2",
             "--out", str(tmp_path / "reps"))
@@ -227,6 +227,6 @@ def test_the_cli_records_a_take_on_the_service_and_cuts_it_into_files(capture_se
 def test_a_replay_of_several_clips_is_one_take_of_all_of_them(capture_service, client_of, squats):
     env, _ = capture_service
     c = client_of(env)
-    c.request("capture", "record", {"take": "both", "replay": [clip_to_wire(s) for s in squats], "idle": 0.5})
+    c.request("capture", "record", {"take": "both", "replay": [clip_to_wire(s) for s in squats]})
     info = _wait_done(c, "both")
     assert info["state"] == "done" and info["frames"] == sum(s.n_frames for s in squats) and info["reconnects"] == 1, info
