@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from shared.errors import BadInput
 from shared.io import find_clips, load_clip, save_clip
 from shared.motion.skeleton import Skeleton
-from shared.pss.recognition import Calibration, calibrate, conformal_threshold, decide
+from shared.pss.recognition import Calibration, calibrate, conformal_threshold, decide, softmax_confidence
 from shared.pss.space import FORMAT, ProtoSymbolSpace
 from shared.reports.evaluation import dtw_recognition, pss_recognition
 
@@ -170,7 +170,7 @@ def test_a_rejected_motion_keeps_at_most_its_credibility_as_confidence(dev_space
     the softmax; a calibration written before the scores decides its confidence as before."""
     import dataclasses
 
-    from shared.pss.recognition import conformal_p_value, softmax_confidence
+    from shared.pss.recognition import conformal_p_value
 
     scores = np.random.default_rng(0).uniform(0.0, 1.0, 99)
     for s in (-1.0, 0.3, 0.99, 2.0):
@@ -507,9 +507,14 @@ def test_discriminant_ratio_as_documented():
     near = np.array([1.0, 1.05, 5.0])  # eq. 2.4: c0 barely before c1
     de = m.class_distances(c1, c.classes)
     assert de.argmin() == 1 and de[0] / de[1] > 1.05
-    assert decide(near, ["c0", "c1", "c2"], c, None, c1, m).nearest_label == "c1"
+    moved = decide(near, ["c0", "c1", "c2"], c, None, c1, m)
+    assert moved.nearest_label == "c1"
     assert decide(near, ["c0", "c1", "c2"], c, None, c1, dataclasses.replace(m, smallest_class=1)).nearest_label == "c0"
-    assert decide(near, ["c0", "c1", "c2"], c).nearest_label == "c0"
+    alone = decide(near, ["c0", "c1", "c2"], c)
+    assert alone.nearest_label == "c0"
+    # the confidence is the label's: the largest share (eq. 2.4's softmax gave c1 less than c0's)
+    assert moved.confidence > 1 / 3 and moved.confidence > softmax_confidence(near, 1.0)[1]
+    assert alone.confidence == pytest.approx(softmax_confidence(near, 1.0)[0])
 
 
 def test_the_label_weighs_eq_2_4_and_the_discriminant_as_documented():
@@ -521,6 +526,19 @@ def test_the_label_weighs_eq_2_4_and_the_discriminant_as_documented():
     assert nearest_class(2.0 * dc, 10.0 * de, 1.0) == nearest_class(dc, de, 1.0)  # neither scale counts
     assert nearest_class(np.array([0.0, 1.0]), np.array([2.0, 1.0])) == 0  # a motion on a proto-symbol
     assert nearest_class(np.array([1.0, np.inf]), np.array([1.0, np.inf])) == 0  # a class the space lacks
+
+
+def test_the_confidence_reads_the_labels_score_in_eq_2_4_units():
+    from shared.pss.confidence import label_distances, nearest_class
+
+    dc, de = np.array([1.0, 1.1, 3.0]), np.array([3.0, 1.0, 2.0])
+    assert label_distances(dc, de, 0.0) == pytest.approx(dc)  # no discriminant: eq. 2.4 itself
+    assert label_distances(dc, 7.0 * dc) == pytest.approx(dc)  # the discriminant agrees at the same ratios
+    for w in (0.25, 1.0, 4.0):  # its smallest is the label, its scale eq. 2.4's
+        ld = label_distances(dc, de, w)
+        assert int(np.argmin(ld)) == nearest_class(dc, de, w) and np.min(ld) >= np.min(dc)
+    assert label_distances(2.0 * dc, 10.0 * de) == pytest.approx(2.0 * label_distances(dc, de))
+    assert np.isinf(label_distances(np.array([1.0, np.inf]), np.array([1.0, np.inf]))[1])
 
 
 def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_their_rule(dev_space, dev_split, tmp_path):
