@@ -15,7 +15,9 @@ Takes are real clips of one performer joined with rests (:func:`shared.capture.t
   no cohort, as a study run without other motions given); dg's
   takes with dg's own first clip as the target (the same performer); and the game studio's
   dataset (bandai1: five styles of one content joined, the target its 'normal' style, the
-  cohort the other contents' 'normal' clips).
+  cohort the other contents' 'normal' clips; and, per style, each gesture's own clip played
+  five times at 0.8-1.25x its speed, the target the clip, the other motions the style's other
+  gestures: one performer's repetitions, as for CMU).
 
 **With a proto-symbol space** (``segment(..., space=)``, ``capture segment --space``): the space
 names each stretch instead of the cohort. Chosen on the same tuning takes, each with a space of
@@ -135,6 +137,31 @@ def bandai_set(root: Path):
     return takes, targets, cohort_of
 
 
+#: the game studio's styles whose own-clip takes are reported (:func:`bandai_own_set`): the first five the take of
+#: :func:`bandai_set` joins, in the files' order
+OWN_STYLES = ("active", "angry", "childish", "chimpira", "feminine")
+
+
+def bandai_own_set(root: Path, style: str):
+    """One style of the game studio (one performance per gesture, as for CMU's windows below):
+    each gesture's clip played five times, each 0.8-1.25x as fast, and joined; the target is the
+    clip itself, the other motions the style's other gestures. Unlike :func:`bandai_set` the
+    repetitions are one performer's, so it tests the reading of the studio's files, its rests
+    and its tempos, not whether one style is a repetition of another."""
+    from dataclasses import replace
+
+    r = np.random.default_rng(len(style))
+    takes, targets = {}, {}
+    for c in ["bow", "bye", "byebye", "guide"]:
+        f = root / "bvh" / f"dataset-1_{c}_{style}_001.bvh"
+        if not f.exists():
+            continue
+        clip = load_clip(f)
+        reps = [replace(clip.resample(clip.fps / float(r.uniform(0.8, 1.25))), fps=clip.fps) for _ in range(5)]
+        takes[c], targets[c] = join(reps, seed=len(c)), clip
+    return takes, targets, {c: [t for o, t in targets.items() if o != c] for c in targets}
+
+
 def bandai_space(targets: dict, cohort_of: dict):
     """The game studio's space: the targets and every cohort clip, each labelled its content (the
     second word of its file name)."""
@@ -242,6 +269,9 @@ def main(argv=None) -> dict:
               "same performer (dg takes, dg's own first clip)": run_set(*hdm05_set(args.hdm05, "dg", "dg", "bd", own=True), how)}
     if (args.bandai / "bvh").exists():
         report["bandai1 (five styles of a gesture joined, target 'normal')"] = run_set(*bandai_set(args.bandai), how)
+        for style in OWN_STYLES:
+            report[f"bandai1 style '{style}' (each gesture's own clip, time-warped)"] = run_set(
+                *bandai_own_set(args.bandai, style), how)
     if (args.cmu / "131_01.bvh").exists():
         report["cmu 131_01 (windows of one performance, time-warped)"] = run_set(*cmu_set(args.cmu), how)
     spaced = _with_space(args, tuning, cross)
@@ -269,8 +299,9 @@ def markdown(out: dict) -> list[str]:
     md = ["# Repetitions found in joined takes (`python -m bench.segmentation`)", "",
           "Takes: real clips of one performer joined with rests, their true boundaries known. **Chosen on** HDM05 "
           "performers bd and bk (each one's takes against the other's targets; with a space, a space of the targets' "
-          "performer); **reported on** performer dg (never seen in the choice), the game studio's styles and a CMU "
-          "performance. Scored: F1 of repetitions, the median error of matched boundaries, repetitions cut from "
+          "performer); **reported on** performer dg (never seen in the choice), the game studio's styles (five "
+          "styles of a gesture against its 'normal' style; and per style, a gesture's own clip time-warped: one "
+          "performer's repetitions) and a CMU performance. Scored: F1 of repetitions, the median error of matched boundaries, repetitions cut from "
           "takes of other motions. Goals: F1 >= 0.95, median boundary error <= 100 ms, no other motion cut.", "",
           f"Chosen, the cohort check: `{out['chosen']}`.",
           f"Chosen, with a space: `{space.get('chosen')}` ({space.get('chosen_key')}); the space's costs 1.1 and 1.15 "
