@@ -36,7 +36,7 @@ import argparse
 import itertools
 import json
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -99,8 +99,6 @@ def hdm05_set(root: Path, take_perf: str, target_perf: str, cohort_perf: str, ow
 def space_of(clips: list, labels: list[str] | None = None):
     """A proto-symbol space of ``clips`` (motion and position channels), labelled ``labels``
     when given (else their own labels)."""
-    from dataclasses import replace
-
     from shared.pss.space import ProtoSymbolSpace
 
     if labels is not None:
@@ -148,8 +146,6 @@ def bandai_own_set(root: Path, style: str):
     clip itself, the other motions the style's other gestures. Unlike :func:`bandai_set` the
     repetitions are one performer's, so it tests the reading of the studio's files, its rests
     and its tempos, not whether one style is a repetition of another."""
-    from dataclasses import replace
-
     r = np.random.default_rng(len(style))
     takes, targets = {}, {}
     for c in ["bow", "bye", "byebye", "guide"]:
@@ -170,8 +166,6 @@ def bandai_space(targets: dict, cohort_of: dict):
 
 
 def cmu_space(targets: dict):
-    from dataclasses import replace
-
     return space_of([replace(t, name=k) for k, t in targets.items()], list(targets))
 
 
@@ -181,8 +175,6 @@ def cmu_set(root: Path, windows: int = 4, seconds: float = 2.0):
     fast; the target is the same window from the file in the conversion's own unit; the cohort
     the other windows. A weak test of the method (one performance, time-warped), a real test of
     reading another studio's files."""
-    from dataclasses import replace
-
     metres, own = load_clip(root / "scaled_131_01.bvh"), load_clip(root / "131_01.bvh")
     r = np.random.default_rng(131)
     takes, targets, cohort_of = {}, {}, {}

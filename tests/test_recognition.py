@@ -539,6 +539,8 @@ def test_the_confidence_reads_the_labels_score_in_eq_2_4_units():
         assert int(np.argmin(ld)) == nearest_class(dc, de, w) and np.min(ld) >= np.min(dc)
     assert label_distances(2.0 * dc, 10.0 * de) == pytest.approx(2.0 * label_distances(dc, de))
     assert np.isinf(label_distances(np.array([1.0, np.inf]), np.array([1.0, np.inf]))[1])
+    on = label_distances(np.array([0.0, 5.0, 9.0]), np.array([1.0, 3.0, 4.0]))  # a motion on a proto-symbol
+    assert int(np.argmin(on)) == 0 and on[1] > on[0] and softmax_confidence(on, 1.0)[0] > 0.9
 
 
 def test_the_discriminant_ratio_is_saved_with_the_space_and_older_files_keep_their_rule(dev_space, dev_split, tmp_path):

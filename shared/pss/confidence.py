@@ -45,11 +45,14 @@ def label_distances(dc: np.ndarray, de: np.ndarray, weight: float = DISCRIMINANT
     """The label's score (:func:`label_scores`) back in eq. 2.4's units, as a distance per class
     the confidence's softmax can read at the eq. 2.4 temperature: the mean of the class's eq. 2.4
     distance ``dc`` and its discriminant distance ``de`` rescaled so that the nearest of each is
-    the nearest eq. 2.4 distance (``min(dc) * label_scores / (1 + weight)``). With the weight 0, or
-    where the discriminant ranks the classes as eq. 2.4 does at the same ratios, it is ``dc``
-    itself. Its smallest is the label's class, so the label is the most likely class of the
-    softmax, which an eq. 2.4 softmax does not give when the discriminant moved the label."""
-    return float(np.min(dc)) * label_scores(dc, de, weight) / (1.0 + weight)
+    the nearest eq. 2.4 distance (``min(dc) * label_scores / (1 + weight)`` where ``min(dc) > 0``).
+    With the weight 0, or where the discriminant ranks the classes as eq. 2.4 does at the same
+    ratios, it is ``dc`` itself; a motion on a proto-symbol (``min(dc) = 0``) gets ``dc / (1 +
+    weight)``, eq. 2.4's ranking, as its label is eq. 2.4's nearest class then. Its smallest is the
+    label's class, so the label is the most likely class of the softmax, which an eq. 2.4 softmax
+    does not give when the discriminant moved the label."""
+    near_dc, near_de = float(np.min(dc)), max(float(np.min(de)), 1e-12)
+    return (dc + weight * de * (near_dc / near_de)) / (1.0 + weight)
 
 
 def nearest_class(dc: np.ndarray, de: np.ndarray, weight: float = DISCRIMINANT_WEIGHT) -> int:

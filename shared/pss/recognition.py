@@ -359,17 +359,16 @@ def decide(distances: np.ndarray, labels: list[str], cal: Calibration, novelty_m
         and each test's own novelty.
     """
     dc = class_distances(np.asarray(distances, float), np.asarray(labels), cal.classes)
-    p = softmax_confidence(dc, cal.temperature)
     order = np.argsort(dc)
-    k = int(order[0])
+    scores = dc  # what the label and its confidence read: eq. 2.4, or the label's own score
     ratio, p_ratio = 0.0, 1.0
     if discriminant is not None and features is not None:
         own = discriminant.centre_distances(features)[0]  # once, for the label and the ratio test
-        if discriminant.smallest_class >= 2:
-            de = discriminant.class_distances(features, cal.classes, own)
-            k = nearest_class(dc, de)
-            p = softmax_confidence(label_distances(dc, de), cal.temperature)  # the label's own score
+        if discriminant.smallest_class >= 2:  # its smallest is nearest_class's label
+            scores = label_distances(dc, discriminant.class_distances(features, cal.classes, own))
         ratio, p_ratio = discriminant.judged(features, own)
+    k = int(np.argmin(scores))
+    p = softmax_confidence(scores, cal.temperature)
     model, p_model = (novelty_model.judged(features) if novelty_model is not None and features is not None
                       else (0.0, 1.0))
     distance = 0.0
