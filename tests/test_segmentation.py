@@ -26,10 +26,10 @@ def test_the_dtw_kernels_match_their_python_source():
     assert seg.global_dtw(cost[:, :15]) == pytest.approx(seg.global_dtw.py(cost[:, :15]))
     a = np.sin(np.linspace(0, 3, 20))[:, None]
     b = np.vstack([np.zeros((7, 1)), a, np.zeros((9, 1))])
-    acc, start = seg.subsequence_dtw(seg._distances(a, b))
+    acc, start = seg.subsequence_dtw(seg.distances(a, b))
     assert acc[7 + 19] == pytest.approx(0.0) and start[7 + 19] == 7
-    assert seg.global_dtw(seg._distances(a, a)) == pytest.approx(0.0)
-    assert seg.global_dtw(seg._distances(a, a[:5])) == np.inf  # a slope steeper than 2 cannot join the ends
+    assert seg.global_dtw(seg.distances(a, a)) == pytest.approx(0.0)
+    assert seg.global_dtw(seg.distances(a, a[:5])) == np.inf  # a slope steeper than 2 cannot join the ends
 
 
 def _subsequence_dtw_whole(cost):
@@ -62,7 +62,7 @@ def test_a_long_take_is_read_in_bounded_pieces_with_the_same_numbers(bundled, mo
         assert np.array_equal(np.isfinite(acc), finite)
         assert np.allclose(acc[finite], ref_acc[finite]) and np.array_equal(start[finite], ref_start[finite])
     a, b = r.normal(size=(7, 5)), r.normal(size=(50, 5))
-    assert np.allclose(seg._distances(a, b), np.sqrt(((a[:, None] - b[None]) ** 2).sum(-1)), atol=1e-12)
+    assert np.allclose(seg.distances(a, b), np.sqrt(((a[:, None] - b[None]) ** 2).sum(-1)), atol=1e-12)
     clips = _clips(bundled, "bd", "squat1Reps")
     take, _ = join(clips * 3, seed=2)
     reader = seg.Reader(clips[0])
@@ -131,7 +131,7 @@ def test_movements_lie_between_the_rests_and_shapes_forget_posture_and_size(bund
     for (s, e), (ts, te) in zip(moves, truth):
         assert s / seg.FPS <= ts + 0.4 and e / seg.FPS >= te - 0.4 and (e - s) / seg.FPS <= (te - ts) + 1.0
     moved = 2.5 * a + 0.3
-    assert seg.global_dtw(seg._distances(seg.shape(a), seg.shape(moved))) == pytest.approx(0.0, abs=1e-9)
+    assert seg.global_dtw(seg.distances(seg.shape(a), seg.shape(moved))) == pytest.approx(0.0, abs=1e-9)
 
 
 @pytest.mark.parametrize("cls", ["elbowToKnee1RepsLelbowStart", "rotateArmsBothBackward1Reps", "squat1Reps"])
@@ -162,6 +162,49 @@ def test_bad_takes_are_refused_clearly(bundled):
         seg.segment(squat, still)
 
 
+def _swaying_take(bundled, cls: str, sway: float, monkeypatch):
+    """Five repetitions of one clip, each 0.8-1.25x as fast, joined with rests that sway ``sway``
+    degrees (the joined takes' sway is 0.3): rests that move faster than the rest level."""
+    from dataclasses import replace
+
+    from shared.capture import takes
+
+    clip = _clips(bundled, "bk", cls)[0]
+    r = np.random.default_rng(0)
+    reps = [replace(clip.resample(clip.fps / float(r.uniform(0.8, 1.25))), fps=clip.fps) for _ in range(5)]
+    monkeypatch.setattr(takes, "SWAY", sway)
+    take, truth = join(reps, seed=2)
+    return clip, take, truth
+
+
+@pytest.mark.parametrize("cls, sway, without", [("kickLFront1Reps", 2.0, "ends"), ("elbowToKnee1RepsLelbowStart", 1.0, "fill")])
+def test_repetitions_are_found_where_the_rests_move(bundled, monkeypatch, cls, sway, without):
+    """Where a person's rests move faster than the rest level, the ends a rest gives are moved to
+    where the target aligns best around them (``refine``) and the take between the repetitions is
+    searched without its rests when fewer than expected were found (``fill``): every repetition
+    found, its ends within 50 ms (median). Without them (``refine`` 0, ``fill`` off), these takes
+    lose a repetition or put its ends 100 ms and more off."""
+    from dataclasses import replace
+
+    target, take, truth = _swaying_take(bundled, cls, sway, monkeypatch)
+
+    def scored(how):
+        found = seg.segment(take, target, expected=5, settings=how)
+        return score([(r.start, r.end) for r in found.repetitions], truth), found
+
+    s, found = scored(seg.Settings())
+    assert s["f1"] == 1.0 and np.median(s["boundary_errors"]) <= 0.05, (s, found.verdict)
+    assert found.verdict == "5 repetition(s) found"
+    off, _ = scored(replace(seg.Settings(), refine=0.0, fill=False))
+    if without == "ends":
+        assert off["f1"] == 1.0 and np.median(off["boundary_errors"]) >= 0.1, off
+    else:
+        assert off["f1"] < 1.0, off
+    kicks, _ = join(_clips(bundled, "bd", "kickLFront1Reps") * 2, seed=6)
+    squat = _clips(bundled, "bk", "squat1Reps")[0]
+    assert seg.segment(kicks, squat, expected=5).repetitions == []  # the searches start from a repetition taken
+
+
 def test_tempos_the_slopes_cannot_join_are_compared_not_waved_through(bundled):
     """A stretch three times as long as another motion of the cohort was infinitely far from it
     (the DTW's slopes cannot join their ends), so its cohort ratio was 0 and any stretch passed
@@ -169,7 +212,7 @@ def test_tempos_the_slopes_cannot_join_are_compared_not_waved_through(bundled):
     squat = _clips(bundled, "bd", "squat1Reps")[0]
     a = seg.Reader(squat).target
     slow = time_normalised(a, 3 * len(a))
-    assert seg.global_dtw(seg._distances(seg.shape(a), seg.shape(slow))) == np.inf
+    assert seg.global_dtw(seg.distances(seg.shape(a), seg.shape(slow))) == np.inf
     near = seg._Template(a).cost(seg._Template(slow))
     assert np.isfinite(near) and near < 0.1
     kick = seg.Reader(squat).read(_clips(bundled, "bd", "kickLFront1Reps")[0])

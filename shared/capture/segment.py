@@ -24,13 +24,13 @@ are compared at the nearest tempo they can (they used to be infinitely far apart
 no other motion could join passed the cohort check below with a ratio of 0).
 
 **Alignment.** Each movement (or run of movements) is aligned with the whole target by dynamic
-time warping with the symmetric steps of slope 1/2 to 2 (:func:`subsequence_dtw`, a numba
+time warping with the symmetric steps of slope 1/2 to 2 (:func:`shared.capture.align.subsequence_dtw`, a numba
 kernel; (1, 1) weighted 2, (1, 2) and (2, 1) weighted 3, so a cost divided by ``n + L`` is a mean
 per-frame distance), its ends free within ``SLACK`` seconds of the movement's ends (the way from
 a rest into the first pose is movement, not the motion). A movement longer than twice the
 target (repetitions without a rest between) gives every end's best stretch inside it.
 
-**Decision.** Candidates are taken in order of their cost against the target (:func:`global_dtw`
+**Decision.** Candidates are taken in order of their cost against the target (:func:`shared.capture.align.global_dtw`
 of the two shapes plus the postures' distance), overlapping none taken by more than ``OVERLAP``,
 while the cost is at most ``MAX_COST`` and at most ``COHORT`` times the cost against the nearest
 of the other motions (the ``background`` clips), so a motion near the target because it is near
@@ -42,6 +42,21 @@ and nearer to that one than to any other motion (a person repeats their own way 
 motion, which differs from the demonstration's). Each repetition's **confidence** is how far its
 cohort ratio is below ``COHORT``. The result says whether the take holds the expected number of
 repetitions, fewer, more, or none: a different motion. The settings are a :class:`Settings`.
+
+**Where the rests mislead** (``Settings.refine``, ``Settings.fill``): a person's rest can move
+faster than ``REST_SHARE`` of the target's speed (a slow gesture, a swaying stance) and a pause
+inside the motion slower, so a rest's ends can lie off the repetition's, or two repetitions and
+the rest between them read as one movement. Once repetitions are taken (the take holds the
+target), each is moved to the stretch around it (within half the target's length) where the
+whole target aligns best without the rests (:func:`shared.capture.align.best_stretches`: every end's best start by
+:func:`shared.capture.align.subsequence_dtw`, the take read in that repetition's own mean and spread), when it costs
+at most ``REFINE`` of the repetition's cost and passes the same ratio; and when fewer than
+expected were found, the take between them is searched the same way (read in the mean and spread
+of the person's repetition most like the target), a stretch there passing as a first repetition
+would or as near the person's own. Neither runs on a take where nothing was taken, so a take of
+another motion is cut no more than before. (Searching the whole take without its rests from the
+start cut 9 stretches of a jog as sneaking on the tuning takes: a part of a cyclic motion is
+like many things.)
 
 **With a proto-symbol space** (``space``: a space holding the target's motion and others, read
 here or asked through the pss service; thesis eq. 2.6): the space decides instead of the cohort
@@ -91,13 +106,12 @@ kicks (costs 1.13-1.14) are not found: F1 0.91 across performers.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
-from scipy.spatial.distance import cdist
 
+from shared.capture.align import best_stretches, distances, global_dtw, subsequence_dtw
 from shared.capture.naming import SPACE_RATIO, Named, SpaceNamer, target_label
-from shared.compiled import kernel
 from shared.deadline import check_time
 from shared.errors import BadInput
 from shared.motion.clip import Clip, time_normalised
@@ -124,70 +138,9 @@ SPACE_COST = 1.15  # with a proto-symbol space, a first repetition's cost agains
 #: the space decides only when it holds at least this many examples (proto-symbols) of the target's motion;
 #: with fewer, and other motions given, the cohort check decides (module docstring)
 SPACE_EXAMPLES = 2
+REFINE = 0.5  # a repetition moved to a stretch around it that costs at most this share of its cost (Settings.refine)
+FILL = True  # fewer repetitions than expected: the take between them searched without its rests (Settings.fill)
 REST_AFTER = 0.2  # seconds of take after the last expected repetition before a live take ends (until_repeated)
-
-
-@kernel(cache=True, nogil=True)
-def subsequence_dtw(cost):
-    """Open-begin, open-end DTW of the target (rows) against the take (columns) on a cost matrix
-    ``cost`` (n, m): per end column, the accumulated cost of the best alignment of the whole
-    target ending there and the column where it starts."""
-    n, m = cost.shape
-    # three rows kept (a step reaches two rows back): memory of the take's length, not n times it
-    acc = np.full((3, m), np.inf)
-    start = np.zeros((3, m), np.int64)
-    for j in range(m):
-        acc[0, j] = 2.0 * cost[0, j]
-        start[0, j] = j
-    for i in range(1, n):
-        r, r1, r2 = i % 3, (i - 1) % 3, (i - 2) % 3
-        acc[r, 0], start[r, 0] = np.inf, 0
-        for j in range(1, m):
-            c = cost[i, j]
-            best = acc[r1, j - 1] + 2.0 * c
-            s = start[r1, j - 1]
-            if j >= 2:
-                two = acc[r1, j - 2] + 2.0 * cost[i, j - 1] + c
-                if two < best:
-                    best, s = two, start[r1, j - 2]
-            if i >= 2:
-                down = acc[r2, j - 1] + 2.0 * cost[i - 1, j] + c
-                if down < best:
-                    best, s = down, start[r2, j - 1]
-            acc[r, j] = best
-            start[r, j] = s
-    last = (n - 1) % 3
-    return acc[last].copy(), start[last].copy()
-
-
-@kernel(cache=True, nogil=True)
-def global_dtw(cost):
-    """DTW with fixed ends and the same steps as :func:`subsequence_dtw`, divided by ``n + m``
-    (a mean per-frame distance); infinite when the slopes cannot join the ends."""
-    n, m = cost.shape
-    acc = np.full((n, m), np.inf)
-    acc[0, 0] = 2.0 * cost[0, 0]
-    for i in range(1, n):
-        for j in range(1, m):
-            c = cost[i, j]
-            best = acc[i - 1, j - 1] + 2.0 * c
-            if j >= 2:
-                two = acc[i - 1, j - 2] + 2.0 * cost[i, j - 1] + c
-                if two < best:
-                    best = two
-            if i >= 2:
-                down = acc[i - 2, j - 1] + 2.0 * cost[i - 1, j] + c
-                if down < best:
-                    best = down
-            acc[i, j] = best
-    return acc[n - 1, m - 1] / (n + m)
-
-
-def _distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Euclidean distances of every frame of ``a`` (rows) to every frame of ``b`` (columns):
-    scipy's ``cdist`` (no target x take x features differences held: a movement of 20,000 frames
-    held 1.1 GB of them at once)."""
-    return cdist(a, b)
 
 
 @dataclass
@@ -352,7 +305,7 @@ def _aligned(a: np.ndarray, b: np.ndarray, s: int, e: int, slack: int, floor: fl
     lo, hi = max(s - slack, 0), min(e + slack, len(b))
     part = b[s:e]
     window = (b[lo:hi] - part.mean(axis=0)) / max(_spread(part), floor)
-    cost = _distances(a, window)
+    cost = distances(a, window)
     n = len(a)
     several = e - s > SPEEDS[1] * n + 2 * slack  # several repetitions in one movement: start anywhere
     if not several:
@@ -381,6 +334,8 @@ class Settings:
     min_amplitude: float = MIN_AMPLITUDE  # a stretch smaller than this share of the target's spread is no repetition
     space_cost: float = SPACE_COST  # with a proto-symbol space, the first repetition's cost against the target, at most
     space_ratio: float = SPACE_RATIO  # with a space, its distance ratio (target's motion / nearest other), at most
+    refine: float = REFINE  # a repetition moved to a stretch around it costing at most this share of its cost (0: off)
+    fill: bool = FILL  # fewer repetitions than expected: the take between them searched without its rests
 
 
 class _Template:
@@ -399,12 +354,12 @@ class _Template:
         n, m = len(self.shape), len(other)
         if not (n + 1) // 2 < m < 2 * n - 1:  # tempos the slopes cannot join: the other's resampled to the nearest they can
             other = time_normalised(other, int(np.clip(m, (n + 1) // 2 + 1, 2 * n - 2)))
-        c = global_dtw(_distances(self.shape, other))
+        c = global_dtw(distances(self.shape, other))
         return c + self.posture * float(np.linalg.norm(self.mean - stretch.mean)) / self.spread if self.posture else c
 
 
 def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings, fps: float,
-          by_space: Named | None = None):
+          by_space: Named | None = None, expected: int | None = None):
     """Repetitions of the target ``a`` among the movements of the take ``b`` (module docstring):
     (start, end exclusive, cost, ratio) in frames, the lowest ratio refused and the lowest cost of
     any stretch. The ratio is the cohort's (cost against the target / against the nearest other
@@ -426,17 +381,7 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings,
                 break
             if e - s + 2 * slack >= SPEEDS[0] * n:
                 stretches.update(_aligned(target.shape, b, s, e, slack, floor))
-    scored = []  # (cost, start, end, template): (start, end) is unique, so the templates are never compared
-    for k, (s, e) in enumerate(stretches):
-        if k % 1000 == 999:
-            check_time()
-        if not SPEEDS[0] * n <= e - s <= SPEEDS[1] * n:
-            continue
-        if _spread(b[s:e]) < how.min_amplitude * spread:  # a shift of weight, a step into the next pose
-            continue
-        stretch = _Template(b[s:e], floor, how.posture)
-        scored.append((target.cost(stretch), s, e, stretch))
-    scored = sorted(scored)[:MAX_CHECKS]
+    scored = _score(a, b, stretches, target, floor, how)
     near: dict[tuple[int, int], float] = {}
 
     def nearest(s: int, e: int, stretch: _Template) -> float:
@@ -459,8 +404,73 @@ def _find(a: np.ndarray, b: np.ndarray, others: list[np.ndarray], how: Settings,
     taken = _greedy(cands, [x[0] for x in cands], lambda x: x[3] <= limit)
     if taken and how.own:
         taken += _own(taken, scored, ratio, limit, how)
+        if how.refine > 0:
+            taken = _refined(a, b, taken, target, floor, how, ratio, limit)
+        if how.fill and expected is not None and len(taken) < expected:
+            # a stretch between them passes as a first repetition would (``first``) or near the person's own
+            taken += _own(taken, _between(a, b, taken, target, floor, how), ratio, limit, replace(how, second_cost=first))
     refused = min((x[3] for x in cands if x[3] > limit), default=None)
     return sorted((x[1], x[2], x[0], x[3]) for x in taken), refused, (scored[0][0] if scored else None)
+
+
+def _score(a: np.ndarray, b: np.ndarray, stretches, target: _Template, floor: float, how: Settings) -> list:
+    """The stretches a repetition may be (as long as the DTW's slopes allow, as large as
+    ``min_amplitude``), each with its cost against the target, lowest first, the ``MAX_CHECKS``
+    lowest: (cost, start, end, template)."""
+    n, scored = len(a), []
+    for k, (s, e) in enumerate(stretches):
+        if k % 1000 == 999:
+            check_time()
+        if not SPEEDS[0] * n <= e - s <= SPEEDS[1] * n:
+            continue
+        if _spread(b[s:e]) < how.min_amplitude * target.spread:  # a shift of weight, a step into the next pose
+            continue
+        stretch = _Template(b[s:e], floor, how.posture)
+        scored.append((target.cost(stretch), s, e, stretch))
+    return sorted(scored, key=lambda x: x[:3])[:MAX_CHECKS]
+
+
+def _refined(a: np.ndarray, b: np.ndarray, taken: list, target: _Template, floor: float, how: Settings,
+             ratio, limit: float) -> list:
+    """Each repetition taken moved to the stretch around it (within half the target's length of
+    its ends; :func:`shared.capture.align.best_stretches`, the take read in the repetition's own mean and spread) that costs
+    least against the target, when that stretch costs less, passes the same ratio (at most
+    ``limit``) and overlaps no other repetition by more than ``OVERLAP``: the ends a rest gave
+    are only as good as the rest (a person's rest can move faster than ``REST_SHARE`` of the
+    target's speed, and a pause inside the motion be slower)."""
+    w, out = len(a) // 2, list(taken)
+    for k in np.argsort([x[0] for x in taken], kind="stable"):
+        check_time()
+        c, s, e, _, stretch = out[k]
+        lo, hi = max(s - w, 0), min(e + w, len(b))
+        others = [y for i, y in enumerate(out) if i != k]
+        for cost, s2, e2, moved in _score(a, b, best_stretches(target.shape, b, lo, hi, stretch.mean, stretch.spread),
+                                          target, floor, how):
+            if cost > how.refine * c:
+                break
+            if any(min(e2, y[2]) - max(s2, y[1]) > OVERLAP * (e2 - s2) for y in others):
+                continue
+            r = ratio(s2, e2, moved, cost)  # (one check a repetition: with a space, each is an HMM's training)
+            if r <= limit:
+                out[k] = (cost, s2, e2, r, moved)
+            break
+    return out
+
+
+def _between(a: np.ndarray, b: np.ndarray, taken: list, target: _Template, floor: float, how: Settings) -> list:
+    """Stretches of the take between the repetitions taken, found without its rests (a person's
+    rests can move faster than ``REST_SHARE`` of the target's speed, and a pause inside the motion
+    slower; :func:`shared.capture.align.best_stretches`), the take read in the mean and spread of the person's repetition most
+    like the target."""
+    n = len(a)
+    anchor = min(taken, key=lambda x: x[3])[4]
+    spans, prev, stretches = sorted((x[1], x[2]) for x in taken), 0, []
+    for s, e in [*spans, (len(b), len(b))]:
+        if s - prev >= SPEEDS[0] * n:
+            check_time()
+            stretches += best_stretches(target.shape, b, prev, s, anchor.mean, anchor.spread)
+        prev = max(prev, e)
+    return _score(a, b, stretches, target, floor, how)
 
 
 def _own(taken: list, scored: list, ratio, limit: float, how: Settings) -> list:
@@ -540,7 +550,7 @@ def segment(take: Clip, target: Clip, expected: int | None = 5, background: list
         else:
             notes.append(f"the space holds {examples} example of {name!r}, too few to tell how far a repetition may "
                          f"lie from it: the other motions given decide (the cohort check)")
-    taken, best_refused, closest = _find(a, b, others, how, fps, by_space)
+    taken, best_refused, closest = _find(a, b, others, how, fps, by_space, expected)
     limit = how.cohort if by_space is None else by_space.limit
     reps = [Repetition(float(s / fps), float(e / fps), float(c), max(0.0, 1.0 - float(ratio) / limit), float(ratio))
             for s, e, c, ratio in taken]

@@ -126,7 +126,7 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
     say_if_unguarded(background, space)  # (after the files: a wrong path is said first)
     how = Settings()
     if max_cost is not None:
-        how = replace(how, **({"max_cost": max_cost} if space is None else {"space_cost": max_cost}))
+        how = replace(how, max_cost=max_cost) if space is None else replace(how, space_cost=max_cost)
     sp = None
     if space is not None:
         from shared.pss.space import ProtoSymbolSpace
