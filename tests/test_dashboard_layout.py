@@ -64,3 +64,15 @@ def test_the_latency_table_counts_every_request_and_says_when_it_changed():
     for i in range(KEPT + 10):  # only the newest KEPT are in the percentiles; every one is counted
         t.add("coach", "run", 1000.0 if i < 10 else 5.0, False)
     assert t.due and f"| coach | run | {KEPT + 10} | 0 | 5.0 | 5.0 | 5.0 |" in t.markdown()
+
+
+def test_a_sessions_space_is_drawn_on_the_trial_whose_attempt_it_holds():
+    """pss's space event and the coach's trial event come from two processes: the space names the
+    trial itself (its last attempt), whichever event arrives first; before any attempt, none."""
+    from shared.observe.dashboard import _space_trial
+
+    names = ["squat", "attempt1-3f2a1c", "attempt2-9b0d4e", "attempt2-9b0d4e-goal1"]
+    ev = {"space": "coach-demo", "info": {"proto_symbols": [{"name": n, "label": None} for n in names]}}
+    assert _space_trial(ev) == 2
+    assert _space_trial({"space": "coach-demo", "info": {"proto_symbols": [{"name": "squat"}]}}) is None
+    assert _space_trial({"space": "coach-demo", "change": "deleted"}) is None

@@ -36,6 +36,7 @@ why every tab reads on ``playback`` in :mod:`shared.observe.layout`):
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -117,6 +118,16 @@ def _bars(rec, entity: str, xs: list[int], values: list[float], colour, width: f
     rec.log(entity, rr.BarChart(np.asarray(values, float), abscissa=np.asarray(xs, float) + offset - width / 2,
                                 widths=np.full(len(xs), width), color=colour))
 
+
+
+def _space_trial(ev: dict) -> int | None:
+    """The trial a session's space was built for: the number of the last attempt it holds (the
+    coach names them ``attempt<n>``), read from the space itself because pss's event and the
+    coach's trial event come from two processes and can arrive in either order (drawn as the trial
+    in progress, a space that arrived after its trial's event was drawn on one trial more)."""
+    numbers = [int(m.group(1)) for p in (ev.get("info") or {}).get("proto_symbols", [])
+               if (m := re.match(r"attempt(\d+)", str(p.get("name", ""))))]
+    return max(numbers) if numbers else None
 
 class Dashboard:
     """A rerun recording fed with the cluster's events."""
@@ -472,7 +483,7 @@ class Dashboard:
                     self.pending.pop(next(iter(self.pending)))
                 return
             entity, panel = f"sessions/{s}/space", lay.SESSION_SPACE_PX
-            n = self.trials_done(s) + 1  # the trial in progress
+            n = _space_trial(ev) or self.trials_done(s) + 1  # the trial whose attempt it holds, else the one in progress
             self._at(trial=n, playback=n * self.frames[s])
         elif name.startswith("est-"):
             e = name[4:]
