@@ -10,7 +10,10 @@ Takes are real clips of one performer joined with rests (:func:`shared.capture.t
   bk's targets, and bk's takes with bd's targets, the other motions (the cohort) of the
   target's performer. The settings (:class:`shared.capture.segment.Settings`: cohort ratio,
   largest cost, posture's weight, the person's own repetitions on or off) are chosen there: the
-  largest F1 among those that cut the fewest repetitions from takes of other motions.
+  largest F1 among those that cut the fewest repetitions from takes of other motions. On top of
+  that choice, where the rests mislead (``FREE_GRID``: ``refine``, ``fill``) is chosen on the same
+  takes and the game studio's styles that are never reported (``TUNING_STYLES``, each gesture's
+  own clip time-warped), within the goal's 100 ms median boundary error on every tuning set.
 * **Reported on**: performer dg's takes, targets of bk, cohort of bd (cross-performer; and with
   no cohort, as a study run without other motions given); dg's
   takes with dg's own first clip as the target (the same performer); and the game studio's
