@@ -467,8 +467,8 @@ class Dashboard:
                      static=static)
 
     def space(self, ev: dict) -> None:
-        """A session's space (``coach-<s>``: kept, and drawn with the session's next trial; before
-        the session's first event, it waits for it), an estimate's on its conversation set
+        """A session's space (``coach-<s>``: kept, and drawn on the trial whose attempt it holds, or the
+        next trial before any attempt; before the session's first event, it waits for it), an estimate's on its conversation set
         (``est-<e>``, and at ``playback`` 0), any other as it is now (static: on every timeline)."""
         name = ev["space"]
         static = False
