@@ -223,8 +223,11 @@ def _chosen(sweep: dict, within_ms: float | None = None) -> tuple[seg.Settings, 
     The tie rule was written after the space's grid tied at costs 1.1 and 1.15 and the report had
     been seen at both (F1 0.91 and 1.00 across performers): said wherever the number is given."""
     if within_ms is not None:
-        sweep = {k: v for k, v in sweep.items()
-                 if all((r["median_boundary_error_ms"] or 0.0) <= within_ms for r in v["splits"])} or sweep
+        within = {k: v for k, v in sweep.items()
+                  if all((r["median_boundary_error_ms"] or 0.0) <= within_ms for r in v["splits"])}
+        if not within:
+            print(f"no setting within {within_ms:g} ms on every tuning set: chosen among all")
+        sweep = within or sweep
     fewest = min(v["other_motion_cuts"] for v in sweep.values())
     keys = [k for k, v in sweep.items() if v["other_motion_cuts"] == fewest]
     best = max(sweep[k]["f1"] for k in keys)

@@ -477,6 +477,7 @@ def study_seat(folder: Path = FOLDER, coach: str = typer.Option(..., help="The h
 def _demonstration(c, session: str, target) -> dict:
     """The coach's emphatic demonstration of the attempt just judged: d_s and the three points
     (x_t, x_p, x_s) in one embedding of the seat's space (eq. 5.2, 5.8); blank: none."""
+    from shared.coaching.session import attempt_name
     from shared.errors import MirrorcoachError
 
     while True:
@@ -492,8 +493,8 @@ def _demonstration(c, session: str, target) -> dict:
     info = c.request("pss", "info", {"space": f"coach-{session}"})
     points = {s["name"].split("-")[0]: [float(v) for v in p] for s, p in zip(info["proto_symbols"], info["points"])}
     n = r["trial"]
-    return {"d_s": float(r["d_p"]), "x_t": points["target"], "x_p": points[f"attempt{n - 1}"],
-            "x_s": points[f"attempt{n}"], "demonstration": answer}
+    return {"d_s": float(r["d_p"]), "x_t": points["target"], "x_p": points[attempt_name(n - 1)],
+            "x_s": points[attempt_name(n)], "demonstration": answer}
 
 
 @study_app.command("export")

@@ -40,6 +40,7 @@ distance to the goal since the goal was set, or after ``SUBGOAL_TRIALS`` trials 
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Protocol
@@ -225,6 +226,18 @@ def subgoal_motion(target: Clip, attempts: list[Clip], parts: list[str]) -> Clip
     return target.with_data(out, name="subgoal_" + "_".join(parts))
 
 
+def attempt_name(number: int) -> str:
+    """The proto-symbol of trial ``number``'s attempt in the session's space."""
+    return f"attempt{number}"
+
+
+def attempt_number(name: str) -> int | None:
+    """The trial whose attempt a proto-symbol is (its name as :func:`attempt_name` gives it, the
+    coach service's suffix after it), or None."""
+    m = re.match(r"attempt(\d+)", name)
+    return int(m.group(1)) if m else None
+
+
 def _goal(session: Session, attempts: list[Clip], name: str, number: int, ports: CoachPorts) -> tuple[str, Clip]:
     """The goal of this trial under sub-goal coaching (module docstring): plans the sub-goals on
     the first trial, then moves on when the current one is reached or has had its trials."""
@@ -292,7 +305,7 @@ def trial(session: Session, attempts: list[Clip], ports: CoachPorts, felt: int |
                            field="felt")
         session.effort.add(felt)
     number = len(session.trials) + 1
-    name = f"attempt{number}"
+    name = attempt_name(number)
     ports.add_attempt(session.space, name, attempts)
     d_p = ports.distance(session.space, "target", name)
     d_cop = None

@@ -36,7 +36,6 @@ why every tab reads on ``playback`` in :mod:`shared.observe.layout`):
 
 from __future__ import annotations
 
-import re
 import time
 from pathlib import Path
 
@@ -121,13 +120,15 @@ def _bars(rec, entity: str, xs: list[int], values: list[float], colour, width: f
 
 
 def _space_trial(ev: dict) -> int | None:
-    """The trial a session's space was built for: the number of the last attempt it holds (the
-    coach names them ``attempt<n>``), read from the space itself because pss's event and the
-    coach's trial event come from two processes and can arrive in either order (drawn as the trial
-    in progress, a space that arrived after its trial's event was drawn on one trial more)."""
-    numbers = [int(m.group(1)) for p in (ev.get("info") or {}).get("proto_symbols", [])
-               if (m := re.match(r"attempt(\d+)", str(p.get("name", ""))))]
-    return max(numbers) if numbers else None
+    """The trial a session's space was built for: the number of the last attempt it holds
+    (:func:`shared.coaching.session.attempt_number`), read from the space itself because pss's event
+    and the coach's trial event come from two processes and can arrive in either order (drawn as the
+    trial in progress, a space that arrived after its trial's event was drawn on one trial more)."""
+    from shared.coaching.session import attempt_number
+
+    numbers = [attempt_number(str(p.get("name", ""))) for p in (ev.get("info") or {}).get("proto_symbols", [])]
+    return max((n for n in numbers if n is not None), default=None)
+
 
 class Dashboard:
     """A rerun recording fed with the cluster's events."""
