@@ -152,6 +152,27 @@ def test_generation_gives_back_the_rotations_on_a_continuous_branch(hdm05):
     assert np.abs(np.diff(ang, axis=0)).max() < 30.0  # no jump of a branch or a turn between frames
 
 
+def test_a_clip_on_another_studios_skeleton_is_refused_naming_both_skeletons(hdm05, bandai):
+    """Joints are matched by name: a game studio's clip against a space (or a segmentation target)
+    of HDM05's skeleton is refused with both skeletons' joints named, not as 60-odd channels lacking."""
+    from shared.capture.segment import segment
+    from shared.errors import BadInput
+    from shared.pss.space import ProtoSymbolSpace
+
+    hdm = [load_clip(f) for f in sorted((hdm05 / "amc").rglob("HDM_bd_squat1Reps_*.amc"))[:2]]
+    hdm += [load_clip(f) for f in sorted((hdm05 / "amc").rglob("HDM_bd_kickLFront1Reps_*.amc"))[:2]]
+    studio = load_clip(bandai[0])
+    space = ProtoSymbolSpace.build(hdm)
+    for refuse in (lambda: space.recognize(studio), lambda: segment(studio, hdm[0], expected=1)):
+        with pytest.raises(BadInput, match=r"another skeleton, 0 of the 31 joints .*root, lhipjoint.*its own: Hips"):
+            refuse()
+    dropped = hdm[0].with_data(hdm[0].data[:, 6:], channels=hdm[0].channels[6:],
+                               groups={"motion": hdm[0].channels[6:]})  # one skeleton, channels lacking: said as before
+    with pytest.raises(BadInput, match=r"lacks 6 channels of this space, e.g. \['root.tx'") as err:
+        space.recognize(dropped)
+    assert "another skeleton" not in str(err.value)
+
+
 # ---------------------------------------------------------------------------- bodies
 def test_a_body_from_the_game_studios_skeleton_is_a_person_and_walks_with_human_torques(bandai):
     from shared.bodies.body import perform

@@ -301,6 +301,20 @@ class Skeleton:
         return isinstance(other, Skeleton) and self.to_json() == other.to_json()
 
 
+def other_skeleton(ours: Skeleton | None, theirs: Skeleton | None) -> str:
+    """A clip's lacking channels said more plainly when its skeleton names fewer than half of
+    ``ours``'s joints: it is on another skeleton (joints are matched by name); else ""."""
+    if ours is None or theirs is None:
+        return ""
+    mine, its = [j.name for j in ours.joints], [j.name for j in theirs.joints]
+    shared = len(set(mine) & set(its))
+    if shared * 2 >= len(mine):
+        return ""
+    return (f": it is on another skeleton, {shared} of the {len(mine)} joints it is compared with are in it by name "
+            f"(those: {', '.join(mine[:5])}, ...; its own: {', '.join(its[:5])}, ...); joints are matched by name, so "
+            f"the clips compared must come from one skeleton (one capture set-up or dataset)")
+
+
 def continuous_euler(angles_deg, seq: str, start=None) -> np.ndarray:
     """One joint's Euler angles (T, k) in degrees, continuous over time, the same rotations.
 

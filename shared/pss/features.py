@@ -65,7 +65,7 @@ import numpy as np
 from shared.bodies.segments import body_frame, stature
 from shared.errors import BadInput
 from shared.motion.clip import Clip
-from shared.motion.skeleton import Skeleton
+from shared.motion.skeleton import Skeleton, other_skeleton
 
 if TYPE_CHECKING:  # scipy's Rotation costs 0.4 s to import; only generation (decode) needs it
     from scipy.spatial.transform import Rotation
@@ -418,8 +418,7 @@ class MotionFeatures:
         """Feature frames (T, D) of a clip, its groups in output order; ``groups=("motion",)``
         gives the motion part only."""
         foreign = self._foreign(clip)
-        if foreign is not None:  # the same joints carry the rotations under their own
-            # channel names (a joint without rotation channels in the clip's skeleton does not turn)
+        if foreign is not None:  # the same joints, rotations under their own names (no rotation channel: no turn)
             joints = dict.fromkeys(c.rsplit(".", 1)[0] for c in self.angle_channels)
             missing = [f"{j}.{d}" for j in joints for d in foreign.joints[foreign.index(j)].dofs
                        if d.startswith("r") and f"{j}.{d}" not in clip.channels]
@@ -427,7 +426,8 @@ class MotionFeatures:
         else:
             missing = [c for c in self.motion_channels if c not in clip.channels]
         if missing:
-            raise BadInput(f"clip {clip.name!r} lacks {len(missing)} channels of this space, e.g. {missing[:3]}")
+            raise BadInput(f"clip {clip.name!r} lacks {len(missing)} channels of this space, e.g. {missing[:3]}"
+                           + other_skeleton(self.skeleton, clip.skeleton))
         cols = []
         if self.rot_joints:
             cols.append(self._rotations(clip))
