@@ -152,25 +152,57 @@ def test_generation_gives_back_the_rotations_on_a_continuous_branch(hdm05):
     assert np.abs(np.diff(ang, axis=0)).max() < 30.0  # no jump of a branch or a turn between frames
 
 
-def test_a_clip_on_another_studios_skeleton_is_refused_naming_both_skeletons(hdm05, bandai):
-    """Joints are matched by name: a game studio's clip against a space (or a segmentation target)
-    of HDM05's skeleton is refused with both skeletons' joints named, not as 60-odd channels lacking."""
+def test_a_clip_on_another_studios_skeleton_is_read_by_where_its_body_parts_are(hdm05, bandai):
+    """Issue 29: a studio's own skeleton must not change the label. HDM05 clips moved onto the game
+    studio's joints (:func:`shared.reports.evaluation.on_studio_skeleton`: other names, fewer joints,
+    no joint angle of HDM05's) keep their label in a space of HDM05's skeleton, the joints both have
+    read where they are; a take on the studio's joints is cut as the HDM05 take is; the studio's own
+    files are read; and what needs joint angles refuses them, naming both skeletons."""
     from shared.capture.segment import segment
+    from shared.capture.takes import join, score
     from shared.errors import BadInput
+    from shared.pss.foreign import landmarks, point_names, read_points
     from shared.pss.space import ProtoSymbolSpace
+    from shared.reports.evaluation import STUDIO_JOINTS, on_studio_skeleton
 
-    hdm = [load_clip(f) for f in sorted((hdm05 / "amc").rglob("HDM_bd_squat1Reps_*.amc"))[:2]]
-    hdm += [load_clip(f) for f in sorted((hdm05 / "amc").rglob("HDM_bd_kickLFront1Reps_*.amc"))[:2]]
+    def clips(who, cls, n=3):
+        return [load_clip(f) for f in sorted((hdm05 / "amc" / cls).glob(f"HDM_{who}_*.amc"))[:n]]
+
+    classes = ("squat1Reps", "kickLFront1Reps", "elbowToKnee1RepsLelbowStart", "rotateArmsBothBackward1Reps")
+    space = ProtoSymbolSpace.build([c for who in ("bd", "bk") for k in classes for c in clips(who, k)])
+    test = [c for k in classes for c in clips("dg", k, 2)]
+    moved = [on_studio_skeleton(c) for c in test]
+    assert moved[0].skeleton.name == "game studio" and not set(moved[0].channels) & set(test[0].channels)
+    for c, m in zip(test, moved):
+        assert space.recognize(m).nearest_label == space.recognize(c).nearest_label == c.label
+    # the landmarks (the joints both skeletons start their segments at) are read exactly; the others on their
+    # segment's line
+    c, m = test[0], moved[0]
+    p = c.skeleton.forward_kinematics(c.data, c.channels)
+    got = read_points(m.skeleton.forward_kinematics(m.data, m.channels), m.skeleton, c.skeleton)
+    names = point_names(c.skeleton)
+    kept = [names.index(STUDIO_JOINTS[i][1]) for k, i in landmarks(m.skeleton).items() if k[2] != "base"]
+    assert len(kept) >= 20
+    assert np.abs(got[:, kept] - p[:, kept]).max() < 1e-6
+    err = np.linalg.norm(got - p, axis=2) / c.skeleton.rest_height()
+    assert np.median(err) < 0.01 and err.max() < 0.1
+    # a take on the studio's joints is cut where the same take on HDM05's is
+    target, squat = clips("bk", "squat1Reps", 2)
+    take, truth = join([squat] * 3, seed=1)
+    for t in (take, on_studio_skeleton(take)):
+        found = segment(t, target, expected=3)
+        assert score([(r.start, r.end) for r in found.repetitions], truth)["f1"] == 1.0, found.verdict
     studio = load_clip(bandai[0])
-    space = ProtoSymbolSpace.build(hdm)
-    for refuse in (lambda: space.recognize(studio), lambda: segment(studio, hdm[0], expected=1)):
-        with pytest.raises(BadInput, match=r"another skeleton, 0 of the 31 joints .*root, lhipjoint.*its own: Hips"):
-            refuse()
-    dropped = hdm[0].with_data(hdm[0].data[:, 6:], channels=hdm[0].channels[6:],
-                               groups={"motion": hdm[0].channels[6:]})  # one skeleton, channels lacking: said as before
-    with pytest.raises(BadInput, match=r"lacks 6 channels of this space, e.g. \['root.tx'") as err:
+    assert space.recognize(studio).nearest_label in classes
+    with pytest.raises(BadInput, match="another body layout"):  # a space's clips share one skeleton
+        ProtoSymbolSpace.build([*clips("bd", "squat1Reps", 2), studio, *clips("bd", "kickLFront1Reps", 2)])
+    with pytest.raises(BadInput, match=r"another skeleton, 0 of the 31 joints .*root, lhipjoint.*its own: Hips"):
+        space.associate(studio.frames(0, 60), "frames")  # its joint angles are needed: refused
+    dropped = test[0].with_data(test[0].data[:, 6:], channels=test[0].channels[6:],
+                                groups={"motion": test[0].channels[6:]})  # one skeleton, channels lacking: said as before
+    with pytest.raises(BadInput, match=r"lacks 6 channels of this space, e.g. \['root.tx'") as err_info:
         space.recognize(dropped)
-    assert "another skeleton" not in str(err.value)
+    assert "another skeleton" not in str(err_info.value)
 
 
 # ---------------------------------------------------------------------------- bodies

@@ -207,8 +207,7 @@ class Segmentation:
 def _positions(features, clip: Clip) -> np.ndarray:
     """The clip's joints in the body's heading frame and the root's height, in body lengths (the
     position group's z-scores undone, its root rates and up vector left out)."""
-    x = features.encode(clip, ("position",))[:, features.feature_indices("position")]
-    x = x * features.position_scale + features.position_mean
+    x = features.positions(clip) * features.position_scale + features.position_mean  # (another studio's skeleton too)
     return np.ascontiguousarray(x[:, :-ROOT_TERMS])
 
 

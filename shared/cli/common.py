@@ -166,6 +166,9 @@ def recognition_text(r: dict) -> str:
         head = f"none of these: {'; '.join(said)} (novelty {r['novelty']:.2f} > 1)"
     lines = [head, f"point in the space ({', '.join(f'{v:.3f}' for v in r['point'])})", "nearest proto-symbols:"]
     lines += [f"  {n['distance']:9.3f}  {n['label']:<30} {n['name']}" for n in r["nearest"]]
+    if r.get("another_skeleton"):
+        lines.append("note: the clip is on another skeleton than the space's: read by where its body's parts are (its "
+                     "joints' positions mapped onto the space's), not by its joint angles (docs/pss.md)")
     return "\n".join(lines)
 
 

@@ -13,7 +13,7 @@ from shared.errors import BadInput
 from shared.motion.clip import Clip
 from shared.pss.distance import distance_matrix, distances_to
 from shared.pss.hmm import fit_hmm, fit_hmm_once
-from shared.pss.symbol import Association
+from shared.pss.symbol import Association, at_space_rate
 from shared.pss.synthesis import generate
 
 if TYPE_CHECKING:  # annotations only: the space imports this module
@@ -136,3 +136,23 @@ def reach_of(space: ProtoSymbolSpace, groups: tuple, nearest: float) -> float:
         space._group_models[key] = float(np.quantile(nn[np.isfinite(nn)], 0.95)) if np.isfinite(nn).any() else 0.0
     ref = space._group_models[key]
     return float(nearest / ref) if ref > 0 else float("inf")
+
+
+def recognize_by_positions(space: ProtoSymbolSpace, clips: list, top: int = 5):
+    """``F_recog`` of clips on another studio's skeleton (:mod:`shared.pss.foreign`): an HMM of
+    their position group alone (no joint angle of theirs compares with the space's), labelled by
+    the recognition distances as any clip is, placed by the position distances rescaled to the
+    space's (:func:`marginal_scale`)."""
+    p = space.params
+    if space.recognition_groups != ("position",):
+        raise BadInput(f"space {space.name!r} has no position features to read a clip on another skeleton with")
+    seqs = []
+    for c in clips:
+        if not np.all(np.isfinite(c.data)):
+            raise BadInput(f"clip {c.name!r} contains NaN or Inf")
+        seqs.append(space.features.positions(at_space_rate(c, p.fps, p.n_states, "HMM states, a frame each")))
+    hmm = fit_hmm(seqs, p.n_states, covariance_type=p.covariance_type, var_floor=p.var_floor, backend=p.backend,
+                  n_iter=p.n_iter)
+    hr = space.as_recognised(hmm)
+    f = space.bank_on(("position",)).distances(hmm) * marginal_scale(space, "position")
+    return space._place(hmm, f, top, space.recognition_bank().distances(hr), hr)

@@ -66,6 +66,7 @@ from shared.bodies.segments import body_frame, stature
 from shared.errors import BadInput
 from shared.motion.clip import Clip
 from shared.motion.skeleton import Skeleton, other_skeleton
+from shared.pss.foreign import is_foreign, read_points, same_layout
 
 if TYPE_CHECKING:  # scipy's Rotation costs 0.4 s to import; only generation (decode) needs it
     from scipy.spatial.transform import Rotation
@@ -132,21 +133,6 @@ def _swing_from_vector(v: np.ndarray) -> Rotation:
     ang = np.arctan2(s, c)
     axis = np.where(s[:, None] > 1e-12, axis / np.maximum(s, 1e-12)[:, None], np.array([1.0, 0.0, 0.0]))
     return Rotation.from_rotvec(axis * ang[:, None])
-
-
-def _layout(sk: Skeleton) -> set[tuple[str, str | None]]:
-    """A skeleton's joints as (name, parent's name): the same body whatever order lists them."""
-    return {(j.name, sk.joints[j.parent].name if j.parent >= 0 else None) for j in sk.joints}
-
-
-def _point_rows(sk: Skeleton, ref: Skeleton) -> np.ndarray:
-    """Rows of ``sk``'s forward kinematics (joints, then end sites) in ``ref``'s order."""
-    def names(s):
-        parents = {j.parent for j in s.joints}
-        return [j.name for j in s.joints] + [f"{j.name}.end" for i, j in enumerate(s.joints)
-                                             if j.end is not None and i not in parents]
-    row = {n: i for i, n in enumerate(names(sk))}
-    return np.array([row[n] for n in names(ref)])
 
 
 def _needed(sk: Skeleton | None) -> Skeleton:
@@ -253,16 +239,30 @@ class MotionFeatures:
         """The skeleton to read a clip with: its own (its bone lengths, Euler orders and axis
         conventions) when it has the space's joints, else the space's (None: a space without one)."""
         sk = clip.skeleton
-        if sk is not None and self.skeleton is not None and _layout(sk) == _layout(self.skeleton):
+        if sk is not None and self.skeleton is not None and same_layout(sk, self.skeleton):
             return sk
         return self.skeleton
 
+    def _whole(self, clip: Clip) -> Skeleton | None:
+        """The skeleton a clip's root and joints' positions are read with: :meth:`body`, or the clip's
+        own when it is another studio's (:mod:`shared.pss.foreign`)."""
+        return clip.skeleton if is_foreign(clip.skeleton, self.skeleton) else self.body(clip)
+
+    def positions(self, clip: Clip) -> np.ndarray:
+        """The position group alone (T, P), z-scored: no joint angle read, so a clip on another
+        person's skeleton has it too (:mod:`shared.pss.foreign`)."""
+        root, heading = self._root_terms(clip)
+        x = (self._raw_positions(clip, root, heading) - self.position_mean) / self.position_scale
+        if not np.all(np.isfinite(x)):
+            raise BadInput(f"clip {clip.name!r} contains NaN or Inf")
+        return x
+
     def _raw_positions(self, clip: Clip, root_terms: np.ndarray, psi: np.ndarray) -> np.ndarray:
         """The position group before z-scoring: joints in the heading frame ``psi``, in body heights."""
-        sk = _needed(self.body(clip))
+        sk = _needed(self._whole(clip))
         p = sk.forward_kinematics(clip.data, clip.channels)  # (T, J + ends, 3) metres, Y up, in sk's order
-        if sk is not self.skeleton:  # the same joints listed in another order (a BVH lists them depth first)
-            p = p[:, _point_rows(sk, self.sk)]
+        if sk is not self.skeleton:  # the same joints in another order (a BVH lists them depth first), or another's
+            p = read_points(p, sk, self.sk)
         height = sk.rest_height() if self.frame is None else stature(sk, head_top=False)
         rel = (p[:, 1:] - p[:, :1]) / height
         c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
@@ -289,7 +289,7 @@ class MotionFeatures:
             raise BadInput("no clips")
         first = clips[0]
         motion = first.group("motion")
-        layout = None if first.skeleton is None else _layout(first.skeleton)
+        layout = first.skeleton
         sensors = first.group("sensor") if sensor else []
         frame = None if first.skeleton is None else body_frame(first.skeleton, first.data, first.channels)
         base = cls(first.skeleton, motion, [], None, None, frame=frame, travel_window=TRAVEL_WINDOW)
@@ -310,7 +310,7 @@ class MotionFeatures:
 
         for i in range(len(clips)):
             c = first if i == 0 else clips[i]
-            same = (c.skeleton is not None and _layout(c.skeleton) == layout) if layout else c.group("motion") == motion
+            same = (c.skeleton is not None and same_layout(c.skeleton, layout)) if layout else c.group("motion") == motion
             if not same:
                 raise BadInput(f"clip {c.name!r} has another body layout than {first.name!r} (joints or motion channels); "
                                "a space needs one")
@@ -487,7 +487,7 @@ class MotionFeatures:
 
     def _root_terms(self, clip: Clip) -> tuple[np.ndarray, np.ndarray]:
         """The root's motion features and its unwrapped heading (rad) per frame."""
-        sk = _needed(self.body(clip))
+        sk = _needed(self._whole(clip))
         r = sk.root.name
         out = []
         rot = sk.root_matrices(clip.data, clip.channels)

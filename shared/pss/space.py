@@ -28,7 +28,7 @@ import numpy as np
 
 from shared.errors import BadInput, NotFound
 from shared.motion.clip import Clip
-from shared.pss import association, growth, spacefile
+from shared.pss import association, foreign, growth, spacefile
 from shared.pss.distance import ModelBank, bank_parameters, distance_matrix
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
@@ -423,26 +423,20 @@ class ProtoSymbolSpace:
         return self._group_models[key]
 
     def recognize(self, clip_or_clips, top: int = 5) -> Recognition:
-        """``x = F_recog(M)`` (eq. 2.6): abstract the new clip (or the repetitions of one
-        trial) into an HMM, measure eq. 2.4 to every proto-symbol, decide its label (nearest
-        proto-symbol on the recognition group, calibrated confidence, "none of these" when it
-        is farther than the space's known motions; :mod:`shared.pss.recognition`) and place it
-        without moving the space's points.
-
-        Parameters
-        ----------
-        clip_or_clips : Clip or list of Clip
-            One motion, or the repetitions of one trial (abstracted into one HMM together).
-        top : int
-            How many nearest proto-symbols the result lists.
-
-        Returns
-        -------
-        Recognition
-            ``label`` (``None``: "none of these"), ``confidence``, ``novelty``, the ``point`` in
-            the space and its ``stress``, the ``nearest`` proto-symbols and the decision's tests.
-        """
+        """``x = F_recog(M)`` (eq. 2.6): abstract the new clip (or the repetitions of one trial,
+        into one HMM together) into an HMM, measure eq. 2.4 to every proto-symbol, decide its label
+        (nearest proto-symbol on the recognition group, calibrated confidence, "none of these" when
+        it is farther than the space's known motions; :mod:`shared.pss.recognition`) and place it
+        without moving the space's points. Clips on another studio's skeleton are read by their
+        joints' positions alone (:mod:`shared.pss.foreign`). Returns a :class:`Recognition`:
+        ``label`` (``None``: "none of these"), ``confidence``, ``novelty``, the ``point`` in the
+        space and its ``stress``, the ``top`` nearest proto-symbols and the decision's tests."""
         t0 = time.perf_counter()
+        clips = [clip_or_clips] if isinstance(clip_or_clips, Clip) else list(clip_or_clips)
+        if clips and all(foreign.is_foreign(c.skeleton, self.features.skeleton) for c in clips):
+            rec = association.recognize_by_positions(self, clips, top)  # another studio's skeleton
+            rec.seconds = time.perf_counter() - t0
+            return rec
         hmm = self.abstract(clip_or_clips)
         geo = self.features.group_indices(GEOMETRY_GROUPS)
         f = self.bank_on(GEOMETRY_GROUPS).distances(hmm.marginal(geo))

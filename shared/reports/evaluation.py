@@ -285,7 +285,50 @@ def expected_calibration_error(conf: np.ndarray, correct: np.ndarray, bins: int 
 #: what a person expects not to change a label: where they stand and face, how fast they move,
 #: how tall they are
 ROBUSTNESS = ("pelvis moved 3 m sideways", "turned 90 degrees", "played at 0.7x speed", "played at 1.4x speed",
-              "body scaled 0.8x", "body scaled 1.2x")
+              "body scaled 0.8x", "body scaled 1.2x", "on a game studio's skeleton")
+#: a game studio's skeleton (``../shared/data/bandai1``'s joints) by the HDM05 points they lie at: (name, HDM05
+#: point, parent); no hip joints, hands' inner joints, fingers, thumbs, upper back or upper neck; the tips of the
+#: head, hands and feet are joints of their own (an end site would not turn with its joint: below)
+STUDIO_JOINTS = [("Hips", "root", None), ("Spine", "lowerback", "Hips"), ("Chest", "thorax", "Spine"),
+                 ("Neck", "lowerneck", "Chest"), ("Head", "head", "Neck"), ("Head_End", "head.end", "Head"),
+                 *[(f"{a}_{s.upper()}", f"{s}{b}", p if p in ("Chest", "Hips") else f"{p}_{s.upper()}")
+                   for s in "lr" for a, b, p in (("Shoulder", "clavicle", "Chest"), ("UpperArm", "humerus", "Shoulder"),
+                                                 ("LowerArm", "radius", "UpperArm"), ("Hand", "wrist", "LowerArm"),
+                                                 ("Hand_End", "fingers.end", "Hand"), ("UpperLeg", "femur", "Hips"),
+                                                 ("LowerLeg", "tibia", "UpperLeg"), ("Foot", "foot", "LowerLeg"),
+                                                 ("Toes", "toes", "Foot"), ("Toes_End", "toes.end", "Toes"))]]
+
+
+def on_studio_skeleton(clip: Clip) -> Clip:
+    """An HDM05 clip on :data:`STUDIO_JOINTS`: the same world positions of the points kept, carried
+    by translation channels under the root's rotation (the studio's files give every joint six
+    channels; a joint without rotations turns its children and end sites with its parent, so the
+    tips are joints), so its joints' names, number, rest offsets and channels are another studio's
+    and no joint angle of HDM05's is in it (:mod:`shared.pss.foreign` reads it)."""
+    from shared.motion.skeleton import Joint, Skeleton
+
+    sk = clip.skeleton
+    assert sk is not None  # (transformed checks)
+    names = [j.name for j in sk.joints]
+    names += [f"{j.name}.end" for i, j in enumerate(sk.joints) if j.end is not None and i not in {k.parent for k in sk.joints}]
+    p = sk.forward_kinematics(clip.data, clip.channels) / sk.unit_m
+    rest = sk.forward_kinematics(np.zeros((1, len(sk.channels()))), sk.channels())[0] / sk.unit_m
+    rot = sk.root_matrices(clip.data, clip.channels)
+    at = {n: names.index(h) for n, h, _ in STUDIO_JOINTS}
+    joints, cols, chans = [], [], []
+    for n, _, parent in STUDIO_JOINTS:
+        if parent is None:
+            root = sk.root
+            joints.append(Joint(n, -1, root.offset, list(root.dofs), root.euler, root.pre))
+            cols.append(clip.select([f"{root.name}.{d}" for d in root.dofs]))
+            chans += [f"{n}.{d}" for d in root.dofs]
+            continue
+        off = rest[at[n]] - rest[at[parent]]
+        joints.append(Joint(n, [j.name for j in joints].index(parent), off, ["tx", "ty", "tz"]))
+        cols.append(np.einsum("tji,tj->ti", rot, p[:, at[n]] - p[:, at[parent]]) - off)
+        chans += [f"{n}.t{a}" for a in "xyz"]
+    studio = Skeleton("game studio", joints, sk.unit_m, sk.up_axis, "bvh")
+    return Clip(np.hstack(cols), chans, clip.fps, studio, {"motion": chans}, name=clip.name, label=clip.label)
 
 
 def transformed(clip: Clip, how: str) -> Clip:
@@ -322,6 +365,8 @@ def transformed(clip: Clip, how: str) -> Clip:
                         None if j.end is None else j.end * k, dict(j.limits)) for j in sk.joints]
         data[:, tcols] = (root.offset + data[:, tcols]) * k - root.offset * k
         return clip.with_data(data, skeleton=Skeleton(sk.name, joints, sk.unit_m, sk.up_axis, sk.source_format))
+    if how == "on a game studio's skeleton":
+        return on_studio_skeleton(clip)
     raise ValueError(how)
 
 
