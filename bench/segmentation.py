@@ -16,7 +16,9 @@ Takes are real clips of one performer joined with rests (:func:`shared.capture.t
   own clip time-warped), within the goal's 100 ms median boundary error on every tuning set.
 * **Reported on**: performer dg's takes, targets of bk, cohort of bd (cross-performer; and with
   no cohort, as a study run without other motions given); dg's
-  takes with dg's own first clip as the target (the same performer); and the game studio's
+  takes with dg's own first clip as the target (the same performer); both again with dg's takes
+  moved onto a game studio's skeleton (:func:`on_studio`: read by its landmarks,
+  :mod:`shared.pss.foreign`); and the game studio's
   dataset (bandai1: five styles of one content joined, the target its 'normal' style, the
   cohort the other contents' 'normal' clips; and, per style, each gesture's own clip played
   five times at 0.8-1.25x its speed, the target the clip, the other motions the style's other
@@ -101,6 +103,14 @@ def hdm05_set(root: Path, take_perf: str, target_perf: str, cohort_perf: str, ow
     for c in targets:
         cohort_of[c] = [load_clip(f) for o in targets if o != c for f in _hdm05(root, cohort_perf, o)[:COHORT_CLIPS]]
     return takes, targets, cohort_of
+
+
+def on_studio(takes: dict) -> dict:
+    """The takes moved onto a game studio's skeleton (:func:`shared.reports.evaluation.on_studio_skeleton`: other
+    joints, no HDM05 joint angle), their true boundaries kept: read through :mod:`shared.pss.foreign`."""
+    from shared.reports.evaluation import on_studio_skeleton
+
+    return {c: (on_studio_skeleton(take), truth) for c, (take, truth) in takes.items()}
 
 
 def space_of(clips: list, labels: list[str] | None = None):
@@ -279,10 +289,15 @@ def main(argv=None) -> dict:
     print(f"chosen: {key} (the largest F1 among the fewest cuts of other motions); "
           f"{'the module defaults' if same else 'NOT the module defaults: update shared/capture/segment.py'}")
     cross = hdm05_set(args.hdm05, "dg", "bk", "bd")
+    same = hdm05_set(args.hdm05, "dg", "dg", "bd", own=True)
     report = {"cross-performer (dg takes, bk targets)": run_set(*cross, how),
               "cross-performer, no other motions given (study run without --background)":
                   run_set(cross[0], cross[1], {c: [] for c in cross[1]}, how),
-              "same performer (dg takes, dg's own first clip)": run_set(*hdm05_set(args.hdm05, "dg", "dg", "bd", own=True), how)}
+              "same performer (dg takes, dg's own first clip)": run_set(*same, how),
+              "cross-performer, takes on a game studio's skeleton (dg takes, bk targets)":
+                  run_set(on_studio(cross[0]), *cross[1:], how),
+              "same performer, takes on a game studio's skeleton (dg takes, dg's own first clip)":
+                  run_set(on_studio(same[0]), *same[1:], how)}
     if (args.bandai / "bvh").exists():
         report["bandai1 (five styles of a gesture joined, target 'normal')"] = run_set(*bandai_set(args.bandai), how)
         for style in OWN_STYLES:
@@ -315,7 +330,8 @@ def markdown(out: dict) -> list[str]:
     md = ["# Repetitions found in joined takes (`python -m bench.segmentation`)", "",
           "Takes: real clips of one performer joined with rests, their true boundaries known. **Chosen on** HDM05 "
           "performers bd and bk (each one's takes against the other's targets; with a space, a space of the targets' "
-          "performer); **reported on** performer dg (never seen in the choice), the game studio's styles (five "
+          "performer); **reported on** performer dg (never seen in the choice; also with dg's takes moved onto a game "
+          "studio's skeleton, read by its body's landmarks), the game studio's styles (five "
           "styles of a gesture against its 'normal' style; and per style, a gesture's own clip time-warped: one "
           "performer's repetitions) and a CMU performance. Scored: F1 of repetitions, the median error of matched boundaries, repetitions cut from "
           "takes of other motions. Goals: F1 >= 0.95, median boundary error <= 100 ms, no other motion cut.", "",
