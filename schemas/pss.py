@@ -163,6 +163,9 @@ RECOGNIZE = Endpoint(
         "nearest": F(List(NEAREST, max_len=100), "nearest proto-symbols, nearest first"),
         "stress": F(Float(0.0), "out-of-sample stress of the placement"),
         "seconds": F(Float(0.0), "library time"),
+        "another_skeleton": F(Bool(), "true: the clips are on another studio's skeleton, read by where its body's parts "
+                              "are (their joints' positions mapped onto the space's), not by joint angles",
+                              required=False, default=False),
     })),
     "Recognise a clip (or several repetitions) as a point, with its nearest proto-symbols.",
 )

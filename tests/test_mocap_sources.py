@@ -152,12 +152,12 @@ def test_generation_gives_back_the_rotations_on_a_continuous_branch(hdm05):
     assert np.abs(np.diff(ang, axis=0)).max() < 30.0  # no jump of a branch or a turn between frames
 
 
-def test_a_clip_on_another_studios_skeleton_is_read_by_where_its_body_parts_are(hdm05, bandai):
+def test_a_clip_on_another_studios_skeleton_is_read_by_where_its_body_parts_are(hdm05, bandai, tmp_path):
     """Issue 29: a studio's own skeleton must not change the label. HDM05 clips moved onto the game
     studio's joints (:func:`shared.reports.evaluation.on_studio_skeleton`: other names, fewer joints,
     no joint angle of HDM05's) keep their label in a space of HDM05's skeleton, the joints both have
-    read where they are; a take on the studio's joints is cut as the HDM05 take is; the studio's own
-    files are read; and what needs joint angles refuses them, naming both skeletons."""
+    read where they are, in memory and as the BVH we write; a take on the studio's joints is cut as
+    the HDM05 take is; the studio's own files are read; and what needs joint angles refuses them, naming both skeletons."""
     from shared.capture.segment import segment
     from shared.capture.takes import join, score
     from shared.errors import BadInput
@@ -186,6 +186,13 @@ def test_a_clip_on_another_studios_skeleton_is_read_by_where_its_body_parts_are(
     assert np.abs(got[:, kept] - p[:, kept]).max() < 1e-6
     err = np.linalg.norm(got - p, axis=2) / c.skeleton.rest_height()
     assert np.median(err) < 0.01 and err.max() < 0.1
+    # written as BVH (its root an AMC root's extrinsic rotation) and read back: the same body, the same label
+    save_clip(m, tmp_path / "studio.bvh")
+    back = load_clip(tmp_path / "studio.bvh")
+    q, at = back.skeleton.forward_kinematics(back.data, back.channels), point_names(back.skeleton)
+    here = m.skeleton.forward_kinematics(m.data, m.channels)
+    assert max(np.abs(q[:, at.index(n)] - here[:, i]).max() for i, n in enumerate(point_names(m.skeleton))) < 1e-4
+    assert space.recognize(back).nearest_label == c.label
     # a take on the studio's joints is cut where the same take on HDM05's is
     target, squat = clips("bk", "squat1Reps", 2)
     take, truth = join([squat] * 3, seed=1)

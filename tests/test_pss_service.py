@@ -91,6 +91,16 @@ def test_every_verb_answers_within_its_contract(pss_service, clips, built, clien
             "space": "base", "files": [wire_file(tmp_path / f"{clip.name}.npz")]}))
         assert by_file["label"] == by_clip["label"] == clip.label
         assert np.allclose([n["distance"] for n in by_file["nearest"]], [n["distance"] for n in by_clip["nearest"]])
+        assert not by_file["another_skeleton"]
+
+    # a clip on a game studio's skeleton, as its BVH file: read by where its body's parts are, and said so
+    from shared.reports.evaluation import on_studio_skeleton
+
+    for clip in motion_only:
+        save_clip(on_studio_skeleton(clip), tmp_path / f"{clip.name}.studio.bvh")
+        r = _checked(contract.RECOGNIZE, c.request("pss", "recognize", {
+            "space": "base", "files": [wire_file(tmp_path / f"{clip.name}.studio.bvh")]}))
+        assert r["nearest_label"] == clip.label and r["another_skeleton"] is True
 
     names = [p["name"] for p in info["proto_symbols"]]
     # generate from a point and from a mix

@@ -190,7 +190,8 @@ def make_service(settings: Settings | None = None) -> Service:
         return {"space": req["space"], **decided, "known": rec.label is not None, "nearest_label": rec.nearest_label,
                 "confidence": float(rec.confidence), "novelty": float(rec.novelty), "label_in_space": rec.label_in_space,
                 "point": np.asarray(rec.point, float), "stress": float(rec.stress), "seconds": float(rec.seconds),
-                "nearest": [{"name": n, "label": lab, "distance": float(d)} for n, lab, d in rec.nearest]}
+                "nearest": [{"name": n, "label": lab, "distance": float(d)} for n, lab, d in rec.nearest],
+                **({"another_skeleton": True} if rec.another_skeleton else {})}
 
     @svc.cost("generate")
     def generate_cost(req):

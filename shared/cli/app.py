@@ -143,21 +143,19 @@ def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
 
         use_numba(False)  # one clip's work is milliseconds: numba's start-up (~0.6 s) would be most of the command
         import shared.io  # noqa: F401  (read_clip's)
-        from shared.pss.foreign import is_foreign
         from shared.pss.recognition import rejected_by
         from shared.pss.space import ProtoSymbolSpace
 
     space = ProtoSymbolSpace.load(space_file)
     reps = [read_clip(c, skeleton=skeleton) for c in clips]
     r = space.recognize(reps)
-    other = all(is_foreign(c.skeleton, space.features.skeleton) for c in reps)
 
     out = {**({"label": r.label} if r.label is not None else {}), "known": r.label is not None,
            **({"rejected_by": rejected_by(r.decision)} if r.label is None and r.decision is not None else {}),
            "nearest_label": r.nearest_label, "confidence": r.confidence, "novelty": r.novelty,
            "point": [float(v) for v in r.point],
            "nearest": [{"name": n, "label": lab, "distance": d} for n, lab, d in r.nearest], "stress": r.stress,
-           **({"another_skeleton": True} if other else {})}
+           **({"another_skeleton": True} if r.another_skeleton else {})}
     typer.echo(json.dumps(out) if as_json else recognition_text(out))
 
 

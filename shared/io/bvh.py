@@ -248,12 +248,21 @@ def _conventions(path, sk: Skeleton, data: np.ndarray, channels: list[str], unit
     return sk, data, channels, read_as
 
 
+def _read_back_as_is(j: Joint) -> bool:
+    """A BVH reader reads ``j``'s channels back as they are: no rotation before its own, and its
+    rotation channels' order begins its (intrinsic) Euler order, as the reader sets it. An AMC
+    root (extrinsic ``xyz``), or a skeleton built with one, is not: its rotations are converted
+    to ZXY instead."""
+    order = "".join(d[1].upper() for d in j.dofs if d.startswith("r"))
+    return np.array_equal(j.pre, np.eye(3)) and (not order or (j.euler.isupper() and j.euler.startswith(order)))
+
+
 def to_bvh_form(clip: Clip) -> tuple[Skeleton, np.ndarray, list[str]]:
     """The clip's skeleton and motion in BVH form: C folded into ZXY rotations, metres."""
     sk = clip.skeleton
     if sk is None:
         raise ClipFormatError(clip.source or clip.name, "a BVH file needs a skeleton; this clip has none")
-    plain = all(np.array_equal(j.pre, np.eye(3)) for j in sk.joints)
+    plain = all(_read_back_as_is(j) for j in sk.joints)
     if sk.source_format == "bvh" and plain:
         chans = sk.channels()
         scale = sk.unit_m / BVH_UNIT_M

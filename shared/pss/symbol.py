@@ -62,6 +62,8 @@ class Recognition:
     novelty: float = 0.0  # > 1: farther than the space's known motions (rejected)
     recognition_distances: np.ndarray | None = None  # eq. 2.4 on the recognition group
     decision: Decision | None = None  # each open-set test's novelty
+    #: read by its joints' positions alone: the clip is on another studio's skeleton (:mod:`shared.pss.foreign`)
+    another_skeleton: bool = False
 
 
 @dataclass
