@@ -117,6 +117,10 @@ def test_a_local_session_coaches_and_refuses_bad_attempts(squat):
                                            groups={"motion": squat.channels[:10]})])
     with pytest.raises(BadInput, match="too short"):
         check_attempts(s, [squat.frames(0, 5)])
+    from shared.reports.evaluation import on_studio_skeleton
+
+    with pytest.raises(BadInput, match=r"lacks \d+ of the target's channels.*it is on another skeleton, 0 of the 31"):
+        check_attempts(s, [on_studio_skeleton(squat)])  # the coach compares joint angles: one skeleton
     assert len(s.trials) == 4
 
 

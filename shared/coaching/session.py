@@ -53,6 +53,7 @@ from shared.coaching.parts import error_shares, partial_emphasis
 from shared.coaching.policies import Policy, table_adverb
 from shared.errors import BadInput, Unavailable
 from shared.motion.clip import Clip
+from shared.motion.skeleton import other_skeleton
 
 ALPHA_STEP = 0.25
 SUBGOAL_MIN_SHARE = 0.1  # a body part with less of the error gets no sub-goal of its own
@@ -125,8 +126,9 @@ def check_attempts(session: Session, attempts: list[Clip]) -> None:
     for a in attempts:
         missing = [c for c in need if c not in a.channels]
         if missing:
-            raise BadInput(f"attempt {a.name!r} lacks {len(missing)} of the target's channels, e.g. {missing[:3]} "
-                           "(a different skeleton?)", field="clips")
+            raise BadInput(f"attempt {a.name!r} lacks {len(missing)} of the target's channels, e.g. {missing[:3]}"
+                           + (other_skeleton(session.target.skeleton, a.skeleton) or " (a different skeleton?)"),
+                           field="clips")
         if a.duration < 0.3 or a.n_frames < 10:
             raise BadInput(f"attempt {a.name!r} is too short ({a.n_frames} frames, {a.duration:.2f} s); "
                            "at least 10 frames and 0.3 s", field="clips")
