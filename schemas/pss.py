@@ -200,9 +200,10 @@ ASSOCIATE = Endpoint(
                      required=False, default="sensor"),
         "method": F(Str(choices=("expected", "monte_carlo")), required=False, default="expected"),
         "seed": F(Int(0, 2**32 - 1), required=False, default=0),
-        "weighting": F(Str(choices=("affine", "inverse_distance")),
-                       "point -> weights: exact affine (may extrapolate) or convex inverse-distance; absent: "
-                       "inverse-distance for missing sensor channels, affine for missing frames",
+        "weighting": F(Str(choices=("distance", "affine", "inverse_distance")),
+                       "the proto-symbols' weights: from the motion's eq. 2.4 distances to them (convex), or from its "
+                       "point, exact affine (may extrapolate) or convex inverse-distance; absent: distance for "
+                       "missing sensor channels, affine for missing frames",
                        required=False),
         "whole": F(Bool(), "false: leave the whole generated pattern out of the reply (missing sensor channels "
                            "only: the aligned channels are the answer; saves generating it)",

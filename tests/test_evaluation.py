@@ -156,3 +156,18 @@ def test_the_novelty_model_row_names_the_level_its_results_were_made_at():
     assert "novelty model alone (ridge on the HMMs, level 0.95)" in report_markdown(res)  # written before it was kept
     res["novelty_level"] = 0.97
     assert "novelty model alone (ridge on the HMMs, level 0.97)" in report_markdown(res)
+
+
+@pytest.mark.parametrize("below, word", [((0.35, 0.31), "met"), ((0.35, 0.25), "missed")])
+def test_the_association_verdict_is_computed_on_every_test_performer(below, word):
+    res = _result(9, 5)
+    for w, b in zip(("p", "q"), below):
+        res["splits"][w]["association"] = {"training_mean": 0.4, "distance": {"error": 0.4 * (1 - b), "below_mean": b},
+                                           "inverse_distance": {"error": 0.3, "below_mean": 0.25}}
+    res["verdicts"] = verdicts(res)
+    lines = report_markdown(res).splitlines()
+    assert next(x for x in lines if x.startswith("Goal: at least 30 % below")).endswith(f"**{word}**.")
+    assert "| the training clips' mean g | 40.0 % | 40.0 % |" in lines
+    res["splits"]["p"]["association"] = res["splits"]["q"]["association"] = {"not_run": "no right-arm channels"}
+    res["verdicts"] = verdicts(res)
+    assert "association" not in res["verdicts"] and "Association: not run (no right-arm channels)." in report_markdown(res)

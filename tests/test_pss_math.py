@@ -10,7 +10,13 @@ from shared.errors import BadInput, ModelError
 from shared.pss.distance import bhattacharyya, distance_matrix, hmm_distance
 from shared.pss.hmm import LeftToRightHMM, fit_hmm
 from shared.pss.mds import classical_mds, place_point, raw_stress, smacof
-from shared.pss.synthesis import combine, expected_trajectory, monte_carlo_trajectory, point_weights
+from shared.pss.synthesis import (
+    combine,
+    distance_weights,
+    expected_trajectory,
+    monte_carlo_trajectory,
+    point_weights,
+)
 
 
 def _numeric_bd(m1, s1, m2, s2):
@@ -500,3 +506,14 @@ def test_a_long_recording_is_fitted_in_blocks_of_frames_to_the_same_model(monkey
     np.testing.assert_allclose(blocks.covars, stacked.covars, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(blocks.stay, stacked.stay, rtol=1e-9, atol=1e-12)
     assert blocks.n_iter == stacked.n_iter
+
+
+def test_distance_weights_are_convex_and_as_documented():
+    """(d_min / d_i)^8 over the eq. 2.4 distances, normalised; a proto-symbol at distance 0 takes all."""
+    w = distance_weights([1.0, 2.0, 4.0])
+    assert w == pytest.approx(np.array([1.0, 2.0**-8, 4.0**-8]) / (1 + 2.0**-8 + 4.0**-8))
+    assert distance_weights([3.0, 0.0, 1.0]).tolist() == [0.0, 1.0, 0.0]
+    assert distance_weights([2.0, 2.0]).tolist() == [0.5, 0.5]
+    for bad in ([], [1.0, np.nan], [-1.0, 2.0]):
+        with pytest.raises(BadInput, match="finite and non-negative"):
+            distance_weights(bad)

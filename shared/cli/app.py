@@ -171,9 +171,13 @@ def evaluate_recognition(data: Path = typer.Option(Path("../shared/data/hdm05"),
                          peers: bool = typer.Option(True, "--peers/--no-peers",
                                                     help="Run MiniRocket (aeon) and 1-NN DTW on the same clips (dev extras)."),
                          open_set: bool = typer.Option(True, "--open-set/--no-open-set",
-                                                       help="Hold every class out in turn (about a minute per split).")):
+                                                       help="Hold every class out in turn (about a minute per split)."),
+                         association: bool = typer.Option(True, "--association/--no-association",
+                                                          help="Estimate an arm robot's torques from each test clip's "
+                                                               "motion (eq. 2.8; about 10 s per split).")):
     """Recognition report: leave-one-performer-out accuracy, per-class confusions, confidence
-    calibration, unknown motions and time per clip, side by side with MiniRocket and DTW."""
+    calibration, unknown motions, association (motion -> torque) and time per clip, side by side
+    with MiniRocket and DTW."""
     from shared.io import find_clips
     from shared.reports.evaluation import evaluate
     from shared.reports.evaluation_report import write_report
@@ -185,7 +189,8 @@ def evaluate_recognition(data: Path = typer.Option(Path("../shared/data/hdm05"),
     if not files:
         fail(f"no clips under {folder}")
     clips = [read_clip(f) for f in files]
-    res = evaluate(clips, peers=peers, open_set_test=open_set, progress=lambda m: typer.echo(m, err=True))
+    res = evaluate(clips, peers=peers, open_set_test=open_set, association=association,
+                   progress=lambda m: typer.echo(m, err=True))
     path = write_report(res, out)
     typer.echo(f"wrote {path} and {out / 'results.json'}")
     for k, ok in res["verdicts"].items():

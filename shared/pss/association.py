@@ -14,7 +14,7 @@ from shared.motion.clip import Clip
 from shared.pss.distance import distance_matrix, distances_to
 from shared.pss.hmm import fit_hmm, fit_hmm_once
 from shared.pss.symbol import Association, at_space_rate
-from shared.pss.synthesis import generate
+from shared.pss.synthesis import distance_weights, generate
 
 if TYPE_CHECKING:  # annotations only: the space imports this module
     from shared.pss.space import ProtoSymbolSpace
@@ -44,20 +44,23 @@ def associate(space: ProtoSymbolSpace, clip: Clip, missing: str = "sensor", *, m
     from the state posterior of its last frame under the best-fitting proto-symbol, and
     the clip is compared with that many first states of every proto-symbol.
 
-    ``weighting``: how the point becomes proto-symbol weights: ``"affine"`` (exact, may
-    extrapolate) or ``"inverse_distance"`` (convex: the estimate stays among the known
-    patterns, which is steadier for motions outside the space's hull; ch. 3 uses it).
-    ``None``: inverse-distance for missing sensor channels, affine for missing frames.
-    Chosen on HDM05's bd and bk splits (arm torques from motion, eq. 3.9 error against
-    the training mean's: inverse-distance 31 / 24 % below it, affine 17 / 10 %) and
-    reported on dg (32 % below, affine 9 %).
+    ``weighting``: how the motion becomes proto-symbol weights: ``"distance"`` (convex, from
+    its eq. 2.4 distances to every proto-symbol, the way recognition weighs them:
+    :func:`shared.pss.synthesis.distance_weights`), or from its point in the space,
+    ``"affine"`` (exact, may extrapolate) or ``"inverse_distance"`` (convex; ch. 3's estimator
+    asks for it). ``None``: distance for missing sensor channels, affine for missing frames.
+    Missing sensor channels, HDM05 arm torques from motion, eq. 3.9 error below the training
+    mean's, test performers bd / bk / dg each against a space of the other two: distance 33 /
+    41 / 33 %, the point's inverse distance (the default before) 29 / 24 / 32 %; the power
+    chosen on the inner splits (one training performer's space against the other's clips;
+    docs/pss.md, "Association across performers").
 
     ``whole=False`` (missing sensor channels only): the whole pattern is not generated
     (``Association.whole`` is ``None``): a caller that reads only the sensor channels on the
     clip's own frames (the estimator, ch. 3) saves the generation, a third of the association.
     """
     if weighting is None:
-        weighting = "inverse_distance" if missing == "sensor" else "affine"
+        weighting = "distance" if missing == "sensor" else "affine"
     if missing == "sensor":
         return associate_channels(space, clip, method, seed, weighting, whole)
     if missing == "frames":
@@ -79,7 +82,7 @@ def associate_channels(space: ProtoSymbolSpace, clip, method, seed, weighting="a
     f = space.bank_on((group,)).distances(hmm) * marginal_scale(space, group)
     rec = space._place(hmm, f)
     reach = reach_of(space, (group,), float(np.min(f)) / marginal_scale(space, group))
-    c = space.weights(rec.point, method=weighting)
+    c = _weights(space, rec, f, weighting)
     model = space.synthesize(c)
     generated = space.features.decode(generate(model, method=method, seed=seed), p.fps,
                                       name=f"{clip.name}-whole") if whole else None
@@ -116,9 +119,15 @@ def associate_frames(space: ProtoSymbolSpace, clip, method, seed, weighting="aff
     rec = space._place(hmm, f)
     scale = marginal_scale(space, "motion") if groups == ("motion",) and space.features.sensor_channels else 1.0
     reach = reach_of(space, groups, float(np.min(f)) / scale)
-    c = space.weights(rec.point, method=weighting)
+    c = _weights(space, rec, f, weighting)
     whole = space.features.decode(generate(space.synthesize(c), method=method, seed=seed), p.fps, name=f"{clip.name}-whole")
     return Association(rec, c, whole, None, progress=k / p.n_states, reach=reach)
+
+def _weights(space: ProtoSymbolSpace, rec, f: np.ndarray, weighting: str) -> np.ndarray:
+    """Eq. 4.2's proto-symbol weights of an association: from the motion's eq. 2.4 distances
+    ``f`` (``"distance"``) or from its point ``rec.point`` (``"affine"``, ``"inverse_distance"``)."""
+    return distance_weights(f) if weighting == "distance" else space.weights(rec.point, method=weighting)
+
 
 def reach_of(space: ProtoSymbolSpace, groups: tuple, nearest: float) -> float:
     """``nearest`` (an eq. 2.4 distance on ``groups``) over the 95th percentile of the

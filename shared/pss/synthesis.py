@@ -33,6 +33,26 @@ import numpy as np
 from shared.errors import BadInput
 from shared.pss.hmm import LeftToRightHMM
 
+#: the power of :func:`distance_weights` (chosen on nested splits of HDM05's performers: docs/pss.md,
+#: "Association across performers")
+DISTANCE_POWER = 8
+
+
+def distance_weights(d, power: float = DISTANCE_POWER) -> np.ndarray:
+    """Convex weights ``(d_min / d_i)^power`` (summing to 1) from a motion's eq. 2.4 distances
+    ``d`` to every proto-symbol, the distances recognition labels it by (not its point's in the
+    low-dimensional space, where eq. 2.6's placement moves it): the nearest proto-symbols take
+    (almost) all, several about as near share. All on one proto-symbol at distance 0."""
+    d = np.asarray(d, float).ravel()
+    if d.size == 0 or not np.all(np.isfinite(d)) or np.any(d < 0):
+        raise BadInput("distances must be finite and non-negative, one per proto-symbol")
+    if d.min() <= 0.0:
+        c = np.zeros(d.size)
+        c[np.argmin(d)] = 1.0
+        return c
+    w = (d.min() / d) ** power
+    return w / w.sum()
+
 
 def point_weights(points: np.ndarray, x: np.ndarray, *, method: str = "affine", k: int | None = None,
                   reg: float = 1.0) -> np.ndarray:
@@ -77,7 +97,7 @@ def point_weights(points: np.ndarray, x: np.ndarray, *, method: str = "affine", 
         w = (d.min() / d) ** 4
         return w / w.sum()
     if method != "affine":
-        raise BadInput(f"unknown weighting {method!r} (affine or inverse_distance)")
+        raise BadInput(f"unknown weighting {method!r} (distance, affine or inverse_distance)")
     # exact reproduction sum c_i x_i = x, sum c_i = 1, with the locality-weighted smallest
     # norm sum (d_i / d_min)^4 c_i^2: far proto-symbols get small weights
     idx = np.argsort(d)[: (n if k is None else min(max(k, 1), n))]
