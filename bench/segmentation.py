@@ -289,15 +289,15 @@ def main(argv=None) -> dict:
     print(f"chosen: {key} (the largest F1 among the fewest cuts of other motions); "
           f"{'the module defaults' if same else 'NOT the module defaults: update shared/capture/segment.py'}")
     cross = hdm05_set(args.hdm05, "dg", "bk", "bd")
-    same = hdm05_set(args.hdm05, "dg", "dg", "bd", own=True)
+    own_set = hdm05_set(args.hdm05, "dg", "dg", "bd", own=True)
     report = {"cross-performer (dg takes, bk targets)": run_set(*cross, how),
               "cross-performer, no other motions given (study run without --background)":
                   run_set(cross[0], cross[1], {c: [] for c in cross[1]}, how),
-              "same performer (dg takes, dg's own first clip)": run_set(*same, how),
+              "same performer (dg takes, dg's own first clip)": run_set(*own_set, how),
               "cross-performer, takes on a game studio's skeleton (dg takes, bk targets)":
                   run_set(on_studio(cross[0]), *cross[1:], how),
               "same performer, takes on a game studio's skeleton (dg takes, dg's own first clip)":
-                  run_set(on_studio(same[0]), *same[1:], how)}
+                  run_set(on_studio(own_set[0]), *own_set[1:], how)}
     if (args.bandai / "bvh").exists():
         report["bandai1 (five styles of a gesture joined, target 'normal')"] = run_set(*bandai_set(args.bandai), how)
         for style in OWN_STYLES:
