@@ -232,8 +232,9 @@ def association_lines(res: dict) -> list[str]:
              "The torques of a 2.4 kg arm robot performing each test clip's right arm, estimated from the clip's motion "
              "alone by a space of the training clips with their torques (`space associate`); eq. 3.9's error "
              "|g - g_hat| / g, and how far below always answering the training clips' mean it lies. The weighting's "
-             "power was chosen on inner splits (one training performer's space against the other's clips), never on "
-             "the test performer (docs/pss.md, \"Association across performers\").", "",
+             "power was chosen on inner splits (one training performer's space against the other's clips), though the "
+             "test performers were scored in the same run (docs/pss.md, \"Association across performers\", gives "
+             "every variant's numbers).", "",
              "| proto-symbols weighted | " + " | ".join(f"test {w}" for w in who) + " |", "|---|" + "---|" * len(who),
              "| the training clips' mean g | " + " | ".join(f"{100 * splits[w]['association']['training_mean']:.1f} %"
                                                          for w in who) + " |"]
