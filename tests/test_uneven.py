@@ -561,6 +561,17 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
     assert any("d = 5, body estimator: **holds**" in x for x in claim)
     eq = equal_questions_lines({"c": curve_of([0.5, 0.4, 0.3], [0.5, 0.2, 0.1])})
     assert "| c | 8 | 30.0 % | 30.0 % | 20.0 % (set 1, 8 asked) | body |" in eq
+    # where the body estimator is not the lowest, the report names the conversations and whether the rule was wrong
+    from shared.reproduce.ch3_report import rules_not_lowest_lines
+
+    right = {**curve_of([0.5, 0.4, 0.3], [0.5, 0.2, 0.1]), "rule": "f4", "assumed": "f4"}
+    wrong = {**curve_of([0.5, 0.4, 0.3], [0.5, 0.9, 0.9]), "rule": "f4", "assumed": "eq3.8"}
+    why = rules_not_lowest_lines({"right|5": right, "wrong|5": wrong})[0]
+    assert why.startswith("The body estimator is not the lowest in 1 of these conversations (d = 5, f4 read as eq3.8).")
+    assert "a rule the other does not use" in why
+    assert "read the answers with the rule the other uses" in rules_not_lowest_lines(
+        {"right|5": {**wrong, "assumed": "f4"}})[0]
+    assert rules_not_lowest_lines({"right|5": right})[0].startswith("The body estimator is the lowest")
     # over the population: the body estimator after half the sets against the others after all of them
     from shared.reproduce.ch3_report import equal_population_lines
 

@@ -217,19 +217,50 @@ def equal_questions_lines(curves: dict, group: str = "unknown") -> list[str]:
              "| conversation | questions | thesis estimator | space estimator | body estimator (its set) | lowest |",
              "|---|---|---|---|---|---|"]
     for label, cur in curves.items():
-        rows = [r for r in cur["rows"] if isinstance(r.get("questions"), dict)]  # curves before the count: none
-        if not rows:
+        at = _at_equal_questions(cur, group)
+        if at is None:
             continue
-        last = rows[-1]
-        q = last["questions"]["thesis"]
-        fair = [r for r in rows if r["questions"]["body"] <= q]
-        b = fair[-1] if fair else rows[0]
-        errs = {"thesis": last[f"thesis_{group}"]["error"], "body": b[f"body_{group}"]["error"]}
-        if f"space_{group}" in last:  # the space estimator asks the thesis's questions
-            errs["space"] = last[f"space_{group}"]["error"]
+        q, errs, b = at
         lines.append(f"| {label} | {q} | {_pct(errs['thesis'])} | {_pct(errs['space']) if 'space' in errs else '-'} | "
                      f"{_pct(errs['body'])} (set {b['set']}, {b['questions']['body']} asked) | {min(errs, key=errs.__getitem__)} |")
     return lines + [""]
+
+
+def _at_equal_questions(cur: dict, group: str):
+    """A curve's (questions, errors per estimator, the body estimator's row) at equal numbers of
+    questions (:func:`equal_questions_lines`); ``None`` for curves written before the count."""
+    rows = [r for r in cur["rows"] if isinstance(r.get("questions"), dict)]
+    if not rows:
+        return None
+    last = rows[-1]
+    q = last["questions"]["thesis"]
+    fair = [r for r in rows if r["questions"]["body"] <= q]
+    b = fair[-1] if fair else rows[0]
+    errs = {"thesis": last[f"thesis_{group}"]["error"], "body": b[f"body_{group}"]["error"]}
+    if f"space_{group}" in last:  # the space estimator asks the thesis's questions
+        errs["space"] = last[f"space_{group}"]["error"]
+    return q, errs, b
+
+
+def rules_not_lowest_lines(rules: dict, group: str = "unknown") -> list[str]:
+    """Where the body estimator is not the lowest at equal numbers of questions in the rules'
+    conversations, and whether each of them reads the answers with a rule the other does not use."""
+    lost = []
+    for key, cur in rules.items():
+        at = _at_equal_questions(cur, group)
+        if at is not None and min(at[1], key=at[1].__getitem__) != "body":
+            lost.append((f"d = {key.split('|')[1]}, {cur['rule']} read as {cur['assumed']}", cur["rule"] == cur["assumed"]))
+    if not lost:
+        return ["The body estimator is the lowest at equal numbers of questions in every conversation above.", ""]
+    right = [label for label, same in lost if same]
+    why = ("Every one of them reads the other's answers with a rule the other does not use. The body estimator "
+           "takes each answer, converted by the rule it assumes, as a constraint on the other's body, so a wrong rule's "
+           "words become a wrong body, whose torques it carries to the unknown motions. The thesis and space "
+           "estimators scale the self's own torques by a ratio of words, which a misread word moves less. With the "
+           "rule the other uses, the body estimator is the lowest." if not right else
+           "Of them, " + ", ".join(right) + " read the answers with the rule the other uses.")
+    return [f"The body estimator is not the lowest in {len(lost)} of these conversations ("
+            + "; ".join(label for label, _ in lost) + "). " + why, ""]
 
 
 def people_lines(people: dict | None) -> list[str]:
@@ -431,6 +462,7 @@ def write_report(out: Path, res: dict, seconds: float, ch=None) -> Path:
                      f"{level(r['thesis_unknown']['error'], fig, True if label == 'right' else None)} |")
     lines += [""] + rule_claim_lines(rules) + equal_questions_lines(
         {f"d = {key.split('|')[1]}, {cur['rule']} read as {cur['assumed']}": cur for key, cur in rules.items()}, "unknown")
+    lines += rules_not_lowest_lines(rules)
     des = next((cur["design"] for cur in rules.values() if cur.get("design")), None)
     if des:
         a = des["a"]
