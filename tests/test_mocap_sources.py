@@ -153,7 +153,7 @@ def test_generation_gives_back_the_rotations_on_a_continuous_branch(hdm05):
 
 
 def test_a_clip_on_another_studios_skeleton_is_read_by_where_its_body_parts_are(hdm05, bandai, tmp_path):
-    """Issue 29: a studio's own skeleton must not change the label. HDM05 clips moved onto the game
+    """A studio's own skeleton must not change the label. HDM05 clips moved onto the game
     studio's joints (:func:`shared.reports.evaluation.on_studio_skeleton`: other names, fewer joints,
     no joint angle of HDM05's) keep their label in a space of HDM05's skeleton, the joints both have
     read where they are, in memory and as the BVH we write; a take on the studio's joints is cut as
@@ -214,7 +214,7 @@ def test_a_clip_on_another_studios_skeleton_is_read_by_where_its_body_parts_are(
 
 @pytest.mark.slow
 def test_a_game_studios_own_motions_are_none_of_a_spaces_motions(dev_space, bandai):
-    """Issue 29's open set beyond HDM05: the game studio's 174 clips (its own skeleton, read by its
+    """The open set beyond HDM05: the game studio's 174 clips (its own skeleton, read by its
     landmarks; bows, waves, punches, runs, walks, a right-foot kick: none of HDM05's classes) are
     "none of these" for the space of HDM05's performers bd and bk at least as often as the goal asks
     of unknown motions (90 %; measured 170 of 174: docs/pss.md)."""

@@ -566,12 +566,12 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
 
     right = {**curve_of([0.5, 0.4, 0.3], [0.5, 0.2, 0.1]), "rule": "f4", "assumed": "f4"}
     wrong = {**curve_of([0.5, 0.4, 0.3], [0.5, 0.9, 0.9]), "rule": "f4", "assumed": "eq3.8"}
-    why = rules_not_lowest_lines({"right|5": right, "wrong|5": wrong})[0]
+    why = rules_not_lowest_lines({"d = 5, f4 read as f4": right, "d = 5, f4 read as eq3.8": wrong})[0]
     assert why.startswith("The body estimator is not the lowest in 1 of these conversations (d = 5, f4 read as eq3.8).")
     assert "a rule the other does not use" in why
     assert "read the answers with the rule the other uses" in rules_not_lowest_lines(
-        {"right|5": {**wrong, "assumed": "f4"}})[0]
-    assert rules_not_lowest_lines({"right|5": right})[0].startswith("The body estimator is the lowest")
+        {"d = 5, f4 read as f4": {**wrong, "assumed": "f4"}})[0]
+    assert rules_not_lowest_lines({"d = 5, f4 read as f4": right})[0].startswith("The body estimator is the lowest")
     # over the population: the body estimator after half the sets against the others after all of them
     from shared.reproduce.ch3_report import equal_population_lines
 

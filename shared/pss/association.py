@@ -31,6 +31,10 @@ def marginal_scale(space: ProtoSymbolSpace, group: str) -> float:
         space._partial_scale[group] = num / den if den > 0 else 1.0
     return space._partial_scale[group]
 
+#: the weighting of an association with missing sensor channels when none is asked (:func:`associate`)
+SENSOR_WEIGHTING = "distance"
+
+
 def associate(space: ProtoSymbolSpace, clip: Clip, missing: str = "sensor", *, method: str = "expected", seed: int = 0,
               weighting: str | None = None, whole: bool = True) -> Association:
     """Eq. 2.8: the whole pattern from a partial one.
@@ -60,7 +64,7 @@ def associate(space: ProtoSymbolSpace, clip: Clip, missing: str = "sensor", *, m
     clip's own frames (the estimator, ch. 3) saves the generation, a third of the association.
     """
     if weighting is None:
-        weighting = "distance" if missing == "sensor" else "affine"
+        weighting = SENSOR_WEIGHTING if missing == "sensor" else "affine"
     if missing == "sensor":
         return associate_channels(space, clip, method, seed, weighting, whole)
     if missing == "frames":
@@ -164,4 +168,6 @@ def recognize_by_positions(space: ProtoSymbolSpace, clips: list, top: int = 5):
                   n_iter=p.n_iter)
     hr = space.as_recognised(hmm)
     f = space.bank_on(("position",)).distances(hmm) * marginal_scale(space, "position")
-    return space._place(hmm, f, top, space.recognition_bank().distances(hr), hr)
+    rec = space._place(hmm, f, top, space.recognition_bank().distances(hr), hr)
+    rec.another_skeleton = True
+    return rec

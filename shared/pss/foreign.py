@@ -1,5 +1,5 @@
-"""Clips on another studio's skeleton, read as the space's (issue 29: "the studio's skeleton, its
-own joints mapped to the space's, must not change the label").
+"""Clips on another studio's skeleton, read as the space's: a studio's skeleton, its own joints
+mapped to the space's, must not change the label.
 
 A space compares joints by name (:mod:`shared.pss.features`): a clip whose skeleton names fewer
 than half of the space's joints (a game studio's ``UpperLeg_L`` for HDM05's ``lfemur``, CMU's BVH

@@ -435,7 +435,7 @@ class ProtoSymbolSpace:
         clips = [clip_or_clips] if isinstance(clip_or_clips, Clip) else list(clip_or_clips)
         if clips and all(foreign.is_foreign(c.skeleton, self.features.skeleton) for c in clips):
             rec = association.recognize_by_positions(self, clips, top)  # another studio's skeleton
-            rec.seconds, rec.another_skeleton = time.perf_counter() - t0, True
+            rec.seconds = time.perf_counter() - t0
             return rec
         hmm = self.abstract(clip_or_clips)
         geo = self.features.group_indices(GEOMETRY_GROUPS)

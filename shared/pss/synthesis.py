@@ -94,8 +94,7 @@ def point_weights(points: np.ndarray, x: np.ndarray, *, method: str = "affine", 
     if method == "inverse_distance":
         # convex weights (d_min / d_i)^4, the same locality as the affine weights below: a
         # point next to a proto-symbol takes (almost) only it, a point between several blends them
-        w = (d.min() / d) ** 4
-        return w / w.sum()
+        return distance_weights(d, power=4)
     if method != "affine":
         raise BadInput(f"unknown weighting {method!r} (distance, affine or inverse_distance)")
     # exact reproduction sum c_i x_i = x, sum c_i = 1, with the locality-weighted smallest

@@ -32,6 +32,7 @@ import numpy as np
 
 from shared.errors import BadInput
 from shared.motion.clip import Clip
+from shared.pss.association import SENSOR_WEIGHTING
 from shared.pss.novelty import NOVELTY_QUANTILE
 from shared.pss.space import STYLE_POSE_FLOOR, ProtoSymbolSpace, performer
 
@@ -42,10 +43,10 @@ GOAL_ACCURACY = 0.98
 GOAL_OPEN_OUT = 0.90
 GOAL_OPEN_IN = 0.05
 GOAL_MS = 5.0
-#: association on an unseen performer: the eq. 3.9 error at least this share below the training mean's (issue 29)
+#: association's goal on an unseen performer: the eq. 3.9 error at least this share below the training mean's
 GOAL_ASSOCIATION = 0.30
 #: the association weightings the report compares (:func:`shared.pss.association.associate`): the default first
-ASSOCIATION_WEIGHTINGS = ("distance", "inverse_distance")
+ASSOCIATION_WEIGHTINGS = (SENSOR_WEIGHTING, "inverse_distance")
 #: each clip's time is the fastest of this many runs of the method on it, for every method alike (as
 #: ``timeit`` advises: what else the machine does only ever adds; on this 2-core VM the worst split's
 #: median of one run each was 5.0 and 7.1 ms in two runs of the same code minutes apart)
@@ -494,11 +495,16 @@ def association_errors(train: list[Clip], test: list[Clip]) -> dict:
     truth = np.array([g(c.resample(fps)) for c in truth_t])
     out: dict[str, Any] = {"training_mean": float(np.mean(np.abs(truth - g_train) / truth))}
     for w in ASSOCIATION_WEIGHTINGS:
-        aligned = [space.associate(c, "sensor", weighting=w, whole=False).aligned for c in test]
-        est = np.array([g(a) for a in aligned if a is not None])  # (missing sensor channels: always aligned)
+        est = np.array([g(_aligned(space.associate(c, "sensor", weighting=w, whole=False))) for c in test])
         err = float(np.mean(np.abs(truth - est) / truth))
         out[w] = {"error": err, "below_mean": 1.0 - err / out["training_mean"]}
     return out
+
+
+def _aligned(a) -> Clip:
+    """An association's clip with its estimated sensor channels (always there for missing sensor channels)."""
+    assert a.aligned is not None  # (typed Optional: missing frames have none)
+    return a.aligned
 
 
 def open_rates(res: dict, method: str, only: str | None = None) -> tuple[float, float] | None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shared.pss.synthesis import DISTANCE_POWER
 from shared.reports.evaluation import (
     ASSOCIATION_WEIGHTINGS,
     GOAL_ACCURACY,
@@ -226,7 +227,7 @@ def association_lines(res: dict) -> list[str]:
     if not who:
         why = next((s["association"]["not_run"] for s in splits.values() if "not_run" in s.get("association", {})), None)
         return ["", f"Association: not run ({why})."] if why else []
-    names = {"distance": "from its eq. 2.4 distances, (d_min / d)^8 (the default)",
+    names = {"distance": f"from its eq. 2.4 distances, (d_min / d)^{DISTANCE_POWER:g} (the default)",
              "inverse_distance": "from its point in the space, (d_min / d)^4 (the default before)"}
     lines = ["", "## Association on unseen performers (eq. 2.8)", "",
              "The torques of a 2.4 kg arm robot performing each test clip's right arm, estimated from the clip's motion "

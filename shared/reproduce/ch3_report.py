@@ -242,14 +242,15 @@ def _at_equal_questions(cur: dict, group: str):
     return q, errs, b
 
 
-def rules_not_lowest_lines(rules: dict, group: str = "unknown") -> list[str]:
+def rules_not_lowest_lines(conversations: dict, group: str = "unknown") -> list[str]:
     """Where the body estimator is not the lowest at equal numbers of questions in the rules'
-    conversations, and whether each of them reads the answers with a rule the other does not use."""
+    conversations (label -> curve, as :func:`equal_questions_lines` takes them), and whether each
+    of them reads the answers with a rule the other does not use."""
     lost = []
-    for key, cur in rules.items():
+    for label, cur in conversations.items():
         at = _at_equal_questions(cur, group)
         if at is not None and min(at[1], key=at[1].__getitem__) != "body":
-            lost.append((f"d = {key.split('|')[1]}, {cur['rule']} read as {cur['assumed']}", cur["rule"] == cur["assumed"]))
+            lost.append((label, cur["rule"] == cur["assumed"]))
     if not lost:
         return ["The body estimator is the lowest at equal numbers of questions in every conversation above.", ""]
     right = [label for label, same in lost if same]
@@ -460,9 +461,9 @@ def write_report(out: Path, res: dict, seconds: float, ch=None) -> Path:
         lines.append(f"| {d}, {cur['rule']} | {cur['assumed']} | {qs} | {_pct(r['thesis_unknown']['error'])}{stop} | "
                      f"{_pct(r['body_unknown']['error'])} | {'~10 %' if label == 'right' else '45-60 %'} | "
                      f"{level(r['thesis_unknown']['error'], fig, True if label == 'right' else None)} |")
-    lines += [""] + rule_claim_lines(rules) + equal_questions_lines(
-        {f"d = {key.split('|')[1]}, {cur['rule']} read as {cur['assumed']}": cur for key, cur in rules.items()}, "unknown")
-    lines += rules_not_lowest_lines(rules)
+    conversations = {f"d = {key.split('|')[1]}, {cur['rule']} read as {cur['assumed']}": cur for key, cur in rules.items()}
+    lines += [""] + rule_claim_lines(rules) + equal_questions_lines(conversations, "unknown")
+    lines += rules_not_lowest_lines(conversations)
     des = next((cur["design"] for cur in rules.values() if cur.get("design")), None)
     if des:
         a = des["a"]
