@@ -31,6 +31,17 @@ def test_asf_reads_hdm05_skeleton(hdm05):
     assert np.linalg.norm(femur.offset) == pytest.approx(2.28399, rel=1e-5)
 
 
+def test_values_derived_from_a_skeleton_are_made_once_per_skeleton(hdm05):
+    from shared.bodies.segments import stature
+
+    sk, other = read_asf(hdm05 / "asf/HDM_bd.asf"), read_asf(hdm05 / "asf/HDM_bk.asf")
+    made = []
+    assert sk.derived("k", lambda: made.append(1) or 7) == 7 and sk.derived("k", lambda: made.append(1) or 8) == 7
+    assert len(made) == 1 and other.derived("k", lambda: 9) == 9  # per skeleton object
+    # cached derived values equal what they are made from (two performers: no stale value shared)
+    assert stature(sk) == stature(sk) != stature(other)
+
+
 def test_amc_reads_crlf_latin1_and_keeps_angles_past_360(hdm05):
     raw = (hdm05 / PAST_360).read_bytes()
     assert b"\r\n" in raw and any(b > 127 for b in raw[:200])  # the file really has both quirks

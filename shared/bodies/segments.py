@@ -361,6 +361,10 @@ def stature(sk: Skeleton, head_top: bool = True) -> float:
     to the head and (``head_top``) over it to its farthest tip. Without the head's top it is a
     length no end site enters (studios put end sites anywhere). The skeleton's rest-pose height
     when it has no feet or no head."""
+    return sk.derived(("stature", head_top), lambda: _stature(sk, head_top))
+
+
+def _stature(sk: Skeleton, head_top: bool) -> float:
     seg = segments_of(sk)
     tree = _Tree(sk)
 

@@ -84,6 +84,14 @@ class Skeleton:
     source_format: str = "asf"
 
     # ----------------------------------------------------------------- structure
+    def derived(self, key, make):
+        """``make()``, a value computed from the skeleton alone, once per skeleton object and
+        ``key`` (a skeleton is not changed once read; :meth:`from_json` makes a new one)."""
+        cache = self.__dict__.setdefault("_derived", {})
+        if key not in cache:
+            cache[key] = make()
+        return cache[key]
+
     def index(self, name: str) -> int:
         for i, j in enumerate(self.joints):
             if j.name == name:
@@ -175,8 +183,9 @@ class Skeleton:
                            k["end_offset"])
         return pos * self.unit_m
 
-    def local_matrices(self, data: np.ndarray, channels: list[str], joints: slice = slice(None)) -> np.ndarray:
-        """Every joint's (or the ``joints`` slice's) local rotation ``L_j = C_j M_j C_j^T``
+    def local_matrices(self, data: np.ndarray, channels: list[str],
+                       joints: slice | np.ndarray = slice(None)) -> np.ndarray:
+        """Every joint's (or the ``joints`` slice's or index array's) local rotation ``L_j = C_j M_j C_j^T``
         (T, J, 3, 3): the rotation in the world-aligned rest frame, whatever Euler order or
         axis convention the file used."""
         from shared.motion.kinematics import local_rotations

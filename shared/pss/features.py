@@ -457,9 +457,9 @@ class MotionFeatures:
         rotation in the space skeleton's joint frame, ``M = C^T L C`` with ``L`` the clip's
         rotation in the world-aligned rest frame (module docstring)."""
         body = _needed(self.body(clip))
-        local = body.local_matrices(clip.data, clip.channels)[:, [body.index(j) for j in self.rot_joints]]
-        pre = self.rot_pre
-        m = np.einsum("jba,tjbc,jcd->tjad", pre, local, pre)  # C^T L C: the space's own joint frame
+        local = body.local_matrices(clip.data, clip.channels, body.derived(
+            ("rows", tuple(self.rot_joints)), lambda: np.array([body.index(j) for j in self.rot_joints])))
+        m = np.swapaxes(self.rot_pre, 1, 2) @ local @ self.rot_pre  # C^T L C: the space's own joint frame
         return np.ascontiguousarray(m[..., :2].transpose(0, 1, 3, 2)).reshape(clip.n_frames, -1)
 
     def _decode_rotations(self, x: np.ndarray, values: dict) -> None:

@@ -53,16 +53,20 @@ def point_names(sk: Skeleton) -> list[str]:
 def same_layout(a: Skeleton, b: Skeleton) -> bool:
     """The same joints under the same parents, whatever order lists them."""
     def layout(sk):
-        return {(j.name, sk.joints[j.parent].name if j.parent >= 0 else None) for j in sk.joints}
+        return sk.derived("layout", lambda: frozenset((j.name, sk.joints[j.parent].name if j.parent >= 0 else None)
+                                                      for j in sk.joints))
 
-    return layout(a) == layout(b)
+    return a is b or layout(a) == layout(b)
 
 
 def is_foreign(sk: Skeleton | None, ref: Skeleton | None) -> bool:
     """Whether ``sk`` names fewer than half of ``ref``'s joints (:func:`shared.motion.skeleton.other_skeleton`)."""
     if sk is None or ref is None:
         return False
-    return 2 * len({j.name for j in sk.joints} & {j.name for j in ref.joints}) < len(ref.joints)
+    def names(s: Skeleton) -> frozenset:
+        return s.derived("joint names", lambda: frozenset(j.name for j in s.joints))
+
+    return 2 * len(names(sk) & names(ref)) < len(ref.joints)
 
 
 def _rest(sk: Skeleton) -> np.ndarray:
@@ -147,7 +151,10 @@ def read_points(p: np.ndarray, sk: Skeleton, ref: Skeleton) -> np.ndarray:
     """``sk``'s forward kinematics ``p`` (T, points, 3) as ``ref``'s points (module docstring;
     the same joints in another order are only reordered)."""
     if same_layout(sk, ref):
-        row = {n: i for i, n in enumerate(point_names(sk))}
-        return p[:, [row[n] for n in point_names(ref)]]
+        maps = sk.__dict__.setdefault("_reorders", {})  # per reference skeleton, as point_map's
+        if id(ref) not in maps or maps[id(ref)][0] is not ref:
+            row = {n: i for i, n in enumerate(point_names(sk))}
+            maps[id(ref)] = (ref, np.array([row[n] for n in point_names(ref)]))
+        return p[:, maps[id(ref)][1]]
     a, b, t = point_map(sk, ref)
     return p[:, a] * (1.0 - t)[None, :, None] + p[:, b] * t[None, :, None]
