@@ -435,6 +435,10 @@ def test_numpy_twins_of_distance_placement_and_kinematics_match_numba(hdm05):
     args = (mu[0], var[0], np.log(var[0]).sum(axis=1), mu, var, np.log(var).sum(axis=2), rng.uniform(0.5, 2.0, 40))
     a, b = _kernel_both_ways(distance._diag_hmm_distances, *args)
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-6)  # atol: the kernel's fastmath on a model and itself
+    tiny = var * 1e-12  # 32 channels' product below 1e-300: the kernel's logs taken one by one
+    args = (mu[0], tiny[0], np.log(tiny[0]).sum(axis=1), mu, tiny, np.log(tiny).sum(axis=2), np.ones(40))
+    a, b = _kernel_both_ways(distance._diag_hmm_distances, *args)
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-5)  # (the log-determinants ~1e3: sqrt of their rounding)
     pts = rng.normal(size=(40, 3))
     f = np.linalg.norm(pts - [0.3, -0.2, 0.5], axis=1) + rng.uniform(0, 0.1, 40)
     starts = np.stack([pts[0] + 1e-3, pts.mean(axis=0), -pts[0]])
