@@ -14,15 +14,16 @@ Takes are real clips of one performer joined with rests (:func:`shared.capture.t
   that choice, where the rests mislead (``FREE_GRID``: ``refine``, ``fill``) is chosen on the same
   takes and the game studio's styles that are never reported (``TUNING_STYLES``, each gesture's
   own clip time-warped), within the goal's 100 ms median boundary error on every tuning set.
-* **Reported on**: performer dg's takes, targets of bk, cohort of bd (cross-performer; and with
-  no cohort, as a study run without other motions given); dg's
+* **Reported on**: performer dg's takes, targets of bk, cohort of bd (cross-performer); dg's
   takes with dg's own first clip as the target (the same performer); both again with dg's takes
   moved onto a game studio's skeleton (:func:`on_studio`: read by its landmarks,
   :mod:`shared.pss.foreign`); and the game studio's
   dataset (bandai1: five styles of one content joined, the target its 'normal' style, the
   cohort the other contents' 'normal' clips; and, per style, each gesture's own clip played
   five times at 0.8-1.25x its speed, the target the clip, the other motions the style's other
-  gestures: one performer's repetitions, as for CMU).
+  gestures: one performer's repetitions, as for CMU). The cross-performer, same-performer,
+  per-style and CMU sets are run again with no cohort (``ALONE``: a run given neither other motions
+  nor a space).
 
 **With a proto-symbol space** (``segment(..., space=)``, ``capture segment --space``): the space
 names each stretch instead of the cohort. Chosen on the same tuning takes, each with a space of
@@ -62,6 +63,9 @@ SPACE_GRID = {"space_ratio": (0.95, 1.0), "space_cost": (1.0, 1.1, 1.15, 1.2, 1.
 #: studio's styles that are never reported (``TUNING_STYLES``), within the goal's 100 ms on every tuning set
 FREE_GRID = {"refine": (0.0, 0.5, 1.0), "fill": (False, True)}
 COHORT_CLIPS = 3  # clips of each other motion in the cohort
+#: the rows of a run given neither other motions nor a space (``capture cut`` or ``study run`` without --background
+#: or --space: only the first repetition's largest cost tells another motion from the target)
+ALONE = "no other motions given (a run without --background or --space)"
 
 
 def _hdm05(root: Path, performer: str, cls: str) -> list[Path]:
@@ -71,7 +75,7 @@ def _hdm05(root: Path, performer: str, cls: str) -> list[Path]:
 def run_set(takes: dict, targets: dict, cohort_of: dict, how: seg.Settings, space=None) -> dict:
     """Every target against every take: F1 and boundary errors on its own class, cuts on others;
     with ``space``, the space decides instead of the cohort."""
-    rows, cuts, errors, seconds = {}, 0, [], []
+    rows, cuts, errors, seconds, cut_from = {}, 0, [], [], {}
     for ct, target in targets.items():
         for ck, (take, truth) in takes.items():
             t = time.perf_counter()
@@ -84,9 +88,11 @@ def run_set(takes: dict, targets: dict, cohort_of: dict, how: seg.Settings, spac
                 errors += sc["boundary_errors"]
             else:
                 cuts += len(found)
+                if found:
+                    cut_from[f"{ck} cut as {ct}"] = len(found)
     f1 = float(np.mean([r["f1"] for r in rows.values()])) if rows else 0.0
     return {"f1": f1, "median_boundary_error_ms": float(np.median(errors) * 1000) if errors else None,
-            "other_motion_cuts": cuts, "classes": rows, "seconds_per_take": float(np.median(seconds))}
+            "other_motion_cuts": cuts, "cut_from": cut_from, "classes": rows, "seconds_per_take": float(np.median(seconds))}
 
 
 def hdm05_set(root: Path, take_perf: str, target_perf: str, cohort_perf: str, own: bool = False):
@@ -291,9 +297,9 @@ def main(argv=None) -> dict:
     cross = hdm05_set(args.hdm05, "dg", "bk", "bd")
     own_set = hdm05_set(args.hdm05, "dg", "dg", "bd", own=True)
     report = {"cross-performer (dg takes, bk targets)": run_set(*cross, how),
-              "cross-performer, no other motions given (study run without --background)":
-                  run_set(cross[0], cross[1], {c: [] for c in cross[1]}, how),
+              f"cross-performer, {ALONE}": run_set(cross[0], cross[1], {c: [] for c in cross[1]}, how),
               "same performer (dg takes, dg's own first clip)": run_set(*own_set, how),
+              f"same performer, {ALONE}": run_set(own_set[0], own_set[1], {c: [] for c in own_set[1]}, how),
               "cross-performer, takes on a game studio's skeleton (dg takes, bk targets)":
                   run_set(on_studio(cross[0]), *cross[1:], how),
               "same performer, takes on a game studio's skeleton (dg takes, dg's own first clip)":
@@ -301,10 +307,13 @@ def main(argv=None) -> dict:
     if (args.bandai / "bvh").exists():
         report["bandai1 (five styles of a gesture joined, target 'normal')"] = run_set(*bandai_set(args.bandai), how)
         for style in OWN_STYLES:
-            report[f"bandai1 style '{style}' (each gesture's own clip, time-warped)"] = run_set(
-                *bandai_own_set(args.bandai, style), how)
+            takes, targets, cohort_of = bandai_own_set(args.bandai, style)
+            report[f"bandai1 style '{style}' (each gesture's own clip, time-warped)"] = run_set(takes, targets, cohort_of, how)
+            report[f"bandai1 style '{style}', {ALONE}"] = run_set(takes, targets, {c: [] for c in targets}, how)
     if (args.cmu / "131_01.bvh").exists():
-        report["cmu 131_01 (windows of one performance, time-warped)"] = run_set(*cmu_set(args.cmu), how)
+        takes, targets, cohort_of = cmu_set(args.cmu)
+        report["cmu 131_01 (windows of one performance, time-warped)"] = run_set(takes, targets, cohort_of, how)
+        report[f"cmu 131_01, {ALONE}"] = run_set(takes, targets, {c: [] for c in targets}, how)
     spaced = _with_space(args, tuning, cross, how)
     report.update(spaced["report"])
     for k, v in report.items():
@@ -353,6 +362,13 @@ def markdown(out: dict) -> list[str]:
         md.append("")
     md += ["| takes (reported on) | F1 | median boundary error | other-motion cuts | per take |", "|---|---|---|---|---|"]
     md += [row(k, v) for k, v in out["report"].items()]
+    alone = {k: v for k, v in out["report"].items() if k.endswith(ALONE)}
+    if alone:
+        md += ["", f"Given no other motions: {sum(v['other_motion_cuts'] for v in alone.values())} stretches of other "
+               f"motions cut over the {len(alone)} sets run so (each set's row with the other motions given: above). "
+               "Where (the take's motion cut as the target's, how many stretches):", ""]
+        md += [f"- {k.replace(', ' + ALONE, '')}: " + ", ".join(f"{c} ({n})" for c, n in v["cut_from"].items())
+               for k, v in alone.items() if v["cut_from"]]
     md += ["", "Classes with F1 below 1:", ""]
     for k, v in out["report"].items():
         missed = [f"{c} {r['f1']:.2f} ({r['verdict']})" for c, r in v["classes"].items() if r["f1"] < 1]

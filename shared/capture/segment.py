@@ -81,8 +81,8 @@ performer dg never seen there; ``REST_SHARE`` 0.1-0.25 and ``SLACK`` 0.4-0.9 s w
 too): the largest F1 among the settings that cut the fewest repetitions from takes of other
 motions. They are reported on takes they were not chosen on (performer dg, a game studio's
 styles, a CMU performance): ``bench/results/segmentation.json``. Measured there, no take of
-another motion cut on any of them (before the postures, the minimum amplitude, the tempo fix
-and the own repetitions: 6, 3, 1 and 3 cut); another performer's repetitions (dg's takes, bk's
+another motion cut on any of them given the other motions (22 stretches given none; before the
+postures, the minimum amplitude, the tempo fix and the own repetitions: 6, 3, 1, 3 cut); another performer's repetitions (dg's takes, bk's
 targets) F1 0.82 with a median boundary error of 83 ms (every repetition of 9 classes found,
 none of dg's hops and kicks: their first repetition costs more than ``MAX_COST``; was 0.92 with
 6 cuts); the same performer's F1 0.98 (79 ms); a CMU performance read from its two unit
