@@ -164,6 +164,7 @@ def fit_hmm(
     tol: float = 1e-3,
     backend: str = "banded",
     end_in_last: bool = True,
+    likelihood: bool = True,
 ) -> LeftToRightHMM:
     """Train a left-to-right HMM on one or several repetitions (Baum-Welch, eq. 2.1-2.2).
 
@@ -183,6 +184,9 @@ def fit_hmm(
         topology (the reference it is tested against).
     end_in_last : bool
         Whether every repetition must end in the last state.
+    likelihood : bool
+        Whether to score the repetitions under the final parameters (one more forward pass; a
+        motion's HMM that is only compared by eq. 2.4, recognition's, leaves it NaN).
 
     Returns
     -------
@@ -213,9 +217,10 @@ def fit_hmm(
     means, covars, stay = uniform_segmentation(seqs, n_states, var_floor, covariance_type)
     n_frames = sum(len(s) for s in seqs)
     if backend == "hmmlearn":
-        model = _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol * n_frames)
+        model = _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol * n_frames, likelihood)
     elif backend == "banded":
-        model = _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol * n_frames, end_in_last)
+        model = _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol * n_frames, end_in_last,
+                            likelihood)
     else:
         raise ModelError(f"unknown backend {backend!r}")
     model.n_frames = n_frames
@@ -433,7 +438,7 @@ def _estep(logb_all, bounds, stay, end_in_last):
     return ll, gamma, xs, xm
 
 
-def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total, end_in_last):
+def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total, end_in_last, likelihood=True):
     """Baum-Welch with the banded E-step. For diagonal covariances the frames are stacked once
     as ``z = [x, x*x]`` so the emissions (eq. 2.2) and the M-step's sufficient statistics are a
     single matrix product each; a long recording (``CHUNKED_ABOVE``) in blocks of frames."""
@@ -495,11 +500,12 @@ def _fit_banded(seqs, means, covars, stay, covariance_type, var_floor, n_iter, t
             break
     model = LeftToRightHMM(means, covars, stay, covariance_type, n_iter=it, converged=converged,
                            history=history)
-    model.log_likelihood = model.log_likelihood_of(seqs, end_in_last)
+    if likelihood:
+        model.log_likelihood = model.log_likelihood_of(seqs, end_in_last)
     return model
 
 
-def _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total):
+def _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter, tol_total, likelihood=True):
     import logging
 
     from hmmlearn.hmm import GaussianHMM
@@ -530,6 +536,6 @@ def _fit_hmmlearn(seqs, means, covars, stay, covariance_type, var_floor, n_iter,
     model = LeftToRightHMM(np.array(m.means_), cov, np.clip(st, 0.0, 0.999), covariance_type,
                            n_iter=m.monitor_.iter, converged=bool(m.monitor_.converged),
                            history=[float(v) for v in m.monitor_.history])
-    if model.is_valid():
+    if likelihood and model.is_valid():
         model.log_likelihood = float(m.score(x_all, lengths))
     return model

@@ -268,8 +268,9 @@ class ProtoSymbolSpace:
         return seqs
 
     def abstract(self, clip_or_clips, groups=("motion", "position", "sensor"),
-                 n_states: int | None = None) -> LeftToRightHMM:
-        """Abstract one or several repetitions into an HMM with the space's settings."""
+                 n_states: int | None = None, likelihood: bool = True) -> LeftToRightHMM:
+        """Abstract one or several repetitions into an HMM with the space's settings
+        (``likelihood``: :func:`shared.pss.hmm.fit_hmm`'s)."""
         p = self.params
         if "sensor" in groups and self.features.sensor_channels:
             clips = [clip_or_clips] if isinstance(clip_or_clips, Clip) else list(clip_or_clips)
@@ -277,7 +278,7 @@ class ProtoSymbolSpace:
                 raise BadInput("the clip lacks this space's sensor channels; use associate() to estimate them")
         seqs = self._sequences(clip_or_clips, groups)
         return fit_hmm(seqs, n_states or p.n_states, covariance_type=p.covariance_type, var_floor=p.var_floor,
-                       backend=p.backend, n_iter=p.n_iter)
+                       backend=p.backend, n_iter=p.n_iter, likelihood=likelihood)
 
     def models_on(self, groups) -> list[LeftToRightHMM]:
         """The proto-symbols seen on some channel groups (views of :meth:`bank_on`'s arrays)."""
@@ -437,7 +438,7 @@ class ProtoSymbolSpace:
             rec = association.recognize_by_positions(self, clips, top)  # another studio's skeleton
             rec.seconds = time.perf_counter() - t0
             return rec
-        hmm = self.abstract(clip_or_clips)
+        hmm = self.abstract(clip_or_clips, likelihood=False)  # compared by eq. 2.4 only, never scored
         geo = self.features.group_indices(GEOMETRY_GROUPS)
         f = self.bank_on(GEOMETRY_GROUPS).distances(hmm.marginal(geo))
         rg = self.recognition_groups

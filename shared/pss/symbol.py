@@ -55,7 +55,7 @@ class Recognition:
     label: str | None  # the decided class; None: "none of these" (open set)
     label_in_space: str  # label of the nearest point in the space
     stress: float
-    hmm: LeftToRightHMM
+    hmm: LeftToRightHMM  # the motion abstracted (its log_likelihood NaN: compared by eq. 2.4, never scored)
     seconds: float = 0.0
     nearest_label: str = ""  # class of the nearest proto-symbol, known or not
     confidence: float = 1.0  # calibrated probability of nearest_label (of a rejected motion: at most its credibility)
