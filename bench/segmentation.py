@@ -68,6 +68,11 @@ COHORT_CLIPS = 3  # clips of each other motion in the cohort
 ALONE = "no other motions given (a run without --background or --space)"
 
 
+def _nothing_else(targets: dict) -> dict:
+    """No other motion for any target (the ``ALONE`` rows)."""
+    return {c: [] for c in targets}
+
+
 def _hdm05(root: Path, performer: str, cls: str) -> list[Path]:
     return sorted((root / "amc" / cls).glob(f"HDM_{performer}_*.amc"))
 
@@ -297,9 +302,9 @@ def main(argv=None) -> dict:
     cross = hdm05_set(args.hdm05, "dg", "bk", "bd")
     own_set = hdm05_set(args.hdm05, "dg", "dg", "bd", own=True)
     report = {"cross-performer (dg takes, bk targets)": run_set(*cross, how),
-              f"cross-performer, {ALONE}": run_set(cross[0], cross[1], {c: [] for c in cross[1]}, how),
+              f"cross-performer, {ALONE}": run_set(cross[0], cross[1], _nothing_else(cross[1]), how),
               "same performer (dg takes, dg's own first clip)": run_set(*own_set, how),
-              f"same performer, {ALONE}": run_set(own_set[0], own_set[1], {c: [] for c in own_set[1]}, how),
+              f"same performer, {ALONE}": run_set(own_set[0], own_set[1], _nothing_else(own_set[1]), how),
               "cross-performer, takes on a game studio's skeleton (dg takes, bk targets)":
                   run_set(on_studio(cross[0]), *cross[1:], how),
               "same performer, takes on a game studio's skeleton (dg takes, dg's own first clip)":
@@ -309,11 +314,11 @@ def main(argv=None) -> dict:
         for style in OWN_STYLES:
             takes, targets, cohort_of = bandai_own_set(args.bandai, style)
             report[f"bandai1 style '{style}' (each gesture's own clip, time-warped)"] = run_set(takes, targets, cohort_of, how)
-            report[f"bandai1 style '{style}', {ALONE}"] = run_set(takes, targets, {c: [] for c in targets}, how)
+            report[f"bandai1 style '{style}', {ALONE}"] = run_set(takes, targets, _nothing_else(targets), how)
     if (args.cmu / "131_01.bvh").exists():
         takes, targets, cohort_of = cmu_set(args.cmu)
         report["cmu 131_01 (windows of one performance, time-warped)"] = run_set(takes, targets, cohort_of, how)
-        report[f"cmu 131_01, {ALONE}"] = run_set(takes, targets, {c: [] for c in targets}, how)
+        report[f"cmu 131_01, {ALONE}"] = run_set(takes, targets, _nothing_else(targets), how)
     spaced = _with_space(args, tuning, cross, how)
     report.update(spaced["report"])
     for k, v in report.items():

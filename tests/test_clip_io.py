@@ -32,7 +32,7 @@ def test_asf_reads_hdm05_skeleton(hdm05):
 
 
 def test_values_derived_from_a_skeleton_are_made_once_per_skeleton(hdm05):
-    from shared.bodies.segments import stature
+    from shared.bodies.segments import _stature, stature
 
     sk, other = read_asf(hdm05 / "asf/HDM_bd.asf"), read_asf(hdm05 / "asf/HDM_bk.asf")
     made = []
@@ -40,6 +40,8 @@ def test_values_derived_from_a_skeleton_are_made_once_per_skeleton(hdm05):
     assert len(made) == 1 and other.derived("k", lambda: 9) == 9  # per skeleton object
     # cached derived values equal what they are made from (two performers: no stale value shared)
     assert stature(sk) == stature(sk) != stature(other)
+    assert [stature(sk), stature(sk, head_top=False)] == [_stature(sk, True), _stature(sk, False)]  # one key each
+    assert sk.rest_height() == sk.derived("rest height", lambda: None) > 0
 
 
 def test_amc_reads_crlf_latin1_and_keeps_angles_past_360(hdm05):

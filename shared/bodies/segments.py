@@ -410,9 +410,7 @@ FRAME_SAMPLES = 120
 
 def segments_of(sk: Skeleton) -> dict[str, tuple[str, str]]:
     """:func:`map_segments` of a skeleton, once per skeleton object."""
-    if "_segments" not in sk.__dict__:
-        sk.__dict__["_segments"] = map_segments(sk)[0]
-    return sk.__dict__["_segments"]
+    return sk.derived("segments", lambda: map_segments(sk)[0])
 
 
 def _feet(sk: Skeleton) -> list[tuple[int, int]]:

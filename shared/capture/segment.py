@@ -80,14 +80,14 @@ bk, each one's takes against the other's targets, the other motions of the targe
 performer dg never seen there; ``REST_SHARE`` 0.1-0.25 and ``SLACK`` 0.4-0.9 s were tried there
 too): the largest F1 among the settings that cut the fewest repetitions from takes of other
 motions. They are reported on takes they were not chosen on (performer dg, a game studio's
-styles, a CMU performance): ``bench/results/segmentation.json``. Measured there, no take of
-another motion cut on any of them given the other motions (22 stretches given none; before the
-postures, the minimum amplitude, the tempo fix and the own repetitions: 6, 3, 1, 3 cut); another performer's repetitions (dg's takes, bk's
-targets) F1 0.82 with a median boundary error of 83 ms (every repetition of 9 classes found,
-none of dg's hops and kicks: their first repetition costs more than ``MAX_COST``; was 0.92 with
-6 cuts); the same performer's F1 0.98 (79 ms); a CMU performance read from its two unit
-conventions F1 1.00 (17 ms); a game studio's styles of one gesture against its 'normal' style
-F1 0.19 (517 ms: styles as far apart as 'feminine' and 'giant', not one person's repetitions);
+styles, a CMU performance): ``bench/results/segmentation.json``. Measured there, no take of another
+motion cut on any of them given the other motions (22 stretches given none; before the postures, the
+minimum amplitude, the tempo fix and the own repetitions: 6, 3, 1, 3 cut); another performer's
+repetitions (dg's takes, bk's targets) F1 0.82 with a median boundary error of 83 ms (every
+repetition of 9 classes found, none of dg's hops and kicks: their first repetition costs more than
+``MAX_COST``; was 0.92 with 6 cuts); the same performer's F1 0.98 (79 ms); a CMU performance read
+from its two unit conventions F1 1.00 (17 ms); a game studio's styles of one gesture against its
+'normal' style F1 0.19 (517 ms: styles as far apart as 'feminine' and 'giant', not one person's repetitions);
 the studio's files with one performer's repetitions (each gesture's own clip, time-warped, five
 styles) F1 1.00, 0-33 ms (0.94-1.00 before ``refine`` and ``fill``, which were chosen on the
 tuning takes and nine other styles of the studio: mean F1 0.910 -> 0.974 there, no cut).

@@ -199,11 +199,10 @@ class Skeleton:
 
     def _fk_arrays(self, channels: tuple[str, ...], ends: bool) -> dict:
         """The skeleton packed for :func:`shared.motion.kinematics.fk_positions`, cached per channel
-        layout (a skeleton is not changed once read; :meth:`from_json` makes a new one)."""
-        cache = self.__dict__.setdefault("_fk_cache", {})
-        key = (channels, ends)
-        if key in cache:
-            return cache[key]
+        layout (:meth:`derived`)."""
+        return self.derived(("fk arrays", channels, ends), lambda: self._pack(channels, ends))
+
+    def _pack(self, channels: tuple[str, ...], ends: bool) -> dict:
         nj = len(self.check().joints)
         col = {c: i for i, c in enumerate(channels)}
         axes = np.full((nj, 3), -1, dtype=np.int64)
@@ -214,7 +213,7 @@ class Skeleton:
                 cols[i, k] = col.get(f"{j.name}.r{ax}", -1)
         parents = {j.parent for j in self.joints}
         ends_at = [i for i, j in enumerate(self.joints) if ends and j.end is not None and i not in parents]
-        cache[key] = {
+        return {
             "cols": cols, "axes": axes, "intrinsic": np.array([j.euler.isupper() for j in self.joints]),
             "pre": np.stack([j.pre for j in self.joints]).astype(float),
             "parent": np.array([j.parent for j in self.joints], dtype=np.int64),
@@ -223,7 +222,6 @@ class Skeleton:
             "end_joint": np.array(ends_at, dtype=np.int64),
             "end_offset": np.array([self.joints[i].end for i in ends_at], dtype=float).reshape(-1, 3),
         }
-        return cache[key]
 
     def continuous_angles(self, data: np.ndarray, channels: list[str], keep_first: bool = False) -> np.ndarray:
         """``data`` with every joint's rotation channels made continuous over time
@@ -248,10 +246,11 @@ class Skeleton:
 
     def rest_height(self) -> float:
         """The body's height in its rest pose (all channels 0), in metres, along its up axis."""
-        if "_rest_height" not in self.__dict__:
+        def height() -> float:
             rest = self.forward_kinematics(np.zeros((1, len(self.channels()))), self.channels())[0]
-            self.__dict__["_rest_height"] = max(float(np.ptp(rest[:, self.up_axis])), 1e-6)
-        return self.__dict__["_rest_height"]
+            return max(float(np.ptp(rest[:, self.up_axis])), 1e-6)
+
+        return self.derived("rest height", height)
 
     def forward_kinematics_reference(self, data: np.ndarray, channels: list[str], *, ends: bool = True) -> np.ndarray:
         """:meth:`forward_kinematics` through scipy's ``Rotation`` (the reference it is tested against)."""

@@ -113,9 +113,19 @@ def point_map(sk: Skeleton, ref: Skeleton) -> tuple[np.ndarray, np.ndarray, np.n
     """Where each point of ``ref`` (:func:`point_names`) lies on the body of ``sk``: points
     ``a``, ``b`` of ``sk``'s forward kinematics and the fraction ``t`` (``(1 - t) p_a + t p_b``;
     module docstring). :class:`BadInput` when either is not a person's skeleton."""
-    maps = sk.__dict__.setdefault("_point_maps", {})  # per reference skeleton (kept with it: an id is not reused)
-    if id(ref) in maps and maps[id(ref)][0] is ref:
-        return maps[id(ref)][1]
+    return _for_reference(sk, ref, "point map", lambda: _point_map(sk, ref))
+
+
+def _for_reference(sk: Skeleton, ref: Skeleton, kind: str, make):
+    """``make()``, once per skeleton and reference skeleton object (:meth:`Skeleton.derived`; the
+    reference is kept with its value, so its id is not reused while the value is)."""
+    kept = sk.derived(kind, dict)
+    if id(ref) not in kept or kept[id(ref)][0] is not ref:
+        kept[id(ref)] = (ref, make())
+    return kept[id(ref)][1]
+
+
+def _point_map(sk: Skeleton, ref: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     mine, theirs = landmarks(ref), landmarks(sk)
     for marks, who in ((mine, ref), (theirs, sk)):
         needed = [(s, side) for s in ("thigh", "shank", "foot", "upper_arm", "forearm", "hand") for side in "lr"]
@@ -143,7 +153,6 @@ def point_map(sk: Skeleton, ref: Skeleton) -> tuple[np.ndarray, np.ndarray, np.n
         span = float(way @ way)
         t[k] = float(np.clip((rest[k] - rest[ends[0]]) @ way / span, 0.0, 1.0)) if span > 1e-12 else 0.0
         a[k], b[k] = there
-    maps[id(ref)] = (ref, (a, b, t))
     return a, b, t
 
 
@@ -151,10 +160,10 @@ def read_points(p: np.ndarray, sk: Skeleton, ref: Skeleton) -> np.ndarray:
     """``sk``'s forward kinematics ``p`` (T, points, 3) as ``ref``'s points (module docstring;
     the same joints in another order are only reordered)."""
     if same_layout(sk, ref):
-        maps = sk.__dict__.setdefault("_reorders", {})  # per reference skeleton, as point_map's
-        if id(ref) not in maps or maps[id(ref)][0] is not ref:
+        def order() -> np.ndarray:
             row = {n: i for i, n in enumerate(point_names(sk))}
-            maps[id(ref)] = (ref, np.array([row[n] for n in point_names(ref)]))
-        return p[:, maps[id(ref)][1]]
+            return np.array([row[n] for n in point_names(ref)])
+
+        return p[:, _for_reference(sk, ref, "point order", order)]
     a, b, t = point_map(sk, ref)
     return p[:, a] * (1.0 - t)[None, :, None] + p[:, b] * t[None, :, None]
