@@ -8,7 +8,7 @@ from scipy import integrate, stats
 
 from shared.errors import BadInput, ModelError
 from shared.pss.distance import bhattacharyya, distance_matrix, hmm_distance
-from shared.pss.hmm import LeftToRightHMM, fit_hmm
+from shared.pss.hmm import LeftToRightHMM, fit_hmm, uniform_segmentation
 from shared.pss.mds import classical_mds, place_point, raw_stress, smacof
 from shared.pss.synthesis import (
     combine,
@@ -521,3 +521,15 @@ def test_distance_weights_are_convex_and_as_documented():
     for bad in ([], [1.0, np.nan], [-1.0, 2.0]):
         with pytest.raises(BadInput, match="finite and non-negative"):
             distance_weights(bad)
+
+
+def test_the_first_segmentation_cuts_as_array_split_does():
+    """The uniform start of Baum-Welch: each repetition in equal parts, the first ``T mod N`` one
+    frame longer, exactly as ``np.array_split`` cuts (the means of each part)."""
+    rng = np.random.default_rng(5)
+    for lengths, n in (([15], 15), ([16, 29], 13), ([96], 15), ([40, 41, 57], 7)):
+        seqs = [rng.normal(size=(t, 3)) for t in lengths]
+        means, _, _ = uniform_segmentation(seqs, n, 0.01, "diag")
+        parts = [[p for p in np.array_split(x, n)] for x in seqs]
+        want = np.array([np.vstack([ps[i] for ps in parts]).mean(axis=0) for i in range(n)])
+        np.testing.assert_allclose(means, want, rtol=1e-12, atol=1e-12)

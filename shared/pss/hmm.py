@@ -135,8 +135,12 @@ def uniform_segmentation(seqs: list[np.ndarray], n_states: int, var_floor: float
     """Initial parameters: every repetition cut into ``n_states`` equal parts (as
     ``np.array_split`` cuts: the first ``T mod N`` parts one frame longer)."""
     d = seqs[0].shape[1]
-    state = np.concatenate([np.repeat(np.arange(n_states), [len(p) for p in np.array_split(np.arange(len(x)), n_states)])
-                            for x in seqs])
+
+    def states_of(t: int) -> np.ndarray:  # np.array_split's parts of t frames, without splitting
+        q, r = divmod(t, n_states)
+        return np.repeat(np.arange(n_states), np.where(np.arange(n_states) < r, q + 1, q))
+
+    state = np.concatenate([states_of(len(x)) for x in seqs])
     x_all = np.vstack(seqs)
     onehot = np.zeros((len(x_all), n_states))
     onehot[np.arange(len(x_all)), state] = 1.0
