@@ -233,8 +233,9 @@ def test_an_other_keeps_its_bodys_torques_of_a_motion_but_not_what_it_was_handed
 def test_others_outside_the_estimators_model_are_what_they_say():
     """Others outside the estimators' model: springs pull towards their rest angle, rotor inertia adds torque where the joint
     accelerates, a lossy gear makes driving heavier than being driven, a tendon carries the
-    elbow's torque to the shoulder, static friction exceeds sliding near rest, and a tiring other
-    feels the same motion heavier after more questions. None is a scaled self."""
+    elbow's torque to the shoulder, static friction exceeds sliding near rest, a tiring other
+    feels the same motion heavier after more questions, and a fused elbow is welded at its bend.
+    None is a scaled self."""
     from shared.agents.other import transmitted
     from shared.agents.population import OUTSIDE_KINDS
 
@@ -255,7 +256,7 @@ def test_others_outside_the_estimators_model_are_what_they_say():
         assert np.ptp(ratios) > 0.01 * np.mean(ratios), kind  # no single factor maps one onto the other
     # the transmission's terms, one at a time, on a known torque pattern
     clip = m[0]
-    tau = plain.feel(clip)
+    tau = SimulatedOther("y", OtherParams(**{**population("gears", 1)[0], "body": {}, "transmission": None})).feel(clip)
     joints = list(ARM)
     qd = np.gradient(np.radians(clip.column("shoulder_pitch")), 1 / clip.fps)
     lossy = transmitted(tau, clip, joints, {"efficiency": 0.5})
@@ -270,6 +271,19 @@ def test_others_outside_the_estimators_model_are_what_they_say():
         OtherParams(transmission={"efficiency": 1.5}).check()
     with pytest.raises(BadInput, match="coupling"):
         OtherParams(transmission={"coupling": {"elbow>elbow": 0.3}}).check()
+    # a fused elbow is the body with its elbow held at the bend throughout; the self, holding its own at 0, feels otherwise
+    fused = population("fused", 1)[0]
+    bend = fused["body"]["fused"]["elbow"]
+    assert fused["joints"] == ["shoulder_pitch", "shoulder_roll"] and -70 <= bend <= -20
+    moving = SimulatedOther("z", OtherParams(**{**fused, "body": {}, "joints": joints}))
+    at = {v: clip.with_data(np.where(np.array(clip.channels) == "elbow", v, clip.data)) for v in (bend, 0.0)}
+    felt = SimulatedOther("f", OtherParams(**fused)).feel(clip)
+    assert np.allclose(felt, moving.feel(at[bend])[:, :2], atol=1e-12)
+    assert np.abs(felt - moving.feel(at[0.0])[:, :2]).max() > 0.05
+    with pytest.raises(BadInput, match="either missing"):
+        BodySpec(4.8, missing=["elbow"], fused={"elbow": -30.0}).check()
+    with pytest.raises(BadInput, match="lacks"):
+        OtherParams(**{**fused, "joints": joints}).check()
     spring = small_humanoid(BodySpec(4.8, stiffness={"elbow": 0.5}, rest={"elbow": -30.0}))
     held = still.with_data(np.zeros_like(still.data))  # every joint at 0: the spring pulls back to -30 degrees
     assert abs(_tau(spring, held, ["elbow"])[:, 0].mean() - 0.5 * np.radians(30.0)) < 1e-3

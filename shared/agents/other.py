@@ -83,7 +83,7 @@ class OtherParams:
         unknown = [j for j in self.joints if j not in JOINTS]
         if unknown or not self.joints:
             raise BadInput(f"joints must be among {', '.join(JOINTS)}, got {self.joints}", field="joints")
-        lacking = [j for j in self.joints if j in self.body_spec().missing]
+        lacking = [j for j in self.joints if j in self.body_spec().welded]
         if lacking:
             raise BadInput(f"the other cannot feel joints its body lacks: {lacking}", field="joints")
         check_transmission(self.transmission)

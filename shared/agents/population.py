@@ -32,6 +32,9 @@ gears       each joint's torque felt through a gear of ratio 0.6-1.6, efficiency
 coupling    tendon-like: 0.2-0.6 of the elbow's torque felt at the shoulder pitch, 0.1-0.3 back
 stribeck    Stribeck friction: sliding 0.01-0.05 N m, static 1.5-3x that, Stribeck speed 0.05-0.3 rad/s
 fatigue     everything felt 0.5-2 % heavier per question asked so far (strength falling)
+fused       another joint layout: the elbow fused, bent at 20-70 degrees (the self sees that the
+            elbow does not move and imitates it by holding its own at 0, as for a missing joint;
+            the bend it cannot write down), the conversation about the shoulder
 ==========  =====================================================================================
 
 **Development kinds** (:data:`DEVELOPMENT_KINDS`), outside the model as well, on which what
@@ -51,11 +54,14 @@ from shared.errors import BadInput
 
 KINDS = ("mass", "links", "payload", "shares", "damping", "friction", "joints", "legs", "mixed")
 #: kinds outside the body estimator's model (module docstring): reported, never tuned on
-OUTSIDE_KINDS = ("springs", "armature", "gears", "coupling", "stribeck", "fatigue")
+OUTSIDE_KINDS = ("springs", "armature", "gears", "coupling", "stribeck", "fatigue", "fused")
 #: kinds outside the model too, kept for choosing what handles a body outside the model (the
 #: residual correction's design): never reported as the outside population's result
 DEVELOPMENT_KINDS = ("drag", "bias")
 ALL_KINDS = KINDS + OUTSIDE_KINDS + DEVELOPMENT_KINDS
+#: each kind's place in the draws' seed: the order the kinds were added in, so that a new kind
+#: leaves every other kind's others as they were
+_DRAW_ORDER = KINDS + OUTSIDE_KINDS[:-1] + DEVELOPMENT_KINDS + ("fused",)
 ARM = ("shoulder_pitch", "shoulder_roll", "elbow")
 ALL = ARM + ("knee",)
 
@@ -83,6 +89,8 @@ def _body(kind: str, r: np.random.Generator) -> dict:
         body["rest"] = {j: float(r.uniform(-30.0, 30.0)) for j in ALL}
     if kind == "armature":
         body["armature"] = {j: float(r.uniform(0.005, 0.03)) for j in ALL}
+    if kind == "fused":
+        body["fused"] = {"elbow": float(-r.uniform(20.0, 70.0))}
     for group in ("lengths", "shares"):
         if group in body:
             body[group] = {k: float(v) for k, v in body[group].items()}
@@ -125,6 +133,13 @@ def people_answers(n: int, seed: int = 2026) -> list[dict]:
     return out
 
 
+def seen_still(other: dict) -> list[str]:
+    """The joints an other's body does not move (missing or fused): the self sees that and imitates
+    it by holding its own at 0 (thesis 3.3.5); the angle a fused joint is bent at it does not know."""
+    body = other.get("body") or {}
+    return list(body.get("missing", [])) + [j for j in body.get("fused", {}) if j not in body.get("missing", [])]
+
+
 def population(kind: str, n: int = 10, seed: int = 2026, **params) -> list[dict]:
     """``n`` others' parameters (``OtherParams`` fields) of one ``kind``; ``params`` (rule, d,
     g_max, noise, ...) are the same for all of them."""
@@ -134,10 +149,10 @@ def population(kind: str, n: int = 10, seed: int = 2026, **params) -> list[dict]
         raise BadInput(f"a population has 1 to 1000 others, got {n}", field="n")
     out = []
     for i in range(n):
-        r = np.random.default_rng([seed, ALL_KINDS.index(kind), i])
+        r = np.random.default_rng([seed, _DRAW_ORDER.index(kind), i])
         mass = float(r.uniform(3.0, 7.2))
         body = _body(kind, r)
-        joints = [j for j in params.get("joints", ARM) if j not in body.get("missing", [])]
+        joints = [j for j in params.get("joints", ARM) if j not in seen_still({"body": body})]
         t = _transmission(kind, r)
         out.append({**params, "mass": mass, "body": body, "kind": kind, "joints": joints,
                     "seed": int(params.get("seed", 0)) + i, **({"transmission": t} if t else {})})

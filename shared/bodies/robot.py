@@ -13,7 +13,9 @@ torques ``mj_inverse`` reports), joint springs with a rest angle and rotor inert
 ``stiffness``/``springref`` and ``armature``, in those torques too; outside the body estimator's
 model) and Coulomb friction (``friction * tanh(qdot / 0.05 rad/s)``,
 added to the torques by :func:`shared.bodies.body.perform`) per joint, and leave joints out (a
-missing joint is welded at 0: the body cannot move it and feels nothing there).
+missing joint is welded at 0: the body cannot move it and feels nothing there; a *fused* joint is
+welded at another angle, a joint layout outside the body estimator's model: the self imitates it
+by holding its own joint at 0, and its links then lie elsewhere than the self thinks).
 """
 
 from __future__ import annotations
@@ -51,10 +53,11 @@ class BodySpec:
     stiffness: dict[str, float] = field(default_factory=dict)  # joint -> spring, N m / rad (MuJoCo stiffness)
     rest: dict[str, float] = field(default_factory=dict)  # joint -> the spring's rest angle, degrees (springref)
     armature: dict[str, float] = field(default_factory=dict)  # joint -> rotor inertia, kg m^2 (MuJoCo armature)
+    fused: dict[str, float] = field(default_factory=dict)  # joint -> the angle it is welded at, degrees (no joint there)
 
     def check(self) -> BodySpec:
         check_mass(self.mass)
-        for group in ("lengths", "shares", "damping", "friction", "stiffness", "rest", "armature"):
+        for group in ("lengths", "shares", "damping", "friction", "stiffness", "rest", "armature", "fused"):
             if not isinstance(getattr(self, group), dict):
                 raise BadInput(f"body {group} must be a map, got {type(getattr(self, group)).__name__}", field=group)
         if not isinstance(self.missing, list):
@@ -62,7 +65,7 @@ class BodySpec:
         for group, table, lo, hi in (("lengths", self.lengths, 0.02, 1.0), ("shares", self.shares, 0.0, 1.0),
                                      ("damping", self.damping, 0.0, 100.0), ("friction", self.friction, 0.0, 100.0),
                                      ("stiffness", self.stiffness, 0.0, 100.0), ("rest", self.rest, -180.0, 180.0),
-                                     ("armature", self.armature, 0.0, 1.0)):
+                                     ("armature", self.armature, 0.0, 1.0), ("fused", self.fused, -180.0, 180.0)):
             known = LENGTHS if group == "lengths" else LINK_SHARE if group == "shares" else JOINTS
             for k, v in table.items():
                 if k not in known:
@@ -75,7 +78,15 @@ class BodySpec:
         bad = [j for j in self.missing if j not in JOINTS]
         if bad:
             raise BadInput(f"body missing joints must be among {', '.join(JOINTS)}, got {bad}", field="missing")
+        both = [j for j in self.fused if j in self.missing]
+        if both:
+            raise BadInput(f"a joint is either missing (welded at 0) or fused at an angle, not both: {both}", field="fused")
         return self
+
+    @property
+    def welded(self) -> list[str]:
+        """The joints the body cannot move: missing (at 0) and fused (at their angle)."""
+        return list(self.missing) + [j for j in self.fused if j not in self.missing]
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -97,14 +108,20 @@ def small_humanoid(mass: float | BodySpec = 2.4, name: str = "robot", link_masse
     spec.option.gravity = [0, 0, -9.81]
 
     def joint(parent, jname: str, axis):
-        if jname not in b.missing:
+        if jname not in b.welded:
             parent.add_joint(name=jname, type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis, damping=b.damping.get(jname, 0.0),
                              stiffness=b.stiffness.get(jname, 0.0), springref=np.radians(b.rest.get(jname, 0.0)),
                              armature=b.armature.get(jname, 0.0))
 
     def link(parent, lname: str, pos, length_key: str, radius: float, joints=()):
         """A capsule link hanging down from ``pos`` in its parent, with its hinges."""
-        body = parent.add_body(name=lname, pos=pos)
+        turn = np.array([1.0, 0.0, 0.0, 0.0])  # fused joints: the link welded at their angles
+        for jname, axis in joints:
+            if jname in b.fused:
+                half = np.radians(b.fused[jname]) / 2
+                q = np.r_[np.cos(half), np.sin(half) * np.asarray(axis, float)]
+                mujoco.mju_mulQuat(turn, turn.copy(), q)
+        body = parent.add_body(name=lname, pos=pos, quat=turn)
         for jname, axis in joints:
             joint(body, jname, axis)
         body.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, -length[length_key]],
@@ -126,13 +143,13 @@ def small_humanoid(mass: float | BodySpec = 2.4, name: str = "robot", link_masse
     model = spec.compile()
     dofs = []
     for j in JOINTS:
-        if j in b.missing:
+        if j in b.welded:
             continue
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j)
         dofs.append(DofMap(j, int(model.jnt_qposadr[jid]), int(model.jnt_dofadr[jid]), LIMITS[j]))
     return Body(name=name, kind="robot", model=model, dofs=dofs,
                 mass=b.mass if link_masses is None else float(sum(link_masses.values())),
-                friction={j: v for j, v in b.friction.items() if v > 0 and j not in b.missing})
+                friction={j: v for j, v in b.friction.items() if v > 0 and j not in b.welded})
 
 
 def robot(name: str, mass: float | None = None) -> Body:

@@ -91,7 +91,7 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                  kind: str | None = typer.Option(None, help="Draw an uneven body from the population: "
                                                     "mass, links, payload, shares, damping, friction, joints, legs, mixed; "
                                                     "or one outside the estimators' model: springs, armature, gears, "
-                                                    "coupling, stribeck, fatigue (its mass replaces --mass; see "
+                                                    "coupling, stribeck, fatigue, fused (its mass replaces --mass; see "
                                                     "`other reveal`)."),
                  index: int = typer.Option(0, min=0, max=999, help="Which of the kind's population (0-999)."),
                  population_seed: int = typer.Option(2026, help="Seed of the population."),

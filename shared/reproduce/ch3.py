@@ -33,7 +33,7 @@ import numpy as np
 
 from schemas.common import clip_from_wire, clip_to_wire
 from shared.agents.other import OtherParams, SimulatedOther
-from shared.agents.population import KINDS, OUTSIDE_KINDS, people_answers, population
+from shared.agents.population import KINDS, OUTSIDE_KINDS, people_answers, population, seen_still
 from shared.estimation.conversation import Language, evaluate, hold
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
 from shared.reproduce.ch3_report import (
@@ -139,7 +139,7 @@ class Ch3:
         """One other of the population: a whole conversation, then every estimator's error."""
         joints_all = "knee" in p["joints"]
         name = f"ch3-{kind}-{i}"
-        missing = p["body"].get("missing", [])
+        missing = seen_still(p)  # a fused joint is imitated as a missing one: its bend is not seen
         self.new_other(name, **p)
         lang = Language(d=6, g_max=G_MAX, joints=p["joints"], missing=missing)
         self.start(name, name, d=6, g_max=G_MAX, joints=p["joints"], missing=missing)
@@ -234,7 +234,7 @@ class Ch3:
             p = {**p, "rule": c.rule, "weights": None if c.weights is None else list(c.weights),
                  "noise": noise, "seed": 1000 * int(100 * noise) + i}
             self.new_other(name, **p)
-            self.start(name, name, joints=p["joints"], missing=p["body"].get("missing", []),
+            self.start(name, name, joints=p["joints"], missing=seen_still(p),
                        g_max=G_MAX_RULES, probes=0)
             r = self.c.request("estimator", "identify_rule", {"estimate": name, "method": method,
                                                               "apply": False, "candidates": cset})
