@@ -90,6 +90,8 @@ REGRESSOR = Endpoint(
         "joints": F(List(JOINT, min_len=1, max_len=4), "the felt joints (rows of Y)"),
         "missing": F(List(JOINT, max_len=4), "joints the other lacks: the self holds them still", required=False,
                      default=list),
+        "offsets": F(Bool(), "also the arm links' first moments off their lines (rule identification's bodies)",
+                     required=False, default=False),
     })),
     Message("simulator.regressor.reply", Map({
         "names": F(List(Str(max_len=64), max_len=64), "the columns: physical components of a body like the self's"),

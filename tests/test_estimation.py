@@ -101,7 +101,7 @@ def test_the_thesis_pairs_are_designed_on_the_selfs_body(self_body):
 def identification(self_body):
     """The identification motions and their self regressors; bodies the self thinks possible."""
     motions = identification_motions(design_thesis_pairs(_perform(self_body, ALL)))
-    regs = {m.name: self_regressor(m, ALL) for m in motions}
+    regs = {m.name: self_regressor(m, ALL, offsets=True) for m in motions}  # in the bodies' columns
     return motions, regs, candidate_bodies(Language(joints=list(ALL)), [], [], weighted_candidates())
 
 

@@ -115,6 +115,39 @@ def test_the_extended_columns_reproduce_mujoco_springs_and_rotor_inertia():
     assert np.abs(_tau(body, basic_motions(ALL)[1], ALL) - plain).max() > 0.01  # the columns are not idle
 
 
+def test_the_first_moment_columns_reproduce_a_weight_off_the_line():
+    """The extended class's first moments off an arm link's line (ahead, behind): on poses held
+    still (gravity alone) a point mass ahead of the forearm's line, and a forearm fused at a bend
+    that the self imitates with its own elbow straight, are reproduced exactly; moving, only the
+    point's second moment is left (no column for it). The body estimate's regressors leave these
+    columns out; rule identification's bodies have them."""
+    m = basic_motions(ALL)[3]
+    still = m.with_data(np.repeat(m.data[len(m.data) // 2][None], len(m.data), axis=0))
+    names = column_names(ALL, offsets=True)
+    theta = np.r_[_theta(2.4, ALL), np.zeros(4)]  # the columns without offsets are a prefix
+    theta[names.index("ahead.forearm")], theta[names.index("elbow_mass")] = 0.2 * 0.03, 0.2
+    ahead = small_humanoid(BodySpec(mass=2.4), points=(("forearm", (0.03, 0.0, 0.0), 0.2),))
+    truth = _tau(ahead, still, ALL)
+    assert np.abs(self_regressor(still, ALL, offsets=True) @ theta - truth).max() < 1e-7 * np.abs(truth).max()
+    moving = _tau(ahead, m, ALL)
+    assert 0 < np.abs(self_regressor(m, ALL, offsets=True) @ theta - moving).max() < 0.01 * np.abs(moving).max()
+    shoulder = ["shoulder_pitch", "shoulder_roll"]
+    names = column_names(shoulder, offsets=True)
+    bend = np.radians(-45.0)
+    held = still.with_data(np.where(np.array(still.channels) == "elbow", 0.0, still.data))
+    truth = _tau(small_humanoid(BodySpec(mass=2.4, fused={"elbow": -45.0})), held, shoulder)
+    forearm_kg = LINK_SHARE["forearm"] * 2.4
+    theta = np.r_[_theta(2.4, shoulder), np.zeros(4)]
+    theta[names.index("forearm.gravity")] = np.cos(bend)  # its first moment along the line
+    theta[names.index("elbow_mass")] = forearm_kg * (1 - np.cos(bend))  # its mass stays at the elbow
+    theta[names.index("ahead.forearm")] = forearm_kg * 0.05 * abs(np.sin(bend))  # flexed: the hand comes forward
+    y = self_regressor(held, shoulder, missing=["elbow"], offsets=True)
+    assert np.abs(y @ theta - truth).max() < 1e-7 * np.abs(truth).max()
+    theta[names.index("ahead.forearm")] = 0.0
+    assert np.abs(y @ theta - truth).max() > 0.1 * np.abs(truth).max()  # without it the bend is not said
+    assert column_names(shoulder) == names[:-4] and np.array_equal(self_regressor(held, shoulder, ["elbow"]), y[..., :-4])
+
+
 @pytest.mark.parametrize("rule", RULES)
 def test_g_and_its_gradient_match_f_conv(rule):
     r = np.random.default_rng(3)
@@ -469,7 +502,7 @@ def test_a_wrong_rule_makes_the_body_estimator_fail_as_documented():
 def pair_motions():
     lang = Language(d=6, g_max=1.2, joints=list(ALL))
     motions = identification_motions(design_thesis_pairs(LocalPorts(lang, None).perform_self))
-    return lang, motions, {m.name: self_regressor(m, ALL) for m in motions}
+    return lang, motions, {m.name: self_regressor(m, ALL, offsets=True) for m in motions}
 
 
 @pytest.mark.parametrize("kind", ["legs", "mixed", "springs", "armature"])

@@ -69,13 +69,13 @@ class BusPorts:
         return _PERFORMED.once(key, lambda: self._taus(self.c.request("simulator", "perform", {
             "body": "self", "clip": clip_to_wire(motion)})["clip"]), self.timeout + 60).copy()
 
-    def regressor(self, motion) -> np.ndarray:
+    def regressor(self, motion, offsets: bool = False) -> np.ndarray:
         """The self's regressor of a motion (the self's body never changes: one per motion for
-        every estimate)."""
-        key = (motion.fingerprint(), tuple(self.language.joints), tuple(self.language.missing))
+        every estimate); ``offsets``: with the columns rule identification's bodies have."""
+        key = (motion.fingerprint(), tuple(self.language.joints), tuple(self.language.missing), offsets)
         return _REGRESSORS.once(key, lambda: self.c.request("simulator", "regressor", {
-            "clip": clip_to_wire(motion), "joints": self.language.joints, "missing": self.language.missing})["y"],
-            self.timeout + 60)
+            "clip": clip_to_wire(motion), "joints": self.language.joints, "missing": self.language.missing,
+            "offsets": offsets})["y"], self.timeout + 60)
 
     def ask_open(self, motion) -> int | None:
         try:
@@ -182,7 +182,7 @@ def _identify_on_bodies(est: OtherEstimate, cands, ports: BusPorts, design: dict
     estimate feels all four joints the candidates weigh; otherwise the bodies the self thinks
     possible)."""
     motions = identification_motions(design)
-    regs = {m.name: ports.regressor(m) for m in motions}
+    regs = {m.name: ports.regressor(m, offsets=True) for m in motions}
     answers, shared = [], []
     if est.language.joints == list(ALL):
         answers = [(key, est.regressor(ports, key), k) for key, k in est.body_answers]

@@ -113,8 +113,8 @@ class SimulatorHandlers:
     def do_regressor(self, req):
         from shared.estimation.body import column_names, self_regressor
 
-        y = self_regressor(clip_from_wire(req["clip"]), req["joints"], req["missing"])
-        return {"names": column_names(req["joints"]), "y": y}
+        y = self_regressor(clip_from_wire(req["clip"]), req["joints"], req["missing"], req["offsets"])
+        return {"names": column_names(req["joints"], req["offsets"]), "y": y}
 
     # ------------------------------------------------------------------ others
     def other_create(self, req):

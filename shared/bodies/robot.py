@@ -92,9 +92,11 @@ class BodySpec:
         return asdict(self)
 
 
-def small_humanoid(mass: float | BodySpec = 2.4, name: str = "robot", link_masses: dict[str, float] | None = None) -> Body:
+def small_humanoid(mass: float | BodySpec = 2.4, name: str = "robot", link_masses: dict[str, float] | None = None,
+                   points: tuple = ()) -> Body:
     """A small humanoid of ``mass`` kg, or of a :class:`BodySpec`. ``link_masses`` (kg per
-    link) overrides the shares: the self's regressor builds bodies with one link's mass only."""
+    link) overrides the shares: the self's regressor builds bodies with one link's mass only, or
+    with ``points`` alone, each ``(link, (x, y, z) m in the link's frame, kg)`` a point mass."""
     spec_in = mass if isinstance(mass, BodySpec) else BodySpec(mass=check_mass(mass))
     b = spec_in.check()
     length = {**LENGTHS, **b.lengths}
@@ -139,7 +141,10 @@ def small_humanoid(mass: float | BodySpec = 2.4, name: str = "robot", link_masse
         fa.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=[0, 0, -length["fore"]], size=[HAND_RADIUS, 0, 0],
                     mass=b.payload)
     th = link(torso, "thigh", [0, -0.03, -0.08], "thigh", 0.02)
-    link(th, "shin", [0, 0, -length["thigh"]], "shin", 0.018, (("knee", [0, 1, 0]),))
+    sh = link(th, "shin", [0, 0, -length["thigh"]], "shin", 0.018, (("knee", [0, 1, 0]),))
+    links = {"upper_arm": ua, "forearm": fa, "thigh": th, "shin": sh}
+    for lname, pos, kg in points:
+        links[lname].add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=list(pos), size=[0.001, 0, 0], mass=kg)
     model = spec.compile()
     dofs = []
     for j in JOINTS:

@@ -16,7 +16,12 @@ the other lacks held still):
   "Modeling, identification and control of robots", 2002, ch. 12: joint flexibility and rotor
   inertia are the standard additions to the rigid-body regressor): per joint a spring (``q``, rad;
   N m/rad), its rest angle as a constant torque of either sign (``rest_up``: +1, ``rest_down``: -1,
-  N m: ``k (q - q0) = k q - k q0``) and rotor inertia (``qdd``, kg m^2).
+  N m: ``k (q - q0) = k q - k q0``) and rotor inertia (``qdd``, kg m^2); with ``offsets``, and
+  only for rule identification's bodies (below), per arm link its first moment off the link's line
+  (:data:`LINK_EXTENSIONS`: kg m along the link's x, ahead or behind, the plane the elbow bends in;
+  a link's full first moment is three of the standard inertial parameters, Khalil & Dombre 2002,
+  ch. 12, where the rigid columns keep only the part along the link): a forearm bent or shaped off
+  its line, a hand held forward.
 
 **Which model** (:meth:`BodyEstimate.fit`): the rigid body (the extension's prior
 ``EXTENSION_PRIOR`` times narrower than a component's: shut) and the extended model class
@@ -55,6 +60,20 @@ against 4.09 % (the in-model kinds within 0.1 point, bias known 8.1 -> 6.6 % but
 % and 2.5x speed 11.2 -> 13.2 %, drag within 0.6), people-like unknown 9.1 / 24.6 % against 10.5 /
 22.4 %, a conversation 6 % slower: no gain where it was chosen, so it is not here (the report's
 gears and coupling kinds were never run with it).
+
+**First moments off the links' lines: columns kept, not fit.** The columns ahead and behind of
+each arm link (:data:`LINK_EXTENSIONS`; exact against MuJoCo for a weight off a forearm's line and for
+a forearm fused at a bend, on poses held still: tested) were added to the extended model class on
+2026-12-07 and tried in its fit on the tuning populations (in-model and development kinds, 10
+others each, 6 sets; the mean of known / unknown / 2.5x errors): seed 13 3.83 -> 3.96 %, seed 14
+3.74 -> 4.45 % (bias 4.3 -> 6.8 % known, the 2.5x errors up on most kinds). Not kept in the fit:
+the body estimate's regressors leave them out (:func:`column_names` without ``offsets``; kept in it
+but shut by the prior, they changed no estimate by more than the fit's rounding, and yet moved the
+conversations' probes and so every kind's errors by up to a point either way, as rounding does here).
+The bodies rule identification predicts answers from before any open answer
+(:func:`shared.estimation.rules.plausible_bodies`) do use them: half of them have a forearm bent off
+its line (on seed 13's in-model and development kinds, 337 of 340 identifications against 338
+before, 5 % more questions).
 
 **Answers as constraints.** Every open answer "word k" about motion ``m`` says
 ``g_max (k-1)/d <= F_conv(Y_m theta) < g_max k/d`` (eq. 3.4, 3.8). Every rule (eq. 3.8, f1-f4)
@@ -99,6 +118,10 @@ from shared.motion.clip import Clip
 LINKS = ("upper_arm", "forearm", "shin")
 #: the extended model class's columns per joint (module docstring)
 EXTENSIONS = ("spring", "rest_up", "rest_down", "armature")
+#: ... and per arm link (module docstring): its first moment off its line, ahead (+x) or behind
+LINK_EXTENSIONS = ("ahead", "behind")
+ARM_LINKS = ("upper_arm", "forearm")
+OFFSET = 0.05  # m: the first-moment columns are the difference of a point mass this far ahead and behind
 POINTS = ("elbow", "hand")
 JOINTS = ("shoulder_pitch", "shoulder_roll", "elbow", "knee")
 SELF_MASS = 2.4
@@ -109,12 +132,22 @@ def _links(joints) -> list[str]:
     return [link for link in LINKS if link != "shin" or "knee" in joints]
 
 
-def column_names(joints) -> list[str]:
+def column_names(joints, offsets: bool = False) -> list[str]:
+    """The regressor's columns; ``offsets``: also the arm links' first moments off their lines
+    (:data:`LINK_EXTENSIONS`, last: the columns without them are a prefix), which only rule
+    identification's bodies use (module docstring)."""
     names = [f"{link}.{part}" for link in _links(joints) for part in ("gravity", "inertial")]
     names += [f"{p}_mass" for p in POINTS if any(j != "knee" for j in joints)]  # the arm's point masses
     names += [f"damping.{j}" for j in joints] + [f"friction.{j}" for j in joints]
     names += [f"{kind}.{j}" for kind in EXTENSIONS for j in joints]
+    if offsets and any(j != "knee" for j in joints):
+        names += [f"{kind}.{link}" for kind in LINK_EXTENSIONS for link in ARM_LINKS]
     return names
+
+
+def is_extension(name: str) -> bool:
+    """Whether a column belongs to the extended model class (:data:`EXTENSIONS`, :data:`LINK_EXTENSIONS`)."""
+    return name.split(".")[0] in EXTENSIONS + LINK_EXTENSIONS
 
 
 def theta_self(joints) -> np.ndarray:
@@ -138,12 +171,18 @@ def _column_bodies(missing: tuple[str, ...]):
         bodies["hand_mass"] = small_humanoid(BodySpec(mass=SELF_MASS, payload=1.0, missing=list(missing)),
                                              name="self:hand", link_masses={})
         bodies["none"] = small_humanoid(BodySpec(mass=SELF_MASS, missing=list(missing)), name="self:none", link_masses={})
+        for link in ARM_LINKS:  # a unit point mass OFFSET ahead and behind the link's origin (first moments)
+            for sign in (1, -1):
+                bodies[f"{link}{sign:+d}"] = small_humanoid(BodySpec(mass=SELF_MASS, missing=list(missing)),
+                                                           name=f"self:{link}{sign:+d}", link_masses={},
+                                                           points=((link, (sign * OFFSET, 0.0, 0.0), 1.0),))
         _MODELS[missing] = bodies
     return _MODELS[missing]
 
 
-def self_regressor(motion: Clip, joints, missing=()) -> np.ndarray:
-    """``Y`` (T, len(joints), P) of ``motion`` on the self's body (columns: :func:`column_names`).
+def self_regressor(motion: Clip, joints, missing=(), offsets: bool = False) -> np.ndarray:
+    """``Y`` (T, len(joints), P) of ``motion`` on the self's body (columns: :func:`column_names`,
+    with ``offsets`` the first moments off the arm links' lines too).
     ``missing``: joints the other lacks; the self holds them still (their channels are dropped)
     and feels nothing there (their rows are zero)."""
     from shared.bodies.body import coulomb, mj_inverse_series, qpos_derivatives, qpos_trajectory
@@ -173,7 +212,7 @@ def self_regressor(motion: Clip, joints, missing=()) -> np.ndarray:
     base_full = mj_inverse_series(ref.model, q, v, a)[0]
     base_grav = mj_inverse_series(ref.model, q, zero, zero)[0]
     cols = []
-    names = column_names(joints)
+    names = column_names(joints, offsets)
     for key in [*_links(joints), "elbow_mass", "hand_mass"]:
         m = bodies[key].model
         full = mj_inverse_series(m, q, v, a)[0] - base_full
@@ -201,6 +240,13 @@ def self_regressor(motion: Clip, joints, missing=()) -> np.ndarray:
             if dof.get(j) is not None:
                 c[:, joints.index(j)] = per_joint(kind, j)
             cols.append(c)
+    if any(f"ahead.{link}" in names for link in ARM_LINKS):
+        # a point mass's torques are its first moment's (odd in its place) plus its mass's and its second
+        # moment's (even): half the difference ahead and behind, per metre, is the first moment's column alone
+        ahead = {link: felt(mj_inverse_series(bodies[f"{link}+1"].model, q, v, a)[0]
+                            - mj_inverse_series(bodies[f"{link}-1"].model, q, v, a)[0]) / (2 * OFFSET)
+                 for link in ARM_LINKS}
+        cols += [sign * ahead[link] for sign in (1.0, -1.0) for link in ARM_LINKS]
     return np.stack(cols, axis=-1)
 
 
@@ -254,7 +300,7 @@ class BodyEstimate:
         eff, g_self = self._scales(shared)
         self.g_self = max(g_self, 1e-9)
         base = np.where(eff > 1e-12, self.PRIOR * self.g_self / np.maximum(eff, 1e-12), 1.0)
-        extension = np.array([n.split(".")[0] in EXTENSIONS for n in self.names])
+        extension = np.array([is_extension(n) for n in self.names])
         # the rigid body (the extension all but shut) and the extended model class (fit when the answers call for it)
         self.priors = {"rigid": np.where(extension, base / self.EXTENSION_PRIOR, base),
                        "extended": np.where(extension, base / self.EXTENDED_PRIOR, base)}

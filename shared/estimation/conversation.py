@@ -83,7 +83,7 @@ class Ports(Protocol):
     def ask_open(self, motion: Clip) -> int | None: ...  # None: "I don't know"
     def build(self, clips: list[Clip], space: str = "thesis") -> None: ...
     def associate(self, motion: Clip, space: str = "thesis") -> np.ndarray: ...
-    def regressor(self, motion: Clip) -> np.ndarray: ...
+    def regressor(self, motion: Clip, offsets: bool = False) -> np.ndarray: ...
 
 
 def hold(motion: Clip, missing) -> Clip:
@@ -582,10 +582,10 @@ class LocalPorts:
         word = parse_answer(self.other.answer_open(motion), "open", self.language.d)
         return None if word == DONT_KNOW else index_of(word, self.language.d)
 
-    def regressor(self, motion: Clip) -> np.ndarray:
+    def regressor(self, motion: Clip, offsets: bool = False) -> np.ndarray:
         from shared.estimation.body import self_regressor
 
-        return self_regressor(motion, self.language.joints, self.language.missing)
+        return self_regressor(motion, self.language.joints, self.language.missing, offsets)
 
     def build(self, clips: list[Clip], space: str = "thesis") -> None:
         from shared.pss.space import ProtoSymbolSpace

@@ -210,6 +210,9 @@ def g_bodies(c: Candidate, y: np.ndarray, bodies: np.ndarray, torques: np.ndarra
 
 def body_torques(y: np.ndarray, bodies: np.ndarray) -> np.ndarray:
     """``|y theta|`` of one motion (T x J x P) on many bodies (N x P): T x J x N."""
+    if y.shape[-1] != bodies.shape[-1]:
+        raise BadInput(f"a regressor of {y.shape[-1]} columns and bodies of {bodies.shape[-1]}: rule identification's "
+                       "bodies are in the columns of regressors with offsets (self_regressor(..., offsets=True))")
     return np.abs(y.reshape(-1, y.shape[-1]) @ bodies.T).reshape(*y.shape[:2], -1)
 
 
@@ -345,6 +348,9 @@ def identify_bodies(candidates: list[Candidate], motions: list[Clip], regressors
 #: speed of 0.6 rad/s: 0.018 N m; their mean joint angle is 0.3 rad, acceleration 2 rad/s^2), and
 #: the largest rest angle (rad) of a spring
 PLAUSIBLE_SPRING, PLAUSIBLE_ARMATURE, PLAUSIBLE_REST = 0.06, 0.009, 0.5
+#: ... and the largest bend (rad) of a forearm whose weight lies off its line (the first moments
+#: ahead and behind, :data:`shared.estimation.body.LINK_EXTENSIONS`): 45 degrees, set once, not tuned
+PLAUSIBLE_BEND = np.pi / 4
 
 
 def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
@@ -356,15 +362,18 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
     every joint, and the extended model class (:data:`shared.estimation.body.EXTENSIONS`):
     springs at every joint (exponential stiffness, mean ``PLAUSIBLE_SPRING``, each with a rest
     angle uniform within ``PLAUSIBLE_REST`` of the self's) and rotor inertia (mean
-    ``PLAUSIBLE_ARMATURE``). The first row is the self. The overall scale does not matter to
-    comparisons."""
-    from shared.bodies.robot import LINK_SHARE
+    ``PLAUSIBLE_ARMATURE``), and with probability 1/2 a forearm bent off its line by up to
+    ``PLAUSIBLE_BEND`` (its first moment turned ahead or behind, its mass at the elbow kept; drawn
+    from a second stream, so the bodies' other draws are those of before). The first row is the
+    self. The overall scale does not matter to comparisons."""
+    from shared.bodies.robot import LENGTHS, LINK_SHARE
     from shared.estimation.body import LINKS, SELF_MASS, column_names, theta_self
 
-    names = column_names(joints)
+    names = column_names(joints, offsets=True)
     r = np.random.default_rng(seed)
+    bends = np.random.default_rng([seed, 1])
     out = np.zeros((n, len(names)))
-    out[0] = theta_self(joints)
+    out[0, :len(theta_self(joints))] = theta_self(joints)
     col = {name: k for k, name in enumerate(names)}
     for i in range(1, n):
         mass = {link: float(np.exp(r.normal(0.0, 0.5))) for link in LINKS}
@@ -390,6 +399,13 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
         if r.random() < 0.5:
             for j in joints:
                 out[i, col[f"armature.{j}"]] = r.exponential(PLAUSIBLE_ARMATURE)
+        if "ahead.forearm" in col and bends.random() < 0.5:
+            phi = bends.uniform(-PLAUSIBLE_BEND, PLAUSIBLE_BEND)
+            along = out[i, col["forearm.gravity"]]  # the forearm's first moment along its line, in the self's
+            out[i, col["forearm.gravity"]] = along * np.cos(phi)
+            out[i, col["elbow_mass"]] += mass["forearm"] * LINK_SHARE["forearm"] * SELF_MASS * (1.0 - np.cos(phi))
+            out[i, col["ahead.forearm" if phi > 0 else "behind.forearm"]] = (
+                along * LINK_SHARE["forearm"] * SELF_MASS * LENGTHS["fore"] / 2 * abs(np.sin(phi)))
     return out
 
 
@@ -409,10 +425,11 @@ def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str
     rule: a :class:`shared.estimation.body.BodyEstimate` fitted to ``answers`` (key, regressor,
     k) in ``language`` with the candidate's rule, and :func:`body_samples` of what it leaves
     uncertain. Without answers every candidate gets the same bodies, those the self thinks
-    possible (:func:`plausible_bodies`)."""
+    possible (:func:`plausible_bodies`). Either are in the columns of regressors with ``offsets``
+    (:func:`shared.estimation.body.self_regressor`)."""
     from dataclasses import replace
 
-    from shared.estimation.body import BodyEstimate
+    from shared.estimation.body import BodyEstimate, column_names
 
     if not answers:  # nothing known of this other yet: the bodies the self thinks possible, for every rule
         prior = _plausible(tuple(language.joints), n).copy()
@@ -425,5 +442,8 @@ def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str
         for key, y, k in answers:
             b.add(key, y, k)
         b.fit()
-        out[c.name] = body_samples(b.theta, b.covariance(), n, seed=0)
+        samples = body_samples(b.theta, b.covariance(), n, seed=0)
+        # in the prior's columns (regressors with the first moments off the links' lines): none here
+        wide = len(column_names(language.joints, offsets=True))
+        out[c.name] = np.pad(samples, ((0, 0), (0, wide - samples.shape[1])))
     return out
