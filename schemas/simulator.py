@@ -117,7 +117,7 @@ OTHER_PARAMS = Map({
     "body": F(AnyMap(), "how its body differs unevenly: lengths {upper, fore, thigh, shin} (m), shares {link: share "
                         "of the mass}, payload (kg in the hand), damping / friction {joint: N m s/rad / N m}, missing "
                         "[joints], stiffness {joint: N m/rad} with rest {joint: degrees}, armature {joint: kg m^2}, "
-                        "fused {joint: degrees} (welded at that angle) (shared.bodies.robot.BodySpec)", required=False),
+                        "fused {elbow or knee: degrees} (welded at that angle) (shared.bodies.robot.BodySpec)", required=False),
     "kind": F(Str(max_len=32), "the population kind it was drawn from, for reports", required=False, default=""),
     "gamma": F(Float(0.25, 4.0), "its own word boundaries: it words g_max (g / g_max)^gamma", required=False,
                default=1.0),

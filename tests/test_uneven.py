@@ -315,6 +315,8 @@ def test_others_outside_the_estimators_model_are_what_they_say():
     assert np.abs(felt - moving.feel(at[0.0])[:, :2]).max() > 0.05
     with pytest.raises(BadInput, match="either missing"):
         BodySpec(4.8, missing=["elbow"], fused={"elbow": -30.0}).check()
+    with pytest.raises(BadInput, match="alone on its link"):
+        BodySpec(4.8, fused={"shoulder_roll": 10.0}).check()
     with pytest.raises(BadInput, match="lacks"):
         OtherParams(**{**fused, "joints": joints}).check()
     spring = small_humanoid(BodySpec(4.8, stiffness={"elbow": 0.5}, rest={"elbow": -30.0}))

@@ -33,6 +33,7 @@ LIMITS = {"shoulder_pitch": (-180.0, 180.0), "shoulder_roll": (-100.0, 100.0), "
           "knee": (-5.0, 150.0)}
 LINK_SHARE = {"torso": 0.55, "upper_arm": 0.07, "forearm": 0.06, "thigh": 0.12, "shin": 0.10}  # rest: head, left side (fixed)
 LENGTHS = {"upper": 0.10, "fore": 0.10, "thigh": 0.11, "shin": 0.11}  # m
+FUSIBLE = ("elbow", "knee")  # a fused joint turns its link's frame: exact where the link has no other hinge
 ROBOTS = {"self": 2.4, "other": 4.8}  # the thesis's two robots, kg
 HAND_RADIUS = 0.02  # m, the payload's sphere
 
@@ -78,6 +79,10 @@ class BodySpec:
         bad = [j for j in self.missing if j not in JOINTS]
         if bad:
             raise BadInput(f"body missing joints must be among {', '.join(JOINTS)}, got {bad}", field="missing")
+        shoulder = [j for j in self.fused if j not in FUSIBLE]
+        if shoulder:
+            raise BadInput(f"only a joint alone on its link can be fused ({', '.join(FUSIBLE)}), got {shoulder}",
+                           field="fused")
         both = [j for j in self.fused if j in self.missing]
         if both:
             raise BadInput(f"a joint is either missing (welded at 0) or fused at an angle, not both: {both}", field="fused")
