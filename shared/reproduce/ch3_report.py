@@ -361,8 +361,8 @@ def write_report(out: Path, res: dict, seconds: float, ch=None) -> Path:
               "kind); "
               "**thesis pairs**: fig. 3.11's m1/m2, m3/m4, answers predicted from the self's own torques; **auto** "
               "(beyond the thesis): pairs chosen on the estimated body (here, with no open answer asked, the bodies the self "
-              "thinks possible: link masses and lengths, a payload, damping, friction, springs with rest angles and rotor "
-              "inertia, `plausible_bodies`; a pair asked up to 3 times: a noisy other answers it anew), a posterior over rule, body and the other's inconsistency together (from 5 % of answers off to "
+              "thinks possible: link masses and lengths, a payload, damping, friction, springs with rest angles, rotor "
+              "inertia and forearms bent off their lines, `plausible_bodies`; a pair asked up to 3 times: a noisy other answers it anew), a posterior over rule, body and the other's inconsistency together (from 5 % of answers off to "
               "answering at random), stop at 99.9 %. "
               "The kinds outside the model (" + ", ".join(OUTSIDE_KINDS) + ") are in the table too, never tuned on.", "",
               "| kind | candidates | method | no noise | questions | 10 % noise | questions | 20 % noise | questions | "
