@@ -530,6 +530,6 @@ def test_the_first_segmentation_cuts_as_array_split_does():
     for lengths, n in (([15], 15), ([16, 29], 13), ([96], 15), ([40, 41, 57], 7)):
         seqs = [rng.normal(size=(t, 3)) for t in lengths]
         means, _, _ = uniform_segmentation(seqs, n, 0.01, "diag")
-        parts = [[p for p in np.array_split(x, n)] for x in seqs]
+        parts = [np.array_split(x, n) for x in seqs]
         want = np.array([np.vstack([ps[i] for ps in parts]).mean(axis=0) for i in range(n)])
         np.testing.assert_allclose(means, want, rtol=1e-12, atol=1e-12)

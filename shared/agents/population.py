@@ -136,7 +136,7 @@ def people_answers(n: int, seed: int = 2026) -> list[dict]:
 def seen_still(other: dict) -> list[str]:
     """The joints an other's body does not move (missing or fused): the self sees that and imitates
     it by holding its own at 0 (thesis 3.3.5); the angle a fused joint is bent at it does not know."""
-    body = other.get("body") or {}
+    body = other.get("body") or {}  # BodySpec.welded's rule on the dict: drawing others does not load MuJoCo
     return list(body.get("missing", [])) + [j for j in body.get("fused", {}) if j not in body.get("missing", [])]
 
 

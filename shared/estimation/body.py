@@ -171,13 +171,22 @@ def _column_bodies(missing: tuple[str, ...]):
         bodies["hand_mass"] = small_humanoid(BodySpec(mass=SELF_MASS, payload=1.0, missing=list(missing)),
                                              name="self:hand", link_masses={})
         bodies["none"] = small_humanoid(BodySpec(mass=SELF_MASS, missing=list(missing)), name="self:none", link_masses={})
-        for link in ARM_LINKS:  # a unit point mass OFFSET ahead and behind the link's origin (first moments)
-            for sign in (1, -1):
-                bodies[f"{link}{sign:+d}"] = small_humanoid(BodySpec(mass=SELF_MASS, missing=list(missing)),
-                                                           name=f"self:{link}{sign:+d}", link_masses={},
-                                                           points=((link, (sign * OFFSET, 0.0, 0.0), 1.0),))
         _MODELS[missing] = bodies
     return _MODELS[missing]
+
+
+def _offset_bodies(missing: tuple[str, ...]):
+    """The self's body with a unit point mass ``OFFSET`` ahead (+1) and behind (-1) each arm link's
+    origin, and nothing else (cached; made only when a regressor with ``offsets`` is asked for)."""
+    from shared.bodies.robot import BodySpec, small_humanoid
+
+    key = ("offsets", missing)
+    if key not in _MODELS:
+        _MODELS[key] = {(link, sign): small_humanoid(BodySpec(mass=SELF_MASS, missing=list(missing)),
+                                                     name=f"self:{link}{sign:+d}", link_masses={},
+                                                     points=((link, (sign * OFFSET, 0.0, 0.0), 1.0),))
+                        for link in ARM_LINKS for sign in (1, -1)}
+    return _MODELS[key]
 
 
 def self_regressor(motion: Clip, joints, missing=(), offsets: bool = False) -> np.ndarray:
@@ -243,8 +252,9 @@ def self_regressor(motion: Clip, joints, missing=(), offsets: bool = False) -> n
     if any(f"ahead.{link}" in names for link in ARM_LINKS):
         # a point mass's torques are its first moment's (odd in its place) plus its mass's and its second
         # moment's (even): half the difference ahead and behind, per metre, is the first moment's column alone
-        ahead = {link: felt(mj_inverse_series(bodies[f"{link}+1"].model, q, v, a)[0]
-                            - mj_inverse_series(bodies[f"{link}-1"].model, q, v, a)[0]) / (2 * OFFSET)
+        points = _offset_bodies(missing)
+        ahead = {link: felt(mj_inverse_series(points[link, 1].model, q, v, a)[0]
+                            - mj_inverse_series(points[link, -1].model, q, v, a)[0]) / (2 * OFFSET)
                  for link in ARM_LINKS}
         cols += [sign * ahead[link] for sign in (1.0, -1.0) for link in ARM_LINKS]
     return np.stack(cols, axis=-1)

@@ -373,7 +373,8 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
     r = np.random.default_rng(seed)
     bends = np.random.default_rng([seed, 1])
     out = np.zeros((n, len(names)))
-    out[0, :len(theta_self(joints))] = theta_self(joints)
+    own = theta_self(joints)  # the self has no first moment off its links' lines: its columns are a prefix
+    out[0, :len(own)] = own
     col = {name: k for k, name in enumerate(names)}
     for i in range(1, n):
         mass = {link: float(np.exp(r.normal(0.0, 0.5))) for link in LINKS}
@@ -435,6 +436,7 @@ def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str
         prior = _plausible(tuple(language.joints), n).copy()
         return {c.name: prior for c in candidates}
     out = {}
+    wide = len(column_names(language.joints, offsets=True))  # the prior's columns, first moments off the lines too
     for c in candidates:
         lang = replace(language, rule=c.rule, weights=None if c.weights is None else list(c.weights))
         b = BodyEstimate(lang, shared)
@@ -442,8 +444,6 @@ def candidate_bodies(language, shared: list[np.ndarray], answers: list[tuple[str
         for key, y, k in answers:
             b.add(key, y, k)
         b.fit()
-        samples = body_samples(b.theta, b.covariance(), n, seed=0)
-        # in the prior's columns (regressors with the first moments off the links' lines): none here
-        wide = len(column_names(language.joints, offsets=True))
+        samples = body_samples(b.theta, b.covariance(), n, seed=0)  # none off the lines: zeros there
         out[c.name] = np.pad(samples, ((0, 0), (0, wide - samples.shape[1])))
     return out
