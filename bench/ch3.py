@@ -34,6 +34,7 @@ def cpu_seconds(s) -> dict[str, float]:
 
 def main(argv=None) -> int:
     args = parse_args(__doc__, argv)
+    from shared.agents.population import KINDS, OUTSIDE_KINDS
     from shared.bus.client import Client
     from shared.reproduce.ch3 import run
 
@@ -64,7 +65,8 @@ def main(argv=None) -> int:
         "| what | measured | target |", "|---|---|---|",
         f"| one conversation set through the bus (4 questions + 4 probes, associate, rebuild, body fit, save) | "
         f"{res['conversation_set']['median_ms']:.0f} ms (p95 {res['conversation_set']['p95_ms']:.0f}) | - |",
-        f"| full `reproduce ch3` (9 in-model and 6 outside kinds x 10 others, 6 sets, people-like answers, identification, d = 4-8, rules, noise) | "
+        f"| full `reproduce ch3` ({len(KINDS)} in-model and {len(OUTSIDE_KINDS)} outside kinds x 10 others, 6 sets, people-like "
+        "answers, identification, d = 4-8, rules, noise) | "
         f"{res['reproduce_ch3_s']:.0f} s | < 180 s |",
         f"| its CPU, every process of the cluster and the bench | {total:.0f} s: "
         + ", ".join(f"{k} {v:.0f}" for k, v in cpu.items()) + " | - |",
