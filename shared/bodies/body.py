@@ -318,11 +318,12 @@ def foot_points(body: Body, q: np.ndarray, anchors: list | None = None) -> np.nd
     data = mujoco.MjData(m)
     anchors = foot_anchors(body) if anchors is None else anchors
     pts = np.empty((len(q), len(anchors), 3))
+    qpos, xpos, xmat = data.qpos, data.xpos, data.xmat.reshape(-1, 3, 3)  # views, looked up once
     for t in range(len(q)):
-        data.qpos[:] = q[t]
+        qpos[:] = q[t]
         mujoco.mj_kinematics(m, data)
         for k, (b, local) in enumerate(anchors):
-            pts[t, k] = data.xpos[b] + data.xmat[b].reshape(3, 3) @ local
+            pts[t, k] = xpos[b] + xmat[b] @ local
     return pts
 
 
