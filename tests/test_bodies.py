@@ -170,6 +170,44 @@ def test_the_dynamic_balance_check_sees_what_the_static_one_cannot(bundled):
     assert counts[1] > counts[0] and counts[1] > 20, counts
 
 
+def test_the_centre_of_pressure_and_the_hull_distances_equal_their_frame_by_frame_reference(bundled):
+    """All frames' centres of pressure solved at once are each frame's own 2 x 2 solve, to the
+    bit (a frame whose system is singular stays NaN); points judged on one hull are judged as each
+    alone on it, and a contact that spans no area (two points) gives each point's distance to
+    the segment."""
+    from scipy.spatial import ConvexHull
+
+    from shared.bodies.body import _centre_of_pressure, _hull_distances, _root_wrench, inverse_dynamics, qpos_trajectory
+    from shared.bodies.human import human_body
+    from shared.io import load_clip
+
+    clip = load_clip(bundled / "amc/squat1Reps/HDM_bd_squat1Reps_001_120.amc").resample(30)
+    body = human_body(clip.skeleton)
+    q = qpos_trajectory(body, clip)
+    force, moment, origin = _root_wrench(body, q, inverse_dynamics(body, q, clip.fps)[2])
+    force[3] = 0.0  # no force: a singular system
+    up, ground = body.up_axis, -0.01
+    plane = [i for i in range(3) if i != up]
+    reference = np.full((len(force), 2), np.nan)
+    for t in range(len(force)):
+        def horizontal(pa, pb, t=t):
+            p = np.empty(3)
+            p[plane[0]], p[plane[1]], p[up] = pa, pb, ground
+            return (moment[t] + np.cross(origin[t] - p, force[t]))[plane]
+        f0 = horizontal(0.0, 0.0)
+        a = np.column_stack([horizontal(1.0, 0.0) - f0, horizontal(0.0, 1.0) - f0])
+        if abs(np.linalg.det(a)) > 1e-9:
+            reference[t] = np.linalg.solve(a, -f0)
+    cop = _centre_of_pressure(force, moment, origin, up, ground)
+    assert np.isnan(cop[3]).all() and np.isfinite(np.delete(cop, 3, axis=0)).all()
+    np.testing.assert_array_equal(cop, reference)
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    points = [np.array([0.5, 0.5]), np.array([2.0, 0.5]), np.array([0.5, -0.25])]
+    eq = ConvexHull(square).equations
+    assert _hull_distances(square, points) == [float(np.max(eq[:, :2] @ p + eq[:, 2])) for p in points] == [-0.5, 1.0, 0.25]
+    assert _hull_distances(square[:2], points) == [0.5, np.hypot(1.0, 0.5), 0.25]
+
+
 def test_a_tracking_controller_on_a_simulated_floor_needs_a_hand_only_where_the_motion_is_too_fast(bundled):
     """The simulated test (shared/bodies/tracking.py): the body stands on a MuJoCo floor and a
     tracking controller follows the motion, the floor pushing where the soles touch; a pose
