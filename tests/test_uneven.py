@@ -14,6 +14,7 @@ from shared.errors import BadInput
 from shared.estimation.batch import Batch, g_and_gradient
 from shared.estimation.body import (
     BodyEstimate,
+    bend_forearm,
     column_names,
     nonnegative_least_squares,
     self_regressor,
@@ -136,11 +137,9 @@ def test_the_first_moment_columns_reproduce_a_weight_off_the_line():
     bend = np.radians(-45.0)
     held = still.with_data(np.where(np.array(still.channels) == "elbow", 0.0, still.data))
     truth = _tau(small_humanoid(BodySpec(mass=2.4, fused={"elbow": -45.0})), held, shoulder)
-    forearm_kg = LINK_SHARE["forearm"] * 2.4
     theta = np.r_[_theta(2.4, shoulder), np.zeros(4)]
-    theta[names.index("forearm.gravity")] = np.cos(bend)  # its first moment along the line
-    theta[names.index("elbow_mass")] = forearm_kg * (1 - np.cos(bend))  # its mass stays at the elbow
-    theta[names.index("ahead.forearm")] = forearm_kg * 0.05 * abs(np.sin(bend))  # flexed: the hand comes forward
+    bend_forearm(theta, {n: k for k, n in enumerate(names)}, -bend)  # what rule identification's bodies are made with
+    assert theta[names.index("ahead.forearm")] > 0 and theta[names.index("behind.forearm")] == 0  # flexed: forward
     y = self_regressor(held, shoulder, missing=["elbow"], offsets=True)
     assert np.abs(y @ theta - truth).max() < 1e-7 * np.abs(truth).max()
     theta[names.index("ahead.forearm")] = 0.0

@@ -79,9 +79,9 @@ class BodySpec:
         bad = [j for j in self.missing if j not in JOINTS]
         if bad:
             raise BadInput(f"body missing joints must be among {', '.join(JOINTS)}, got {bad}", field="missing")
-        shoulder = [j for j in self.fused if j not in FUSIBLE]
-        if shoulder:
-            raise BadInput(f"only a joint alone on its link can be fused ({', '.join(FUSIBLE)}), got {shoulder}",
+        unfusible = [j for j in self.fused if j not in FUSIBLE]
+        if unfusible:
+            raise BadInput(f"only a joint alone on its link can be fused ({', '.join(FUSIBLE)}), got {unfusible}",
                            field="fused")
         both = [j for j in self.fused if j in self.missing]
         if both:

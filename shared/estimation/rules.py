@@ -370,8 +370,8 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
     ``PLAUSIBLE_BEND`` (its first moment turned ahead or behind, its mass at the elbow kept; drawn
     from a second stream, so the bodies' other draws are those of before). The first row is the
     self. The overall scale does not matter to comparisons."""
-    from shared.bodies.robot import LENGTHS, LINK_SHARE
-    from shared.estimation.body import LINKS, SELF_MASS, column_names, theta_self
+    from shared.bodies.robot import LINK_SHARE
+    from shared.estimation.body import LINKS, SELF_MASS, bend_forearm, column_names, theta_self
 
     names = column_names(joints, offsets=True)
     r = np.random.default_rng(seed)
@@ -405,12 +405,7 @@ def plausible_bodies(joints, n: int, seed: int = 0) -> np.ndarray:
             for j in joints:
                 out[i, col[f"armature.{j}"]] = r.exponential(PLAUSIBLE_ARMATURE)
         if "ahead.forearm" in col and bends.random() < 0.5:
-            phi = bends.uniform(-PLAUSIBLE_BEND, PLAUSIBLE_BEND)
-            along = out[i, col["forearm.gravity"]]  # the forearm's first moment along its line, in the self's
-            out[i, col["forearm.gravity"]] = along * np.cos(phi)
-            out[i, col["elbow_mass"]] += mass["forearm"] * LINK_SHARE["forearm"] * SELF_MASS * (1.0 - np.cos(phi))
-            out[i, col["ahead.forearm" if phi > 0 else "behind.forearm"]] = (
-                along * LINK_SHARE["forearm"] * SELF_MASS * LENGTHS["fore"] / 2 * abs(np.sin(phi)))
+            bend_forearm(out[i], col, bends.uniform(-PLAUSIBLE_BEND, PLAUSIBLE_BEND), mass["forearm"])
     return out
 
 
