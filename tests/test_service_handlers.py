@@ -138,3 +138,28 @@ def test_the_estimators_kept_loads_under_many_workers_at_once(tmp_path):
         got = list(pool.map(lambda n: (n, est.load(n).language.d), names))
     assert all(d == 4 + int(n[1:]) % 5 for n, d in got) and len(got) == 3000
     assert len(est.loaded) <= 64
+
+
+def test_an_others_file_is_synced_when_made_and_its_counter_written_atomically_after_each_answer(tmp_path, monkeypatch):
+    """Creating an other is synced to the disk; after an answer only its question counter moved, and
+    the file is rewritten whole (by rename) without an fsync: a fresh store reads the counter back."""
+    import os
+
+    from schemas.common import clip_to_wire
+    from shared.estimation.motions import basic_motions
+
+    synced: list = []
+    real = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: synced.append(fd) or real(fd))
+    sim = SimulatorHandlers(AgentStore(tmp_path), lambda *event: None)
+    _call(simulator_contract, sim, "other_create", {"other": "o1", "kind": "simulated", "params": {"mass": 4.8, "d": 4}})
+    assert len(synced) == 1
+    wire = clip_to_wire(basic_motions()[0])
+    for _ in range(3):
+        _call(simulator_contract, sim, "other_ask", {"other": "o1", "kind": "open", "clips": [wire]})
+    assert len(synced) == 1  # the answers' counter writes: not synced
+    assert AgentStore(tmp_path).other("o1")[1].asked == 3
+    assert sorted(p.name for p in (tmp_path / "others").iterdir()) == ["o1.json"]  # no temporary file left
+    again = SimulatorHandlers(AgentStore(tmp_path), lambda *event: None)  # a restarted simulator goes on counting
+    _call(simulator_contract, again, "other_ask", {"other": "o1", "kind": "open", "clips": [wire]})
+    assert AgentStore(tmp_path).other("o1")[1].asked == 4 and len(synced) == 1

@@ -72,11 +72,11 @@ class AgentStore:
         obj.asked = int(d.get("asked", 0))
         return kind, obj
 
-    def _saving(self, table: dict, name: str, path: Path, load, write) -> None:
+    def _saving(self, table: dict, name: str, path: Path, load, write, durable: bool = True) -> None:
         """Write ``table[name]`` to ``path``; when the write fails (a full disk), put back what is on
         disk, so memory never runs ahead of the files (an other's noise, a learner's memory)."""
         try:
-            atomic_write(path, write)
+            atomic_write(path, write, durable)
         except OSError:
             with self.lock:
                 if path.exists():
@@ -106,11 +106,14 @@ class AgentStore:
                 raise NotFound(f"no other named {name!r} (others: {', '.join(sorted(self.others)) or 'none'})", other=name)
             return self.others[name]
 
-    def save_other(self, name: str) -> None:
+    def save_other(self, name: str, durable: bool = True) -> None:
+        """Write the other's file; ``durable=False`` after an answer, when only its question counter
+        moved: atomic, not synced (:mod:`shared.io.atomic`; a power loss may replay the last answers'
+        random draws, never lose the other)."""
         kind, obj = self.others[name]
         text = json.dumps({"kind": kind, **obj.to_dict()}).encode()
         self._saving(self.others, name, self.root / "others" / f"{_check(name)}.json", self._load_other,
-                     lambda f: f.write(text))
+                     lambda f: f.write(text), durable)
 
     # ------------------------------------------------------------------ learners
     def add_learner(self, name: str, learner: SimulatedLearner, replace: bool = False) -> None:
