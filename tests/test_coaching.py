@@ -369,3 +369,30 @@ def test_the_balance_tolerance_is_what_real_takes_measure(hdm05, tmp_path):
     assert res["actors"] == ["bd", "bk"] and res["pairs"] > 200
     for kind, tolerance in BALANCE_TOLERANCE.items():
         assert res["tests"][kind]["tolerance"] == pytest.approx(tolerance, abs=0.005), kind
+
+
+def test_warming_the_coach_loads_every_kernel_a_trials_scoring_runs():
+    """In a fresh process, ``warm()`` (run at the coach service's start) leaves nothing for a first
+    trial's eq. 6.5 distance to compile or load: the same kernels and machine code after a real one."""
+    import subprocess
+    import sys
+
+    code = """
+import numpy as np
+from shared.coaching import session
+from shared.pss import hmm
+
+def loaded():
+    k = hmm._estep_scaled._compiled
+    return None if k is None else sorted(map(str, k.signatures))
+
+assert loaded() is None
+session.warm()
+before = loaded()
+r = np.random.default_rng(1)
+session._d_cop(r.normal(size=(90, 3)), r.normal(size=(75, 3)))  # a trial's centres of gravity
+assert before and loaded() == before, (before, loaded())
+print("ok")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr

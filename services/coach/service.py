@@ -31,7 +31,7 @@ from shared.coaching.policies import (
     fit_nb,
     simulated_coach_demonstrations,
 )
-from shared.coaching.session import Session, Trial, session_to_dict, start, trial
+from shared.coaching.session import Session, Trial, session_to_dict, start, trial, warm
 from shared.deadline import check_time, completed
 from shared.errors import BadInput, Conflict, NotFound
 from shared.io import load_clip, save_clip
@@ -337,6 +337,7 @@ class CoachHandlers:
 
 def make_service(settings: Settings | None = None) -> Service:
     settings = settings or Settings()
+    warm()  # before serving: a person's first trial waits on it otherwise
     root = settings.data_dir("coach")
     root.mkdir(parents=True, exist_ok=True)
     svc = Service(contract.SERVICE, contract.ENDPOINTS, contract.EVENTS, settings=settings)

@@ -146,6 +146,14 @@ def _d_cop(target_cog: np.ndarray, attempt_cog: np.ndarray) -> float:
     return float(hmm_distance(a, b))
 
 
+def warm() -> None:
+    """Load the compiled kernels a trial's scoring runs (:func:`_d_cop`'s HMMs and eq. 2.4) once, at
+    the coach service's start: the first trial of a live study paid 0.4-0.6 s for them (numba's
+    import and its cached machine code) after the person's fifth repetition."""
+    r = np.random.default_rng(0)
+    _d_cop(r.random((12, 3)), r.random((12, 3)))
+
+
 def _wrap(deg: np.ndarray) -> np.ndarray:
     return (deg + 180.0) % 360.0 - 180.0
 
