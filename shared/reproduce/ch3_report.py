@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from shared.agents.population import OUTSIDE_KINDS
+from shared.estimation.rules import CONFIDENCE, MAX_QUESTIONS
 
 # the run's settings (shared.reproduce.ch3 runs with them) and the thesis's figures to compare with
 SETS = 6
@@ -397,7 +398,7 @@ def write_report(out: Path, res: dict, seconds: float, ch=None) -> Path:
               + (f" **At least 95 % with 20 % inconsistent answers: "
                  f"{verdict(all(r >= GOALS['identification_noisy'] for r in goal_20.values()))}** (lowest: {worst20[0]}, "
                  f"{_pct(worst20[1], 0)})." if worst20 else ""),
-              "", "A failure is either a wrong rule or no rule reaching 99.9 % within 60 questions; both count against "
+              "", f"A failure is either a wrong rule or no rule reaching {CONFIDENCE * 100:g} % within {MAX_QUESTIONS} questions; both count against "
               "the rate. The 12 weighted rules (f1-f4 as they are, with the knee doubled, with the shoulder pitch "
               "doubled) cannot all be told apart once the body is unknown: a rule that doubles the knee's torque "
               "answers every comparison as an unweighted rule does on a body whose knee torques are twice as large, "
