@@ -50,14 +50,6 @@ from shared.errors import MirrorcoachError
 from shared.extras import missing
 
 PLAN = Path(__file__).resolve().with_name("cluster.toml")  # package data: the plan travels with the wheel
-#: the router's malloc settings (each unless the environment sets it): glibc's default of 8 arenas
-#: per core let Zenoh's threads spread client sessions' allocations over arenas that keep their
-#: freed memory, and the router's resident memory climbed 41 -> 95 MB over 10,000 client sessions.
-#: Measured with ``python -m bench.memory --bursts 20`` (4,000 sessions) and ``bench.bus``, two
-#: runs of each setting alternated: the default 69 / 69 MB (20 concurrent recognitions 235 / 259
-#: per s), 4 arenas 56 / 55 MB (267 / 349 per s), 2 arenas 51 / 47 MB (188 / 273 per s),
-#: ``MALLOC_MMAP_THRESHOLD_`` 128 KB 77 / 77 MB: 4, the memory without a cost in throughput
-ROUTER_MALLOC = {"MALLOC_ARENA_MAX": "4"}
 log = logging.getLogger("mirrorcoach.supervisor")
 
 
@@ -147,13 +139,10 @@ class Supervisor:
 
     def _start(self, p: Proc) -> None:
         self.s.log_dir.mkdir(parents=True, exist_ok=True)
-        env = os.environ.copy()
-        if p.name == "router":
-            for k, v in ROUTER_MALLOC.items():
-                env.setdefault(k, v)
         with open(self.s.log_dir / f"{p.name}.log", "ab") as out:
             p.popen = subprocess.Popen([sys.executable, "-m", p.module], stdout=out, stderr=subprocess.STDOUT,
-                                       stdin=subprocess.DEVNULL, env=env, preexec_fn=self._preexec)
+                                       stdin=subprocess.DEVNULL, env=os.environ.copy(),
+                                       preexec_fn=self._preexec)
         p.started = time.monotonic()
         p.restart_at = None
         write_pid(self.s.run_dir / f"{p.name}.pid", p.popen.pid)
