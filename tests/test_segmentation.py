@@ -372,3 +372,28 @@ def test_the_spaces_ratio_from_its_nearest_proto_symbols_alone():
     assert naming.distance_ratio(labels, d, "squat") == pytest.approx(2.0)
     assert naming.distance_ratio(labels, d, "jump") == np.inf
     assert naming.distance_ratio(np.array(["kick", "kick"]), np.array([1.0, 4.0]), "kick") == pytest.approx(0.25)
+
+
+def test_scoring_a_long_takes_stretches_keeps_only_the_templates_it_returns():
+    """A take of 100,000 frames has about 100,000 candidate stretches; their templates, all held
+    until the cheapest were picked, took one segmentation to 5.6 GB. The same stretches scored
+    keep no more than the ``MAX_CHECKS`` returned (tracemalloc counts numpy's bytes exactly)."""
+    import tracemalloc
+
+    r = np.random.default_rng(0)
+    a = np.cumsum(r.normal(size=(30, 12)), axis=0)
+    b = np.cumsum(r.normal(size=(4000, 12)), axis=0)
+    stretches = {(s, s + 30) for s in range(0, 3960, 2)}  # 1,980 stretches of the target's length
+    how = seg.Settings(min_amplitude=0.0)
+    target = seg._Template(a, posture=how.posture)
+    seg._score(a, b, {(0, 30)}, target, 1e-6, how)  # the compiled alignment loaded before counting
+    tracemalloc.start()
+    try:
+        scored = seg._score(a, b, stretches, target, 1e-6, how)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert len(scored) == seg.MAX_CHECKS
+    assert [x[:3] for x in scored] == sorted(x[:3] for x in scored)
+    one = 30 * 12 * 8  # a stretch's shape, in bytes (its template holds about twice that)
+    assert peak < 300 * one, peak  # 1,980 templates held together are over 2,000 shapes
