@@ -82,7 +82,8 @@ def test_the_simulator_creates_asks_and_reveals_an_other_on_its_own(tmp_path):
 
 def test_what_the_selfs_body_gives_is_computed_once_and_a_failure_is_asked_again():
     """The estimator's cache of the self's regressors and torques (``Once``): requests for one
-    key at once wait for one computation; a failed one is not kept; the table is bounded."""
+    key at once wait for one computation; a failed one is not kept; the table is bounded by keys
+    and by bytes."""
     import threading
 
     from shared.once import Once
@@ -119,6 +120,19 @@ def test_what_the_selfs_body_gives_is_computed_once_and_a_failure_is_asked_again
     once.once(2, lambda: "again", 10.0)  # kept: asked again, it becomes the most recent
     once.once(5, lambda: 5, 10.0)
     assert list(once.table) == [4, 2, 5]  # the least recently asked (3) forgotten, not the oldest kept (2)
+
+    # bounded by bytes too: a value over max_bytes / 16 is answered but not kept, and past max_bytes
+    # of kept values the least recently asked go
+    sized = Once(limit=100, max_bytes=16 * 800)
+    huge = sized.once("huge", lambda: np.zeros(101), 10.0)  # 808 bytes > 800
+    assert huge.shape == (101,) and "huge" not in sized.table and sized.kept_bytes == 0
+    for i in range(20):
+        sized.once(i, lambda: np.zeros(100), 10.0)  # 800 bytes each: 16 fit
+    assert list(sized.table) == list(range(4, 20)) and sized.kept_bytes == 16 * 800
+    sized.once("pair", lambda: (np.zeros(50), np.zeros(50)), 10.0)  # a tuple's arrays summed
+    assert list(sized.table)[0] == 5 and sized.kept_bytes == 16 * 800
+    sized.clear()
+    assert not sized.table and sized.kept_bytes == 0
 
 
 def test_the_estimators_kept_loads_under_many_workers_at_once(tmp_path):

@@ -239,8 +239,7 @@ def test_an_other_keeps_its_bodys_torques_of_a_motion_but_not_what_it_was_handed
     from shared.agents.other import _PERFORMED, KEPT_MOTIONS
     from shared.bodies.body import perform
 
-    with _PERFORMED.lock:  # the process's other tests may have filled it: counted from empty
-        _PERFORMED.table.clear()
+    _PERFORMED.clear()  # the process's other tests may have filled it: counted from empty
     m = basic_motions(ARM)
     params = population("mass", 1)[0]
     other = SimulatedOther("x", OtherParams(**params))

@@ -177,12 +177,13 @@ def transmitted(tau: np.ndarray, motion: Clip, joints, t: dict | None, asked: in
 
 
 KEPT_MOTIONS = 1024  # (body, joints, motion) whose torques the process keeps (_PERFORMED)
+KEPT_BYTES = 64 << 20  # and at most this many bytes of them (a motion's over 4 MB answered, not kept)
 
 
 #: (body, joints, motion) -> the body's torques: a body never changes, rule identification asks about
 #: pairs of the same 20 motions again and again (two inverse dynamics a question before), and others of
 #: the same body (the same population with another answer noise or rule) share them
-_PERFORMED = Once(KEPT_MOTIONS)
+_PERFORMED = Once(KEPT_MOTIONS, KEPT_BYTES)
 
 
 class SimulatedOther:
