@@ -19,7 +19,10 @@ Measured on a private cluster, for every run and every service: the peak residen
 the run's requests work (``VmHWM``, reset before), the answers (a request the budget cannot take
 now waits for memory; one it can never take is refused up front), and the resident memory after
 them against the level before (memory returned), with each service's caches already loaded by
-one short request of the same kind first.
+short requests of the same kind first, as many at once as there are clients (a service's worker
+threads each keep their own caches: a simulator worker's MuJoCo data of a body holds 12 MB once it
+has performed a long clip, so four workers' first large requests left the simulator 49 MB above a
+level measured after one worker had been warmed, and at that level after every later round).
 
 Writes ``bench/results/budget.json`` and ``bench/results/budget.md``.
 """
@@ -66,7 +69,7 @@ class Run:
     verb: str
     what: str
     call: Callable
-    warm: Callable  # one short request of the same kind: the service's caches, before the level
+    warm: Callable  # warm(client, i): client i's short request of the same kind (the caches, before the level)
 
 
 def long_clip(base, frames: int, name: str):
@@ -94,24 +97,24 @@ def runs_for(args, c, train, base) -> list[Run]:
     out = [
         Run("pss", "recognize", f"a clip of {args.frames:,} frames",
             lambda k, i: k.request("pss", "recognize", {"space": "budget", "clips": [wire]}, timeout=900),
-            lambda k: k.request("pss", "recognize", {"space": "budget", "clips": [clip_to_wire(train[0])]})),
+            lambda k, i: k.request("pss", "recognize", {"space": "budget", "clips": [clip_to_wire(train[0])]})),
         Run("pss", "generate", f"{args.frames:,} frames",
             lambda k, i: k.request("pss", "generate", {"space": "budget", "mix": {train[0].name: 1.0},
                                                        "frames": args.frames}, timeout=900),
-            lambda k: k.request("pss", "generate", {"space": "budget", "mix": {train[0].name: 1.0}, "frames": 100})),
+            lambda k, i: k.request("pss", "generate", {"space": "budget", "mix": {train[0].name: 1.0}, "frames": 100})),
         Run("simulator", "perform", f"{PERFORM_FRAMES:,} frames on a human body",
             lambda k, i: k.request("simulator", "perform", human, timeout=900),
-            lambda k: k.request("simulator", "perform", short)),
+            lambda k, i: k.request("simulator", "perform", short)),
     ]
     per = args.frames // ATTEMPT_CLIPS
     reps = [clip_to_wire(long_clip(x, per, f"rep{j}"), with_skeleton=False)
             for j, x in enumerate((train * ATTEMPT_CLIPS)[:ATTEMPT_CLIPS])]
     for i in range(args.clients):
         c.request("coach", "start", {"session": f"budget{i}", "target": clip_to_wire(base), "replace": True})
-    c.request("coach", "start", {"session": "budget-warm", "target": clip_to_wire(base), "replace": True})
+        c.request("coach", "start", {"session": f"budget-warm{i}", "target": clip_to_wire(base), "replace": True})
     out.append(Run("coach", "attempt", f"{ATTEMPT_CLIPS} repetitions of {per:,} frames",
                    lambda k, i: k.request("coach", "attempt", {"session": f"budget{i}", "clips": reps}, timeout=1800),
-                   lambda k: k.request("coach", "attempt", {"session": "budget-warm",
+                   lambda k, i: k.request("coach", "attempt", {"session": f"budget-warm{i}",
                                                             "clips": [clip_to_wire(train[0], False)]}, timeout=600)))
     arm_frames = ARM_PER_FRAME * args.frames
     arms = [clip_to_wire(arm_motion(arm_frames, s)) for s in (1, 2)]
@@ -121,7 +124,7 @@ def runs_for(args, c, train, base) -> list[Run]:
     out.append(Run("dialogue", "ask_compare", f"two arm motions of {arm_frames:,} frames",
                    lambda k, i: k.request("dialogue", "ask_compare", {"dialogue": f"budget{i}", "other": f"budget{i}",
                                                                       "clips": arms, "timeout": 1800}, timeout=1900),
-                   lambda k: k.request("dialogue", "ask_compare", {"dialogue": "budget-warm", "other": "budget0",
+                   lambda k, i: k.request("dialogue", "ask_compare", {"dialogue": f"budget-warm{i}", "other": f"budget{i}",
                                                                    "clips": small_arms})))
     per = args.frames // REPLAY_CLIPS
     replay = [clip_to_wire(long_clip(x, per, f"rep{j}")) for j, x in enumerate((train * REPLAY_CLIPS)[:REPLAY_CLIPS])]
@@ -139,17 +142,16 @@ def runs_for(args, c, train, base) -> list[Run]:
 
     out.append(Run("capture", "record+segment", f"a replay of {REPLAY_CLIPS} clips ({args.frames:,} frames) "
                    "and its repetitions", lambda k, i: take(k, i, replay),
-                   lambda k: take(k, "-warm", [target])))
+                   lambda k, i: take(k, f"-warm{i}", replay[:3])))  # the same paths (a take of few repetitions)
     for i in range(args.clients):
         c.request("estimator", "start", {"estimate": f"budget{i}", "other": f"budget{i}", "replace": True})
 
-    def first_sets(k):  # every estimate's first set: the service keeps its last loaded estimates (a cache)
-        for i in range(args.clients):
-            k.request("estimator", "converse", {"estimate": f"budget{i}", "sets": 1}, timeout=900)
+    def first_set(k, i):  # every estimate's first set: the service keeps its last loaded estimates (a cache)
+        k.request("estimator", "converse", {"estimate": f"budget{i}", "sets": 1}, timeout=900)
 
     out.append(Run("estimator", "converse", "two more conversation sets",
                    lambda k, i: k.request("estimator", "converse", {"estimate": f"budget{i}", "sets": 2}, timeout=1800),
-                   first_sets))
+                   first_set))
     return out
 
 
@@ -175,8 +177,12 @@ def main(argv=None) -> int:
             label = f"{run.service}/{run.verb}"
             if args.only and label not in args.only:
                 continue
-            with Client(s) as c:
-                run.warm(c)
+            def warm(i, run=run):
+                with Client(s) as c:
+                    run.warm(c, i)
+
+            with ThreadPoolExecutor(args.clients) as pool:
+                list(pool.map(warm, range(args.clients)))
             pids = {k: v for k, v in cluster_pids(s).items() if k in SERVICES}
             time.sleep(2.0)
             before = {k: rss_mb(p) for k, p in pids.items()}

@@ -24,10 +24,10 @@ import importlib  # noqa: E402
 import logging  # noqa: E402
 import sys  # noqa: E402
 
-from shared.bus.budget import one_arena  # noqa: E402
+from shared.bus.budget import service_allocator  # noqa: E402
 from shared.errors import MirrorcoachError  # noqa: E402
 
-one_arena()  # before any worker thread: memory a large request freed goes back to the system
+ALLOCATOR = service_allocator()  # before any worker thread: memory a large request freed goes back to the system
 
 log = logging.getLogger("mirrorcoach.runner")
 
@@ -56,5 +56,6 @@ def main(name: str, module: str) -> int:
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)  # the pools the service's imports loaded, whatever the environment said
+    log.info("%s", ALLOCATOR)
     log.info("native thread pools: %s", ", ".join(f"{k} {v}" for k, v in sorted(native_threads().items())) or "none")
     return svc.run()

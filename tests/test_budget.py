@@ -68,3 +68,47 @@ def test_memory_held_by_payloads_in_flight_counts_and_a_long_wait_is_unavailable
     held["bytes"] = 10 * MB
     with b.reserve(50 * MB, "pss/recognize"):
         assert b.reserved == 50 * MB
+
+
+_FREED = """
+import ctypes, sys
+from shared.bus.budget import service_allocator
+print(service_allocator(), file=sys.stderr)
+import numpy as np
+
+class MallInfo2(ctypes.Structure):  # glibc's mallinfo2: hblkhd, the bytes in blocks mapped on their own
+    _fields_ = [(f, ctypes.c_size_t) for f in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                               "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+libc = ctypes.CDLL("libc.so.6")
+libc.mallinfo2.restype = MallInfo2
+np.ones(1 << 20)  # 8 MB made and freed: glibc's own threshold rises to its size
+a = np.ones(1 << 20)  # the next one
+print(libc.mallinfo2().hblkhd / 2**20)
+"""
+
+
+def test_a_services_large_blocks_go_back_to_the_system_when_freed():
+    """A service maps blocks of ``MMAP_THRESHOLD`` or more on their own (``service_allocator``),
+    so they go back to the system when freed: with glibc's rising threshold, once a large block
+    had been freed the next ones came from the heap, where a block freed between small live ones
+    stays resident (the simulator grew a round of large questions after another).
+    ``MALLOC_MMAP_THRESHOLD_`` in the environment wins: set above the block, it comes from the heap."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+
+    def mapped_mb(extra: dict) -> tuple[float, str]:
+        r = subprocess.run([sys.executable, "-c", _FREED], capture_output=True, text=True, cwd=repo,
+                           env={**env, **extra}, timeout=120)
+        assert r.returncode == 0, r.stderr
+        return float(r.stdout.split()[-1]), r.stderr.strip()
+
+    mapped, said = mapped_mb({})
+    assert mapped >= 8.0 and said == "allocator: one arena, blocks of 1024 KB or more mapped on their own", (mapped, said)
+    mapped, said = mapped_mb({"MALLOC_MMAP_THRESHOLD_": str(64 << 20)})
+    assert mapped < 1.0 and "as MALLOC_MMAP_THRESHOLD_ says (67108864)" in said, (mapped, said)

@@ -500,6 +500,18 @@ def test_the_router_limits_its_malloc_arenas_unless_the_environment_says(cluster
     assert r.stdout.strip() == "malloc arenas as MALLOC_ARENA_MAX says (2)", r.stdout + r.stderr
 
 
+def test_every_service_sets_its_allocator_before_it_serves(cluster):
+    """Each service answering requests, however it is started, allocates from one arena and maps large
+    blocks on their own (``service_allocator``), and says so in its log."""
+    from shared.bus.budget import MMAP_THRESHOLD
+
+    logs = Path(cluster["MIRRORCOACH_HOME"]) / "logs"
+    for name in ("capture", "coach", "dialogue", "estimator", "pss", "simulator"):  # the observer answers no requests
+        log = (logs / f"{name}.log").read_text()
+        assert f"allocator: one arena, blocks of {MMAP_THRESHOLD // 1024} KB or more mapped on their own" in log, (
+            name, log[-2000:])
+
+
 def test_a_reused_pid_is_never_taken_for_the_supervisor(tmp_path):
     """Another process's pid in the pid file made `up` refuse for 120 s and
     `down` signal that unrelated process."""

@@ -8,9 +8,10 @@ before its work starts (a multiple of its payload, or the verb's own estimate de
 bench.budget``); it runs when its cost fits beside the requests in progress, waits for memory
 (bounded) when it does not fit now, and is refused up front when it can never fit.
 After a large request is answered the C allocator is asked to return freed memory to the system
-(``malloc_trim``), and services allocate from one arena (:func:`one_arena`): freed blocks
-otherwise stay in the worker threads' arenas, and a reply's buffers are freed only once it is
-sent (trimming before that left one reply's size held: 40-370 MB).
+(``malloc_trim``), and services allocate from one arena with a fixed mmap threshold
+(:func:`service_allocator`): freed blocks otherwise stay in the worker threads' arenas, and a
+reply's buffers are freed only once it is sent (trimming before that left one reply's size held:
+40-370 MB).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import ctypes
 import ctypes.util
 import gc
 import logging
+import os
 import threading
 import time
 from contextlib import contextmanager
@@ -32,7 +34,15 @@ MB = 2**20
 #: a request whose estimate is above this is followed by a trim of the allocator's free memory
 TRIM_ABOVE = 16 * MB
 _libc: Any = None  # glibc (ctypes.CDLL) once loaded; False: not glibc
-M_ARENA_MAX = -8  # glibc's mallopt parameter
+M_ARENA_MAX = -8  # glibc's mallopt parameters
+M_MMAP_THRESHOLD = -3
+#: blocks of at least this many bytes are mapped on their own and unmapped when freed. glibc's own
+#: threshold starts at 128 KB and rises to the largest block freed (up to 32 MB), after which such
+#: blocks come from the heap, where a trim cannot return what smaller live blocks sit between:
+#: the simulator answering four comparisons of two 900,000-frame motions at once grew 140 -> 168 ->
+#: 182 -> 196 -> 223 -> 237 -> 237 -> 250 MB over 7 rounds of them (each round the same requests);
+#: with this threshold 140 -> 143 -> 144 -> 144 -> 145 -> 146 MB over 5
+MMAP_THRESHOLD = 1 << 20
 
 
 def rss_bytes() -> int:
@@ -64,13 +74,21 @@ def trim() -> None:
         _libc.malloc_trim(0)
 
 
-def one_arena() -> None:
-    """Every thread allocates from one arena (glibc's ``M_ARENA_MAX``; call before the worker
-    threads start). With an arena per worker thread, four large requests at once left 50-80 MB
-    in arenas that a trim could not return; with one, memory went back to its level (the workers
-    hold the GIL for most of their work, so they rarely wait for the allocator)."""
-    if _glibc():
-        _libc.mallopt(M_ARENA_MAX, 1)
+def service_allocator() -> str:
+    """A service's allocator, set before its worker threads start (glibc's ``mallopt``); what was
+    done. Every thread allocates from one arena (``M_ARENA_MAX``): with an arena per worker
+    thread, four large requests at once left 50-80 MB in arenas that a trim could not return;
+    with one, memory went back to its level (the workers hold the GIL for most of their work, so
+    they rarely wait for the allocator). Blocks of :data:`MMAP_THRESHOLD` or more are mapped on
+    their own (``M_MMAP_THRESHOLD``), unless ``MALLOC_MMAP_THRESHOLD_`` in the environment says
+    otherwise."""
+    if not _glibc():
+        return "allocator as the C library makes it (not glibc)"
+    _libc.mallopt(M_ARENA_MAX, 1)
+    if os.environ.get("MALLOC_MMAP_THRESHOLD_"):
+        return f"allocator: one arena, mmap threshold as MALLOC_MMAP_THRESHOLD_ says ({os.environ['MALLOC_MMAP_THRESHOLD_']})"
+    _libc.mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+    return f"allocator: one arena, blocks of {MMAP_THRESHOLD // 1024} KB or more mapped on their own"
 
 
 class MemoryBudget:
