@@ -19,10 +19,10 @@ Measured on a private cluster, for every run and every service: the peak residen
 the run's requests work (``VmHWM``, reset before), the answers (a request the budget cannot take
 now waits for memory; one it can never take is refused up front), and the resident memory after
 them against the level before (memory returned), with each service's caches already loaded by
-short requests of the same kind first, as many at once as there are clients (a service's worker
-threads each keep their own caches: a simulator worker's MuJoCo data of a body holds 12 MB once it
-has performed a long clip, so four workers' first large requests left the simulator 49 MB above a
-level measured after one worker had been warmed, and at that level after every later round).
+short requests of the same kind first, as many at once as there are clients: warmed by one, four
+workers' first large performs left the simulator 49 MB above its level, and at that same level
+after every later round (a first use, not growth; its cause not found: in one process, a long
+perform on a new thread leaves nothing behind); warmed by four at once it ends at its level.
 
 Writes ``bench/results/budget.json`` and ``bench/results/budget.md``.
 """
