@@ -36,6 +36,7 @@ label, and with what confidence).
 
 from __future__ import annotations
 
+import json
 import re
 import time
 from collections import Counter
@@ -343,7 +344,8 @@ def main(argv=None) -> int:
         "--choose", action="store_true", help="Also rerun the choices of the travel window, of recognition's "
                                                "pose floor, of the discriminant's weight in the label and of the novelty "
                                                "model's level on the half split's training styles (leave one style "
-                                               "out; about 20 minutes)."))
+                                               "out; about 20 minutes). Without it the last run's choices in --out's "
+                                               "styles.json are carried over, never dropped."))
     folder = args.hdm05.parent / "bandai1" / "bvh"
     clips = load_bandai(folder)
     if len(clips) < 170:
@@ -398,24 +400,46 @@ def main(argv=None) -> int:
         md.append(f"- {r['split']}: " + ("; ".join(f"{k} {v}" for k, v in r["wrong_answers"].items()) or "none")
                   + ". Confusions: " + (", ".join(f"{k} ({v})" for k, v in r["confusions"].items()) or "none"))
     res = {"splits": rows, "styles": styles}
-    if args.choose:
-        from shared.pss.features import TRAVEL_WINDOW
+    previous: dict = {}  # without --choose, the last choices are carried over, never dropped
+    if not args.choose and (args.out / "styles.json").exists():
+        try:
+            previous = json.loads((args.out / "styles.json").read_text())
+        except (OSError, ValueError):
+            previous = {}
+    train = [(s, c) for s, c in clips if s in half]
+    devs: list = []
 
-        res["window_choice"] = choose_window([(s, c) for s, c in clips if s in half])
+    def dev():  # HDM05's dev split, read once for the choices that hold it
+        if not devs:
+            devs.append(_dev_split(args.hdm05))
+        return devs[0]
+
+    def choice(key: str, compute) -> list | None:
+        if args.choose:
+            res[key] = compute()
+        elif key in previous:
+            res[key] = previous[key]
+        return res.get(key)
+
+    if not args.choose and any(k.endswith("_choice") for k in previous):
+        md += ["", f"The choices below are carried over from the last run with `--choose` ({args.out / 'styles.json'}); "
+                   "`--choose` reruns them."]
+    from shared.pss.features import TRAVEL_WINDOW
+
+    if choice("window_choice", lambda: choose_window(train)) is not None:
         md += _table(f"The travel window, chosen on the {len(half)} training styles of the half split alone (leave one "
                      f"style out; ties go to the shorter window; the default is {TRAVEL_WINDOW:g} s, chosen when the label "
                      "was the nearest proto-symbol's: with the discriminant in it the windows lie within a clip of each "
                      "other, docs/pss.md):", ["window", "closed set", "as shown"],
                      [[f"{r['window_s']:g} s", _pct(r["closed"]), _pct(r["as_shown"])] for r in res["window_choice"]])
-        dev = _dev_split(args.hdm05)  # read once for the three choices below
-        res["pose_floor_choice"] = choose_pose_floor([(s, c) for s, c in clips if s in half], dev)
+    if choice("pose_floor_choice", lambda: choose_pose_floor(train, dev())) is not None:
         md += _table(f"The pose floor of a space for other styles (`--pose-floor`, {STYLE_POSE_FLOOR:g}), chosen on the "
                      "same training styles (leave one style out) with HDM05's dev split held at 100 % closed set (chosen "
                      "when the label was the nearest proto-symbol's; with the discriminant in it none to 0.03 tie):",
                      ["floor", "closed set", "as shown", "HDM05 dev split (dg), closed set"],
                      [["none" if r["floor"] is None else format(r["floor"], "g"), _pct(r["closed"]), _pct(r["as_shown"]),
                        _pct(r["dg_closed"])] for r in res["pose_floor_choice"]])
-        res["one_example_floor_choice"] = choose_one_example_floor([(s, c) for s, c in clips if s in half], dev)
+    if choice("one_example_floor_choice", lambda: choose_one_example_floor(train, dev())) is not None:
         md += _table(f"The pose floor of a space of one clip per motion (`ONE_EXAMPLE_POSE_FLOOR`, {ONE_EXAMPLE_POSE_FLOOR:g}, "
                      "what `offline build` and `space build` give such a space: the 'normal' split's default rows), chosen "
                      "on the same training styles, each alone as the space recognising the other seven (the most; ties to "
@@ -425,9 +449,9 @@ def main(argv=None) -> int:
                       "HDM05 bd, bk -> dg, one clip per class (reported)"],
                      [["none" if r["floor"] is None else format(r["floor"], "g"), _pct(r["closed"]), _pct(r["hdm05_tuning"]),
                        _pct(r["hdm05_dg"])] for r in res["one_example_floor_choice"]])
-        from shared.pss.recognition import ONE_EXAMPLE_TEMPERATURE
+    from shared.pss.recognition import ONE_EXAMPLE_TEMPERATURE
 
-        res["one_example_temperature_choice"] = choose_one_example_temperature([(s, c) for s, c in clips if s in half], dev)
+    if choice("one_example_temperature_choice", lambda: choose_one_example_temperature(train, dev())) is not None:
         md += _table(f"The confidence temperature of a space of one clip per motion (`ONE_EXAMPLE_TEMPERATURE`, "
                      f"{ONE_EXAMPLE_TEMPERATURE:g} of its median distance), chosen on the same one-clip spaces (at "
                      f"`ONE_EXAMPLE_POSE_FLOOR`) recognising the other training styles and HDM05's bd and bk each other's "
@@ -436,18 +460,18 @@ def main(argv=None) -> int:
                      ["clips", "n", "optimum", "NLL at the optimum", "NLL at the constant"],
                      [[r["clips"], str(r["n"]), f"{r['optimum']:.3f}", f"{r['nll_optimum']:.3f}",
                        f"{r['nll_constant']:.3f}"] for r in res["one_example_temperature_choice"]])
-        from shared.pss.recognition import DISCRIMINANT_WEIGHT
+    from shared.pss.recognition import DISCRIMINANT_WEIGHT
 
-        res["weight_choice"] = choose_discriminant_weight([(s, c) for s, c in clips if s in half], dev)
+    if choice("weight_choice", lambda: choose_discriminant_weight(train, dev())) is not None:
         md += _table(f"The discriminant's weight in the label (`DISCRIMINANT_WEIGHT`, {DISCRIMINANT_WEIGHT:g}; "
                      "`shared.pss.recognition.nearest_class`), chosen on the same training styles (leave one style out; "
                      "ties go to the smaller weight) with HDM05's dev split held at 100 % closed set:",
                      ["weight", "closed set", "HDM05 dev split (dg), closed set"],
                      [[str(r["weight"]) if isinstance(r["weight"], str) else format(r["weight"], "g"), _pct(r["closed"]),
                        _pct(r["dg_closed"])] for r in res["weight_choice"]])
-        from shared.pss.novelty import NOVELTY_QUANTILE
+    from shared.pss.novelty import NOVELTY_QUANTILE
 
-        res["novelty_level_choice"] = choose_novelty_level([(s, c) for s, c in clips if s in half], dev)
+    if choice("novelty_level_choice", lambda: choose_novelty_level(train, dev())) is not None:
         md += _table(f"The novelty model's level (`NOVELTY_QUANTILE`, {NOVELTY_QUANTILE:g}), chosen on the same training "
                      "styles (leave one style out: the most as shown) among the levels that keep HDM05's dev split, every "
                      "class held out in turn, at 90 % unknown and at most 5 % known clips rejected:",
