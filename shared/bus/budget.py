@@ -40,7 +40,7 @@ M_MMAP_THRESHOLD = -3
 #: threshold starts at 128 KB and rises to the largest block freed (up to 32 MB), after which such
 #: blocks come from the heap, where a trim cannot return what smaller live blocks sit between:
 #: the simulator answering four comparisons of two 900,000-frame motions at once grew 140 -> 168 ->
-#: 182 -> 196 -> 223 -> 237 -> 237 -> 250 MB over 7 rounds of them (each round the same requests);
+#: 182 -> 196 -> 223 -> 236 -> 236 -> 250 MB over 7 rounds of them (each round the same requests);
 #: with this threshold 140 -> 143 -> 144 -> 144 -> 145 -> 146 MB over 5
 MMAP_THRESHOLD = 1 << 20
 
