@@ -19,10 +19,11 @@ Measured on a private cluster, for every run and every service: the peak residen
 the run's requests work (``VmHWM``, reset before), the answers (a request the budget cannot take
 now waits for memory; one it can never take is refused up front), and the resident memory after
 them against the level before (memory returned), with each service's caches already loaded by
-short requests of the same kind first, as many at once as there are clients: warmed by one, four
-workers' first large performs left the simulator 49 MB above its level, and at that same level
-after every later round (a first use, not growth; its cause not found: in one process, a long
-perform on a new thread leaves nothing behind); warmed by four at once it ends at its level.
+short requests of the same kind first, as many at once as there are clients (every worker that
+answers has run once). Before services mapped large blocks on their own (``service_allocator``),
+four workers' first large performs after a one-request warm-up left the simulator 49 MB above its
+level and there over later rounds: blocks in the heap under glibc's raised mmap threshold (with
+``MALLOC_MMAP_THRESHOLD_`` at 32 MB: 255 -> 304 MB; with the services' 1 MB: 254 -> 256 MB).
 
 Writes ``bench/results/budget.json`` and ``bench/results/budget.md``.
 """
