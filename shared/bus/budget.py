@@ -74,6 +74,12 @@ def trim() -> None:
         _libc.malloc_trim(0)
 
 
+def mallopt(param: int, value: int) -> bool:
+    """Set glibc's malloc ``param`` (``M_ARENA_MAX``, ``M_MMAP_THRESHOLD``) to ``value``; False
+    where the C library is not glibc or refuses."""
+    return bool(_glibc()) and _libc.mallopt(param, value) == 1
+
+
 def service_allocator() -> str:
     """A service's allocator, set before its worker threads start (glibc's ``mallopt``); what was
     done. Every thread allocates from one arena (``M_ARENA_MAX``): with an arena per worker
@@ -82,12 +88,11 @@ def service_allocator() -> str:
     they rarely wait for the allocator). Blocks of :data:`MMAP_THRESHOLD` or more are mapped on
     their own (``M_MMAP_THRESHOLD``), unless ``MALLOC_MMAP_THRESHOLD_`` in the environment says
     otherwise."""
-    if not _glibc():
+    if not mallopt(M_ARENA_MAX, 1):
         return "allocator as the C library makes it (not glibc)"
-    _libc.mallopt(M_ARENA_MAX, 1)
     if os.environ.get("MALLOC_MMAP_THRESHOLD_"):
         return f"allocator: one arena, mmap threshold as MALLOC_MMAP_THRESHOLD_ says ({os.environ['MALLOC_MMAP_THRESHOLD_']})"
-    _libc.mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+    mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
     return f"allocator: one arena, blocks of {MMAP_THRESHOLD // 1024} KB or more mapped on their own"
 
 

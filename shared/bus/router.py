@@ -9,7 +9,6 @@ and a TLS handshake that failed (no certificate, another CA, a wrong name).
 
 from __future__ import annotations
 
-import ctypes
 import logging
 import os
 import re
@@ -31,7 +30,6 @@ ZENOH_LOG = "warn,zenoh::net::routing::interceptor::access_control=trace,zenoh_l
 #: ``MALLOC_MMAP_THRESHOLD_`` 77 / 77 MB: 4, the memory without a cost in throughput (those runs set
 #: the environment; asked with ``mallopt`` at start since: 67 MB after 20,000 sessions, 62 before)
 MALLOC_ARENAS = 4
-_M_ARENA_MAX = -8  # glibc's mallopt parameter
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 _DENIED = re.compile(r"CertCommonName\((?P<cn>[^)]*)\).* is unauthorized to (?P<what>.+?) \((?P<flow>ingress|egress)\) "
                      r"on (?P<key>\S+)")
@@ -132,11 +130,9 @@ def limit_malloc_arenas(n: int = MALLOC_ARENAS) -> str:
     threads start, which make the arenas), unless the environment says how many; what was done."""
     if os.environ.get("MALLOC_ARENA_MAX"):
         return f"malloc arenas as MALLOC_ARENA_MAX says ({os.environ['MALLOC_ARENA_MAX']})"
-    try:
-        ok = ctypes.CDLL(None).mallopt(_M_ARENA_MAX, n) == 1
-    except (OSError, AttributeError):  # not glibc
-        ok = False
-    return f"malloc arenas at most {n}" if ok else "malloc arenas as the C library makes them (no mallopt)"
+    from shared.bus.budget import M_ARENA_MAX, mallopt
+
+    return f"malloc arenas at most {n}" if mallopt(M_ARENA_MAX, n) else "malloc arenas as the C library makes them (no mallopt)"
 
 
 def main() -> int:
