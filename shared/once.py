@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from concurrent.futures import Future
 from typing import Any
 
@@ -26,10 +27,15 @@ class Once:
     """A value computed once per key: requests asking for the same key at once wait for one
     answer; a failed one is asked again next time; past ``limit`` keys or ``max_bytes`` of kept
     values the least recently asked are forgotten, and a value larger than ``max_bytes / 16`` is
-    answered but not kept (a few huge requests would otherwise hold the process's memory after
+    answered but not kept (``largest``: a few huge requests would otherwise hold the process's memory after
     them, and push out the many small values asked again and again)."""
 
-    def __init__(self, limit: int = 4096, max_bytes: int = 256 << 20):
+    def __init__(self, limit: int = 4096, max_bytes: int = 256 << 20, largest: int | None = None,
+                 size: Callable[[Any], int] | None = None):
+        """``largest``: the largest value kept (default ``max_bytes / 16``); ``size``: a value's
+        bytes (default :func:`nbytes`)."""
+        self.largest = max_bytes // 16 if largest is None else largest
+        self.size = size or nbytes
         self.table: OrderedDict[Any, Future] = OrderedDict()
         self.sizes: dict[Any, int] = {}  # kept values' bytes, by key (a value being computed: not yet)
         self.kept_bytes = 0
@@ -68,10 +74,10 @@ class Once:
                 fut.set_exception(e)
                 raise
             fut.set_result(value)  # those waiting for it have it even if it is not kept
-            size = nbytes(value)
+            size = self.size(value)
             with self.lock:
                 if self.table.get(key) is fut:
-                    if size > self.max_bytes // 16:
+                    if size > self.largest:
                         self._forget(key)
                     else:
                         self.sizes[key] = size

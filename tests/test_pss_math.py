@@ -237,8 +237,9 @@ def test_a_model_trained_once_is_the_model_trained_anew_and_its_copy_is_the_call
     trained = []
     real = hmm_module.fit_hmm
     monkeypatch.setattr(hmm_module, "fit_hmm", lambda *a, **k: trained.append(1) or real(*a, **k))
-    monkeypatch.setattr(hmm_module, "_TRAINED", hmm_module.OrderedDict())  # (this test's models only)
-    monkeypatch.setattr(hmm_module, "_TRAINED_SIZE", [0])
+    kept = hmm_module._TRAINED
+    monkeypatch.setattr(hmm_module, "_TRAINED", hmm_module.Once(max_bytes=kept.max_bytes, largest=kept.largest,
+                                                                size=kept.size))  # (this test's models only)
     first = hmm_module.fit_hmm_once(reps, 5, var_floor=0.01)
     reference = real(reps, 5, var_floor=0.01)
     for name in ("means", "covars", "stay"):
@@ -249,10 +250,10 @@ def test_a_model_trained_once_is_the_model_trained_anew_and_its_copy_is_the_call
     hmm_module.fit_hmm_once(reps, 5, var_floor=0.02)
     hmm_module.fit_hmm_once([reps[0] + 1e-9] + reps[1:], 5, var_floor=0.01)
     assert len(trained) == 3
-    monkeypatch.setattr(hmm_module, "TRAINED_CACHE_BYTES", 1)  # nothing fits: every call trains
+    monkeypatch.setattr(hmm_module, "_TRAINED", hmm_module.Once(max_bytes=1, largest=1, size=kept.size))  # nothing fits
     hmm_module.fit_hmm_once(reps, 4)
     hmm_module.fit_hmm_once(reps, 4)
-    assert len(trained) == 5 and hmm_module._TRAINED_SIZE[0] <= 1
+    assert len(trained) == 5 and hmm_module._TRAINED.kept_bytes <= 1
 
 
 def test_training_refuses_bad_input():

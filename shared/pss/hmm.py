@@ -26,9 +26,7 @@ after fitting). Tests check that both reach the same log-likelihood.
 
 from __future__ import annotations
 
-import threading
 import warnings
-from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -37,6 +35,7 @@ from shared.compiled import kernel
 from shared.deadline import check_time
 from shared.digest import array_digest
 from shared.errors import ModelError
+from shared.once import Once
 from shared.pss.likelihood import LOG2PI, as_sequences, emission_logprob, forward_backward, forward_loglik
 
 
@@ -233,10 +232,10 @@ def fit_hmm(
     return model
 
 
-_TRAINED: OrderedDict = OrderedDict()  # (sequences, settings) -> model, the most recently used last
-_TRAINED_LOCK = threading.Lock()
-_TRAINED_SIZE = [0]  # bytes of the models kept
 TRAINED_CACHE_BYTES = 16 * 2**20  # the models fit_hmm_once keeps per process, at most
+#: (sequences, settings) -> model: the most recently used kept within TRAINED_CACHE_BYTES
+_TRAINED = Once(limit=1 << 20, max_bytes=TRAINED_CACHE_BYTES, largest=TRAINED_CACHE_BYTES,
+                size=lambda m: m.means.nbytes + m.covars.nbytes + m.stay.nbytes)
 
 
 def fit_hmm_once(sequences, n_states: int, **settings) -> LeftToRightHMM:
@@ -247,21 +246,7 @@ def fit_hmm_once(sequences, n_states: int, **settings) -> LeftToRightHMM:
     :data:`TRAINED_CACHE_BYTES` of models are kept."""
     seqs = as_sequences(sequences)
     key = (array_digest(*seqs), int(n_states), tuple(sorted(settings.items())))
-    with _TRAINED_LOCK:
-        kept = _TRAINED.get(key)
-        if kept is not None:
-            _TRAINED.move_to_end(key)
-    if kept is None:
-        model = fit_hmm(seqs, n_states, **settings)
-        size = model.means.nbytes + model.covars.nbytes + model.stay.nbytes
-        with _TRAINED_LOCK:
-            if key not in _TRAINED:
-                _TRAINED[key] = (model, size)
-                _TRAINED_SIZE[0] += size
-            while _TRAINED_SIZE[0] > TRAINED_CACHE_BYTES and _TRAINED:
-                _TRAINED_SIZE[0] -= _TRAINED.popitem(last=False)[1][1]
-    else:
-        model = kept[0]
+    model = _TRAINED.once(key, lambda: fit_hmm(seqs, n_states, **settings))
     return replace(model, means=model.means.copy(), covars=model.covars.copy(), stay=model.stay.copy(),
                    history=list(model.history))
 
