@@ -188,6 +188,29 @@ def test_errors_are_one_line_without_traceback(bundled, tmp_path):
         assert r.stderr.startswith("error: ") and "Traceback" not in r.stderr, (args, r.stderr)
 
 
+def test_every_study_verb_on_a_folder_that_is_no_study_says_so(bundled, tmp_path):
+    """Before it asks anything of the cluster or the source, each verb says the folder is not a
+    study and how to start one (`study run` said only that target.npz was missing)."""
+    folder = tmp_path / "nostudy"
+    folder.mkdir()
+    for args in (("run", folder, "--source", "tcp://127.0.0.1:9"), ("next", folder), ("report", folder),
+                 ("redo", folder), ("attempt", folder, bundled / SQUAT, "--participant", "P01"),
+                 ("seat", folder, "--coach", "C1"), ("export", folder, "--out", tmp_path / "trials.csv")):
+        r = run("study", *args)
+        assert r.returncode == 2, (args, r.stdout, r.stderr)
+        assert r.stderr.startswith(f"error: {folder} is not a study") and "study init" in r.stderr, (args, r.stderr)
+
+
+def test_help_explains_the_arguments_as_well_as_the_options():
+    """An argument's help text is in `--help` (with click 8.5 and typer 0.19 it was dropped: the
+    Arguments panel listed their names and types only)."""
+    r = run("study", "run", "--help")
+    assert r.returncode == 0, r.stderr
+    assert "The study's folder" in r.stdout and "The live source" in r.stdout, r.stdout
+    r = run("space", "build", "--help")
+    assert r.returncode == 0 and "Name of the space" in r.stdout and "Clip files or folders" in r.stdout, r.stdout
+
+
 def test_schemas_prints_every_contract():
     from schemas import CONTRACTS
 

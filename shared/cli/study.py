@@ -362,6 +362,7 @@ def study_run(folder: Path = FOLDER,
     from shared.io import load_clip
     from shared.reports.study import next_step
 
+    _study(folder)  # a study's folder, or a clear error
     target_clip = load_clip(folder / "target.npz")
     warm(target_clip)
     target = wire(target_clip)
