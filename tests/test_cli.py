@@ -211,6 +211,30 @@ def test_help_explains_the_arguments_as_well_as_the_options():
     assert r.returncode == 0 and "Name of the space" in r.stdout and "Clip files or folders" in r.stdout, r.stdout
 
 
+def test_every_command_and_every_parameter_has_its_help():
+    """`--help` explains each command, argument and option of the whole application (35 had none:
+    `--json`, `--replace`, the names of estimates, learners and sessions, `coach run`'s policy)."""
+    import click
+    import typer.main
+
+    from shared.cli.app import app, register
+
+    register()
+    missing = []
+
+    def walk(cmd, path):
+        if isinstance(cmd, click.Group):
+            for name, sub in cmd.commands.items():
+                walk(sub, [*path, name])
+            return
+        if not cmd.help:
+            missing.append((" ".join(path), "the command itself"))
+        missing.extend((" ".join(path), p.name) for p in cmd.params if not getattr(p, "help", None))
+
+    walk(typer.main.get_command(app), [])
+    assert not missing, missing
+
+
 def test_schemas_prints_every_contract():
     from schemas import CONTRACTS
 

@@ -11,7 +11,19 @@ from typing import Any
 
 import typer
 
-from shared.cli.common import READING, SKELETON_HELP, app, client, fail, jsonable, need, read_clip, wire
+from shared.cli.common import (
+    JSON_HELP,
+    READING,
+    REPLACE_HELP,
+    SKELETON_HELP,
+    app,
+    client,
+    fail,
+    jsonable,
+    need,
+    read_clip,
+    wire,
+)
 
 sim_app = typer.Typer(help="MuJoCo bodies on the simulator service (needs `make up`).", no_args_is_help=True)
 other_app = typer.Typer(help="Others of chapter 3: simulated agents, or a person answering here.", no_args_is_help=True)
@@ -19,6 +31,8 @@ learner_app = typer.Typer(help="Simulated learners of chapters 4-6 (a simulation
 app.add_typer(sim_app, name="sim")
 app.add_typer(other_app, name="other")
 app.add_typer(learner_app, name="learner")
+
+ESTIMATE_HELP = "The estimate (its name, as `estimator start` made it)."
 
 
 def _body_request(body: str) -> dict:
@@ -95,7 +109,7 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                                                     "`other reveal`)."),
                  index: int = typer.Option(0, min=0, max=999, help="Which of the kind's population (0-999)."),
                  population_seed: int = typer.Option(2026, help="Seed of the population."),
-                 replace: bool = typer.Option(False, "--replace")):
+                 replace: bool = typer.Option(False, "--replace", help=REPLACE_HELP)):
     """Create an other: a simulated agent with hidden parameters, or a person's seat."""
     params: dict[str, Any] = {"d": d} if person else {"mass": mass, "rule": rule, "d": d, "noise": noise, "seed": seed}
     if kind is not None and not person:
@@ -178,14 +192,14 @@ def other_answer(name: str | None = typer.Argument(None, help="Only this other's
 
 
 @other_app.command("reveal")
-def other_reveal(name: str = typer.Argument(...)):
+def other_reveal(name: str = typer.Argument(..., help="The simulated other.")):
     """Show an other's hidden parameters (for evaluation; the estimator never asks this)."""
     with client() as c:
         typer.echo(json.dumps(jsonable(c.request("simulator", "other_reveal", {"other": name}))))
 
 
 @app.command("agents")
-def agents_list(as_json: bool = typer.Option(False, "--json")):
+def agents_list(as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
     """Every other and learner on the simulator."""
     with client() as c:
         r = c.request("simulator", "list")
@@ -202,11 +216,11 @@ def agents_list(as_json: bool = typer.Option(False, "--json")):
 
 # ---------------------------------------------------------------------------- learners
 @learner_app.command("create")
-def learner_create(name: str = typer.Argument(...), target: Path = typer.Argument(..., help="The target motion."),
+def learner_create(name: str = typer.Argument(..., help="A name for the new learner."), target: Path = typer.Argument(..., help="The target motion."),
                    population_seed: int = typer.Option(0, help="Which seeded population."),
                    index: int = typer.Option(0, help="Which learner of the population."),
                    skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-                   replace: bool = typer.Option(False, "--replace")):
+                   replace: bool = typer.Option(False, "--replace", help=REPLACE_HELP)):
     """Create a simulated learner of a target motion."""
     with client() as c:
         r = c.request("simulator", "learner_create", {"learner": name, "target": wire(read_clip(target, skeleton=skeleton)),
@@ -216,7 +230,7 @@ def learner_create(name: str = typer.Argument(...), target: Path = typer.Argumen
 
 
 @learner_app.command("imitate")
-def learner_imitate(name: str = typer.Argument(...), demonstration: Path = typer.Argument(..., help="The motion shown."),
+def learner_imitate(name: str = typer.Argument(..., help="The simulated learner."), demonstration: Path = typer.Argument(..., help="The motion shown."),
                     adverb: str | None = typer.Option(None, help="a little more | more | much more | more like this"),
                     out: Path = typer.Option(Path("."), help="Folder for the 5 attempts (BVH)."),
                     skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
@@ -238,7 +252,7 @@ def learner_imitate(name: str = typer.Argument(...), demonstration: Path = typer
 
 
 @learner_app.command("delete")
-def learner_delete(name: str = typer.Argument(...)):
+def learner_delete(name: str = typer.Argument(..., help="The simulated learner.")):
     """Delete a simulated learner (a coaching session's learner goes with `coach delete`)."""
     with client() as c:
         c.request("simulator", "delete", {"learner": name})
@@ -254,7 +268,7 @@ app.add_typer(estimator_app, name="estimator")
 
 @dialogue_app.command("transcript")
 def dialogue_transcript(dialogue: str = typer.Argument(..., help="Dialogue id (an estimate's name)."),
-                        as_json: bool = typer.Option(False, "--json")):
+                        as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
     """Every question and answer of a dialogue, in order."""
     with client() as c:
         r = c.request("dialogue", "transcript", {"dialogue": dialogue})
@@ -298,7 +312,7 @@ def estimator_start(name: str = typer.Argument(..., help="Estimate id."), other:
                     missing: list[str] = typer.Option([], "--missing", help="A joint the other lacks (seen when it "
                                                       "imitates); the self holds it still. Repeatable."),
                     probes: int = typer.Option(4, help="Probe motions per conversation set (0: the thesis's sets only)."),
-                    replace: bool = typer.Option(False, "--replace")):
+                    replace: bool = typer.Option(False, "--replace", help=REPLACE_HELP)):
     """Start estimating an other from the self's own experience (step 1)."""
     joints = [j for j in ["shoulder_pitch", "shoulder_roll", "elbow"] + (["knee"] if knee else []) if j not in missing]
     with client() as c:
@@ -308,7 +322,7 @@ def estimator_start(name: str = typer.Argument(..., help="Estimate id."), other:
 
 
 @estimator_app.command("converse")
-def estimator_converse(name: str = typer.Argument(...), sets: int = typer.Option(3, help="Conversation sets to run."),
+def estimator_converse(name: str = typer.Argument(..., help=ESTIMATE_HELP), sets: int = typer.Option(3, help="Conversation sets to run."),
                        timeout: float = typer.Option(120.0, help="Seconds to wait for each answer.")):
     """Run conversation sets with the other (eq. 3.2-3.6)."""
     with client() as c:
@@ -322,7 +336,7 @@ def estimator_converse(name: str = typer.Argument(...), sets: int = typer.Option
 
 
 @estimator_app.command("estimate")
-def estimator_estimate(name: str = typer.Argument(...), clip: Path = typer.Argument(..., help="A motion of the robot's joints."),
+def estimator_estimate(name: str = typer.Argument(..., help=ESTIMATE_HELP), clip: Path = typer.Argument(..., help="A motion of the robot's joints."),
                        method: str = typer.Option("body", help="body (the estimated body), interval (one "
                                                   "torque scale) or thesis (eq. 3.5)."),
                        out: Path | None = typer.Option(None, help="Write the motion with the estimated torques (.npz).")):
@@ -339,7 +353,7 @@ def estimator_estimate(name: str = typer.Argument(...), clip: Path = typer.Argum
 
 
 @estimator_app.command("identify")
-def estimator_identify(name: str = typer.Argument(...),
+def estimator_identify(name: str = typer.Argument(..., help=ESTIMATE_HELP),
                        candidates: str = typer.Option("thesis", help="thesis (f1-f4) or weighted (12 rules)."),
                        method: str = typer.Option("auto", help="auto (pairs chosen on the estimated body, answers weighed "
                                                   "against noise) or thesis (m1/m2, m3/m4).")):
@@ -354,7 +368,7 @@ def estimator_identify(name: str = typer.Argument(...),
 
 
 @estimator_app.command("info")
-def estimator_info(name: str = typer.Argument(...), as_json: bool = typer.Option(False, "--json")):
+def estimator_info(name: str = typer.Argument(..., help=ESTIMATE_HELP), as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
     """An estimate's state."""
     with client() as c:
         r = c.request("estimator", "info", {"estimate": name})

@@ -10,6 +10,7 @@ import typer
 
 from shared.cli.common import (
     BACKGROUND_HELP,
+    JSON_HELP,
     LABEL_HELP,
     SKELETON_HELP,
     SPACE_HELP,
@@ -56,6 +57,12 @@ def _policy(kind: str, alpha: float, adverb: str, body_part: bool, policy_file: 
             "subgoal": subgoal, "effort": effort}
 
 
+SESSION_HELP = "The coaching session (its id, as `coach start` printed it)."
+POLICY_HELP = "fixed | emu1 | emu1c (or aeu1, aeu2, emu2, nb with --policy-file)."
+ALPHA_HELP = "Emphasis alpha (eq. 4.3)."
+ADVERB_HELP = "table (Table 4.1), none, or an adverb."
+BODY_PART_HELP = "Emphasise the worst body part only."
+POLICY_FILE_HELP = "A fitted policy (JSON)."
 EFFORT_HELP = ("Ask the learner how heavy each demonstration felt (1 light .. 4 at its limit) and keep the emphasis "
                "within what its body can give (thesis 6.5.1; chapter 3's interval estimator).")
 STRENGTH_HELP = ("The simulated learner's strength: the effort its body can give, in multiples of the target's "
@@ -80,20 +87,20 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
                 session: str | None = typer.Option(None, help="Session id (default: a new one)."),
                 index: int = typer.Option(0, help="Which learner of the seeded population."),
                 population_seed: int = typer.Option(0, help="Seed of the learner population."),
-                policy: str = typer.Option("fixed", help="fixed | emu1 | emu1c (or aeu1, aeu2, emu2, nb with --policy-file)."),
-                alpha: float = typer.Option(2.0, help="Emphasis alpha (eq. 4.3)."),
-                adverb: str = typer.Option("table", help="table (Table 4.1), none, or an adverb."),
-                body_part: bool = typer.Option(False, "--body-part", help="Emphasise the worst body part only."),
+                policy: str = typer.Option("fixed", help=POLICY_HELP),
+                alpha: float = typer.Option(2.0, help=ALPHA_HELP),
+                adverb: str = typer.Option("table", help=ADVERB_HELP),
+                body_part: bool = typer.Option(False, "--body-part", help=BODY_PART_HELP),
                 subgoal: bool = typer.Option(False, "--subgoal", help="Coach through sub-goals, worst body part first "
                                              "(thesis 4.6, 7.3)."),
                 family: str = typer.Option("thesis", help="Simulated learner's family: thesis, error_based, copy, "
                                            "two_rate, fixed_step (shared/agents/learner.py)."),
                 effort: bool = typer.Option(False, "--effort", help=EFFORT_HELP),
                 strength: float | None = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
-                policy_file: Path | None = typer.Option(None, help="A fitted policy (JSON)."),
+                policy_file: Path | None = typer.Option(None, help=POLICY_FILE_HELP),
                 mode: str = typer.Option("residual", help="residual (emphasis on the real target) or thesis (F_gen(x_s))."),
                 skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-                as_json: bool = typer.Option(False, "--json")):
+                as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
     """Start a coaching session; prints its id."""
     if person and learner:
         fail("give --learner or --person, not both")
@@ -115,7 +122,7 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
 
 
 @coach_app.command("attempt")
-def coach_attempt(session: str = typer.Argument(...),
+def coach_attempt(session: str = typer.Argument(..., help=SESSION_HELP),
                   clips: list[Path] = typer.Argument(..., help="The attempt: its repetitions (5 in the thesis)."),
                   skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                   out: Path = typer.Option(Path("."), help="Folder for the emphatic motion (BVH)."),
@@ -163,7 +170,7 @@ def _print_session(info: dict) -> None:
 
 
 @coach_app.command("show")
-def coach_show(session: str = typer.Argument(...), as_json: bool = typer.Option(False, "--json")):
+def coach_show(session: str = typer.Argument(..., help=SESSION_HELP), as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
     """A session's trials: d_p, R, alpha, adverb, feasibility."""
     with client() as c:
         r = c.request("coach", "state", {"session": session})
@@ -176,13 +183,15 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
               session: str | None = typer.Option(None, help="Continue this session (default: start one)."),
               target: str | None = typer.Option(None, help="Target for a new session: a clip file or SPACE:LABEL."),
               index: int = typer.Option(0, help="Which learner of the seeded population (new session)."),
-              policy: str = typer.Option("fixed"), alpha: float = typer.Option(2.0), adverb: str = typer.Option("table"),
-              body_part: bool = typer.Option(False, "--body-part"), policy_file: Path | None = typer.Option(None),
+              policy: str = typer.Option("fixed", help=POLICY_HELP), alpha: float = typer.Option(2.0, help=ALPHA_HELP),
+              adverb: str = typer.Option("table", help=ADVERB_HELP),
+              body_part: bool = typer.Option(False, "--body-part", help=BODY_PART_HELP),
+              policy_file: Path | None = typer.Option(None, help=POLICY_FILE_HELP),
               subgoal: bool = typer.Option(False, "--subgoal", help="Coach through sub-goals (thesis 4.6, 7.3)."),
               family: str = typer.Option("thesis", help="Learner family: thesis, error_based, two_rate, copy, fixed_step."),
               effort: bool = typer.Option(False, "--effort", help=EFFORT_HELP),
               strength: float | None = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
-              as_json: bool = typer.Option(False, "--json")):
+              as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
     """Coach a simulated learner for a number of trials (a simulation, not a person)."""
     with client() as c:
         if session is None:

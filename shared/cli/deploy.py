@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from shared.cli.common import app
+from shared.cli.common import JSON_HELP, app
 
 deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small CA, each process its own certificate, "
                               "Zenoh configs with TLS (mutual authentication) and access control per role.",
@@ -62,7 +62,7 @@ def deploy_acl(ca: Path = typer.Argument(..., help="The cluster's CA folder (its
 
 @deploy_app.command("show")
 def deploy_show(folder: Path = typer.Argument(..., help="An identity's folder (OUT/NAME)."),
-                as_json: bool = typer.Option(False, "--json")):
+                as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
     """An identity: its role, routers, certificate's subject and expiry, what its role may do."""
     from cryptography import x509
 
