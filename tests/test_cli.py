@@ -235,6 +235,14 @@ def test_every_command_and_every_parameter_has_its_help():
     assert not missing, missing
 
 
+def test_a_port_out_of_range_is_refused_before_anything_listens(bundled):
+    """`capture serve --port 99999` ended in socket's OverflowError traceback."""
+    for port in ("99999", "-5"):
+        r = run("capture", "serve", bundled / SQUAT, "--port", port)
+        assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+        assert "not in the range" in r.stderr and "65535" in r.stderr, r.stderr
+
+
 def test_schemas_prints_every_contract():
     from schemas import CONTRACTS
 

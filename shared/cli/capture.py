@@ -33,7 +33,7 @@ app.add_typer(capture_app, name="capture")
 @capture_app.command("serve")
 def capture_serve(clips: list[Path] = typer.Argument(..., help="Clips to play (.amc, .bvh or .npz with a skeleton): "
                                                                "one per connection, in turn."),
-                  port: int = typer.Option(7460, help="TCP port to serve on (0: any free port, printed)."),
+                  port: int = typer.Option(7460, min=0, max=65535, help="TCP port to serve on (0: any free port, printed)."),
                   host: str = typer.Option("127.0.0.1", help="Address to bind (loopback by default)."),
                   speed: float = typer.Option(1.0, help="Play this many times faster."),
                   loop: bool = typer.Option(False, "--loop", help="Play again from the start, forever."),
