@@ -646,3 +646,26 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
     lines = equal_population_lines(summ, "in-model kinds")
     assert "| mass | 24 | 20.0 % | 20.0 % | 10.0 % (24) | body |" in lines
     assert any("on every kind:** missed (behind on legs)" in x for x in lines)
+
+
+def test_the_identification_rates_come_with_their_exact_intervals():
+    """One failure in 10 is 90 % with the Clopper-Pearson interval 55.5-99.7 % (which holds a 95 %
+    goal); the rates pooled per noise level, in the model and outside it, with theirs."""
+    from shared.reproduce.ch3_report import identification_interval_lines, rate_interval
+
+    lo, hi = rate_interval(9, 10)
+    assert abs(lo - 0.5550) < 1e-3 and abs(hi - 0.99747) < 1e-4
+    assert rate_interval(10, 10)[1] == 1.0 and abs(rate_interval(10, 10)[0] - 0.69150) < 1e-4
+
+    def row(kind, noise, rate, method="auto"):
+        return {"kind": kind, "candidates": "thesis", "method": method, "noise": noise, "rate": rate, "trials": 10}
+
+    ident = {f"{k}|{n}": row(k, n, r) for k, n, r in [("mass", 0.0, 1.0), ("mass", 0.1, 1.0), ("links", 0.1, 0.9),
+                                                     ("gears", 0.1, 0.9), ("fused", 0.1, 0.8)]}
+    ident["mass|thesis"] = row("mass", 0.1, 0.2, method="thesis")  # the thesis's pairs: not pooled
+    text = " ".join(identification_interval_lines(ident, 0.95))
+    assert "one failure among them is 90 % with an exact 95 % interval of 55.5 % to 99.7 %, which holds the goal's 95 %" in text
+    assert "passes all 10 at one noise level 60 % of the time" in text
+    assert "without noise: in the model 10 of 10 (100.0 %" in text and "outside it" not in text.split("10 % noise")[0]
+    assert "10 % noise: in the model 19 of 20 (95.0 %" in text and "outside it 17 of 20 (85.0 %" in text
+    assert identification_interval_lines({}, 0.95) == []

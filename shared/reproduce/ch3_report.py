@@ -86,6 +86,45 @@ def _pct(x: float, digits: int = 1) -> str:
     return f"{100 * x:.{digits}f} %"
 
 
+def rate_interval(successes: int, trials: int, level: float = 0.95) -> tuple[float, float]:
+    """The exact (Clopper-Pearson) ``level`` interval of a rate of ``successes`` in ``trials``
+    (scipy's ``binomtest``)."""
+    from scipy.stats import binomtest
+
+    ci = binomtest(successes, trials).proportion_ci(confidence_level=level, method="exact")
+    return float(ci.low), float(ci.high)
+
+
+def identification_interval_lines(ident: dict, goal: float) -> list[str]:
+    """How sure the rule identification rates are: each kind's rate is of a few others, so the
+    report gives the exact 95 % interval of one failure among them, how often a kind failing at
+    exactly ``1 - goal`` has none among them at one noise level, and the rates pooled over the
+    kinds in and outside the model per noise level (the automatic method, f1-f4), with their
+    intervals. ``ident``: the run's identification table."""
+    rows = [v for v in ident.values() if v["method"] == "auto" and v["candidates"] == "thesis"]
+    if not rows:
+        return []
+    n = max(v["trials"] for v in rows)
+    lo, hi = rate_interval(n - 1, n)
+    where = "holds" if lo <= goal <= hi else ("lies below" if hi < goal else "lies above")
+    out = [f"How sure these rates are: each is of {n} others, and one failure among them is "
+           f"{_pct((n - 1) / n, 0)} with an exact 95 % interval of {_pct(lo)} to {_pct(hi)}, which {where} the goal's "
+           f"{_pct(goal, 0)}; a kind that fails exactly {_pct(1 - goal, 0)} of its conversations passes all {n} at one "
+           f"noise level {_pct(goal ** n, 0)} of the time. Pooled over the kinds (auto, f1-f4):"]
+    for noise in sorted({v["noise"] for v in rows}):
+        parts = []
+        for name, inside in (("in the model", True), ("outside it", False)):
+            group = [v for v in rows if v["noise"] == noise and (v["kind"] not in OUTSIDE_KINDS) == inside]
+            if not group:
+                continue
+            k = sum(int(round(v["rate"] * v["trials"])) for v in group)
+            t = sum(v["trials"] for v in group)
+            a, b = rate_interval(k, t)
+            parts.append(f"{name} {k} of {t} ({_pct(k / t)}, 95 % interval {_pct(a)} to {_pct(b)})")
+        out.append(f"{'without noise' if noise == 0 else f'{_pct(noise, 0)} noise'}: " + "; ".join(parts) + ".")
+    return [" ".join(out), ""]
+
+
 def _stops(rows: list[dict]) -> str:
     stops = [r for r in rows if r.get("stopped")]
     if not stops:
@@ -404,6 +443,7 @@ def write_report(out: Path, res: dict, seconds: float, ch=None) -> Path:
               "answers every comparison as an unweighted rule does on a body whose knee torques are twice as large, "
               "so on bodies the self thinks possible the posterior stays split between the two. The thesis's pairs "
               "and the self-based prediction assumed the body is the self's, which is what made them look certain.", ""]
+    lines += identification_interval_lines(ident, GOALS["identification_noisy"])
     # ---------------- figs 3.6-3.8
     figs = {"error": ("Eq. 3.9 torque error (fig. 3.6)", "error", (0, 1)),
             "match": ("Symbol match ratio (fig. 3.7)", "match", (0, 1.05)),
