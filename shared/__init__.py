@@ -1,8 +1,8 @@
 """mirrorcoach's library, in layers (each package imports only the layers below it; tests/test_layout.py checks it):
 
-* ``errors``, ``deadline``, ``compiled``, ``extras``, ``digest``, ``once``: errors every layer raises, a
-  request's time limit, numba kernels with numpy twins, the optional dependencies and how to install them,
-  arrays' digests, values computed once per key;
+* ``errors``, ``deadline``, ``compiled``, ``extras``, ``digest``, ``once``, ``rates``: errors every layer
+  raises, a request's time limit, numba kernels with numpy twins, the optional dependencies and how to install
+  them, arrays' digests, values computed once per key, the exact intervals of rates;
 * ``motion``: the motion data model (clips, skeletons, forward kinematics, where a clip's files are);
 * ``io``: reading and writing clips (ASF/AMC, BVH, NPZ) in any studio's conventions;
 * ``bodies``: MuJoCo bodies built from skeletons, performing motions, their balance;

@@ -107,7 +107,7 @@ def test_no_module_is_longer_than_a_reader_takes_in():
 #: the library's layers, lowest first (shared/__init__.py says what each owns); a package may
 #: import its own layer and the layers below it, never one above
 LAYERS = (("shared.errors", "shared.deadline", "shared.compiled", "shared.extras", "shared.digest",
-           "shared.once"), ("shared.motion",), ("shared.io",),
+           "shared.once", "shared.rates"), ("shared.motion",), ("shared.io",),
           ("shared.bodies",), ("shared.pss",), ("shared.estimation",), ("shared.coaching",), ("shared.agents",),
           ("shared.capture", "shared.observe"), ("shared.bus", "schemas"), ("shared.reproduce",), ("shared.reports",),
           ("shared.cli", "shared.demo", "services"))

@@ -651,7 +651,8 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
 def test_the_identification_rates_come_with_their_exact_intervals():
     """One failure in 10 is 90 % with the Clopper-Pearson interval 55.5-99.7 % (which holds a 95 %
     goal); the rates pooled per noise level, in the model and outside it, with theirs."""
-    from shared.reproduce.ch3_report import identification_interval_lines, rate_interval
+    from shared.rates import rate_interval
+    from shared.reproduce.ch3_report import identification_interval_lines
 
     lo, hi = rate_interval(9, 10)
     assert abs(lo - 0.5550) < 1e-3 and abs(hi - 0.99747) < 1e-4

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.pss.synthesis import DISTANCE_POWER
+from shared.rates import with_interval
 from shared.reports.evaluation import (
     ASSOCIATION_WEIGHTINGS,
     GOAL_ACCURACY,
@@ -64,6 +65,12 @@ def _word(ok: bool) -> str:
     return "met" if ok else "missed"
 
 
+def _counts(method: dict) -> tuple[int, int]:
+    """(right, clips) of one method on one split, from its per-class counts."""
+    right, total = (sum(c[i] for c in method["per_class"].values()) for i in (0, 1))
+    return right, total
+
+
 def report_markdown(res: dict) -> str:
     """The report's text; every verdict word comes from :func:`verdicts`."""
     splits = res["splits"]
@@ -109,12 +116,15 @@ def report_markdown(res: dict) -> str:
     v = res["verdicts"]
     ms_max = max(splits[w]["methods"]["pss"]["seconds_per_clip"] for w in who) * 1e3
     accs = [splits[w]["methods"]["pss"]["accuracy"] for w in who]
+    sizes = [_counts(splits[w]["methods"]["pss"])[1] for w in who]
     lines += ["", "## Goals", "",
               f"- At least {100 * GOAL_ACCURACY:.0f} % on every split, closed set: **{_word(v['accuracy_every_split'])}** "
               f"({', '.join(f'{100 * acc:.1f} %' for acc in accs)}).",
               *([f"- At least {100 * GOAL_ACCURACY:.0f} % on every split as `space recognize` shows it (open set on): "
                  f"**{_word(v['as_shown_every_split'])}** ("
-                 + ", ".join(f"{100 * splits[w]['methods']['pss_shown']['accuracy']:.1f} %" for w in who) + ")."]
+                 + ", ".join(with_interval(*_counts(splits[w]["methods"]["pss_shown"])) for w in who)
+                 + f"; in brackets each rate's exact 95 % interval: of {min(sizes)} clips one clip is "
+                 f"{100 / min(sizes):.1f} points)."]
                 if "as_shown_every_split" in v else []),
               f"- Never below the best peer of the same split by more than one clip: **{_word(v['within_one_clip_of_best_peer'])}**.",
               f"- At most {GOAL_MS:g} ms per clip in the library (HMM of the clip, distances, decision and the eq. 2.6 "
@@ -161,11 +171,15 @@ def report_markdown(res: dict) -> str:
                 "common correction of the calibrated level cannot meet the goal with these tests.")]
         lines += ["", "Per split (PSS, ours): a new performer may lie farther from the space's two than they lie "
                       "from each other, and the pooled rates average that away.", "",
-                  "| test performer | out-of-class rejected | in-class rejected |", "|---|---|---|"]
+                  "| test performer | out-of-class rejected | in-class rejected | out-of-class rejected, exact 95 % "
+                  "interval (each clip is out of class once; in class it is counted once per held-out class, not "
+                  "independent trials: no interval) |", "|---|---|---|---|"]
         for w in who:
             r = open_rates(res, "pss", only=w)
             if r is not None:
-                lines.append(f"| {w} | {100 * r[0]:.1f} % | {100 * r[1]:.1f} % |")
+                rows = res["open_set"][w]["rows"]
+                out = [sum(row["pss"]["out"][i] for row in rows) for i in (0, 1)]
+                lines.append(f"| {w} | {100 * r[0]:.1f} % | {100 * r[1]:.1f} % | {with_interval(*out)} |")
         lines += ["", f"Goal: at least {100 * GOAL_OPEN_OUT:.0f} % out-of-class rejected, at most "
                       f"{100 * GOAL_OPEN_IN:.0f} % in-class rejected, on every test performer: "
                       f"**{_word(v['open_set'])}**.", "",

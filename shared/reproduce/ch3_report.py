@@ -12,6 +12,7 @@ import numpy as np
 
 from shared.agents.population import OUTSIDE_KINDS
 from shared.estimation.rules import CONFIDENCE, MAX_QUESTIONS
+from shared.rates import rate_interval
 
 # the run's settings (shared.reproduce.ch3 runs with them) and the thesis's figures to compare with
 SETS = 6
@@ -84,15 +85,6 @@ def _plot(path: Path, title: str, ylabel: str, series: dict, ylim=None) -> str:
 
 def _pct(x: float, digits: int = 1) -> str:
     return f"{100 * x:.{digits}f} %"
-
-
-def rate_interval(successes: int, trials: int, level: float = 0.95) -> tuple[float, float]:
-    """The exact (Clopper-Pearson) ``level`` interval of a rate of ``successes`` in ``trials``
-    (scipy's ``binomtest``)."""
-    from scipy.stats import binomtest
-
-    ci = binomtest(successes, trials).proportion_ci(confidence_level=level, method="exact")
-    return float(ci.low), float(ci.high)
 
 
 def identification_interval_lines(ident: dict, goal: float) -> list[str]:
