@@ -107,6 +107,20 @@ def clips(hdm05: Path, label: str, n: int) -> list[Path]:
 
 
 # ---------------------------------------------------------------------------------------- deploy init
+def test_deploy_init_by_default_gives_every_role_an_identity_and_its_help_names_them(tmp_path):
+    """Without --identity, one identity per role the cluster runs (the capture service's too: it had
+    none, so a deployed cluster could not start it), and --help lists the same roles."""
+    from shared.bus.deploy import ROLES
+
+    out = tmp_path / "d"
+    r = run(["deploy", "init", out, "--router", "hub=10.0.0.1"])
+    assert r.returncode == 0, r.stderr
+    roles = {json.loads((f / "identity.json").read_text())["role"] for f in out.iterdir() if (f / "identity.json").exists()}
+    assert roles == set(ROLES), roles
+    help_text = " ".join(run(["deploy", "init", "--help"]).stdout.split())
+    assert all(role in help_text for role in ROLES if role != "router") and "capture" in help_text, help_text
+
+
 def test_deploy_init_makes_a_ca_and_one_identity_per_process(tmp_path):
     from cryptography import x509
     from cryptography.hazmat.primitives.asymmetric import ec

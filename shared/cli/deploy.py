@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 
+from shared.bus.deploy import SERVICES
 from shared.cli.common import JSON_HELP, app
 
 deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small CA, each process its own certificate, "
@@ -17,18 +18,17 @@ deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small 
                          no_args_is_help=True)
 app.add_typer(deploy_app, name="deploy")
 
-DEFAULT_IDENTITIES = ["pss", "simulator", "coach", "dialogue", "estimator", "cli", "dashboard"]
+#: the roles an identity may take (a router is made by --router), each once by default
+IDENTITY_ROLES = [*SERVICES, "cli", "dashboard"]
+IDENTITY_HELP = ("NAME:ROLE (or ROLE): one process's identity; roles: " + ", ".join(IDENTITY_ROLES) + ". Repeat; two "
+                 "instances of a service get two names (pss-a:pss, pss-b:pss). Default: one of each role.")
 
 
 @deploy_app.command("init")
 def deploy_init(out: Path = typer.Argument(..., help="Folder for the CA and one sub-folder per identity (new)."),
                 router: list[str] = typer.Option(..., "--router", help="A router: NAME=ADDRESS[:PORT] (it listens there, "
                                                  "TLS; default port 7447). Repeat for several routers."),
-                identity: list[str] | None = typer.Option(None, "--identity", help="NAME:ROLE (or ROLE): one "
-                                                             "process's identity; roles: pss, simulator, coach, "
-                                                             "dialogue, estimator, cli, dashboard. Repeat; two "
-                                                             "instances of a service get two names (pss-a:pss, "
-                                                             "pss-b:pss). Default: one of each role."),
+                identity: list[str] | None = typer.Option(None, "--identity", help=IDENTITY_HELP),
                 prefix: str = typer.Option("mc", "--prefix", help="The cluster's key prefix."),
                 days: int = typer.Option(825, "--days", help="Validity of the certificates, days."),
                 lease_ms: int = typer.Option(3000, "--lease-ms", help="Link lease: a silent host counts as gone "
@@ -40,7 +40,7 @@ def deploy_init(out: Path = typer.Argument(..., help="Folder for the CA and one 
     Run a process with MIRRORCOACH_DEPLOY=OUT/NAME. ca/ca.key signs certificates: keep it off the hosts."""
     from shared.bus.deploy import init
 
-    made = init(out, router, identity or DEFAULT_IDENTITIES, prefix=prefix, days=days, lease_ms=lease_ms, ca_from=ca)
+    made = init(out, router, identity or IDENTITY_ROLES, prefix=prefix, days=days, lease_ms=lease_ms, ca_from=ca)
     typer.echo(f"wrote {out}: " + ", ".join(f"{n} ({r})" for n, r in made.items()))
     typer.echo(f"run each process with MIRRORCOACH_DEPLOY={out}/<name>; keep {out}/ca/ca.key off the hosts")
 
