@@ -504,9 +504,12 @@ def test_every_service_sets_its_allocator_before_it_serves(cluster):
     """Each service answering requests, however it is started, allocates from one arena and maps large
     blocks on their own (``service_allocator``), and says so in its log."""
     from shared.bus.budget import MMAP_THRESHOLD
+    from shared.bus.cluster import load_plan
+    from shared.bus.deploy import SERVICES
 
     logs = Path(cluster["MIRRORCOACH_HOME"]) / "logs"
-    for name in ("capture", "coach", "dialogue", "estimator", "pss", "simulator"):  # the observer answers no requests
+    assert set(SERVICES) <= {p.name for p in load_plan()}  # every service answering requests is in the cluster's plan
+    for name in SERVICES:  # (the observer answers no requests)
         log = (logs / f"{name}.log").read_text()
         assert f"allocator: one arena, blocks of {MMAP_THRESHOLD // 1024} KB or more mapped on their own" in log, (
             name, log[-2000:])
