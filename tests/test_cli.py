@@ -175,6 +175,7 @@ def test_errors_are_one_line_without_traceback(bundled, tmp_path):
         ("clip", "convert", bundled / SQUAT, tmp_path / "no/such/dir/x.bvh"),
         ("clip", "convert", bundled / SQUAT, tmp_path / "x.txt"),
         ("offline", "recognize", tmp_path / "nospace.npz", bundled / SQUAT),
+        ("offline", "recognize", tmp_path / "garbage.npz", bundled / SQUAT),
         ("offline", "generate", tmp_path / "nospace.npz", "--point", "a,b", "--out", tmp_path / "g.bvh"),
         ("--units", "furlong", "clip", "info", bundled / SQUAT),
         ("--up", "x", "clip", "info", tmp_path / "s.bvh"),
@@ -182,10 +183,12 @@ def test_errors_are_one_line_without_traceback(bundled, tmp_path):
     ]
     r = run("clip", "convert", bundled / SQUAT, tmp_path / "s.bvh")
     assert r.returncode == 0, r.stderr
+    (tmp_path / "garbage.npz").write_bytes(bytes(range(256)) * 8)  # no archive: numpy took it for a pickle
     for args in cases:
         r = run(*args)
         assert r.returncode == 2, (args, r.stderr)
         assert r.stderr.startswith("error: ") and "Traceback" not in r.stderr, (args, r.stderr)
+        assert "pickle" not in r.stderr, (args, r.stderr)  # never advice to load a file unsafely
 
 
 def test_every_study_verb_on_a_folder_that_is_no_study_says_so(bundled, tmp_path):

@@ -96,6 +96,10 @@ def save_added(space: ProtoSymbolSpace, path, first: int) -> Path:
 
 def read(path) -> tuple[dict, dict, dict]:
     """A space file's header, arrays and the open set's fitted tests' arrays."""
+    import zipfile
+
+    if Path(path).is_file() and not zipfile.is_zipfile(path):  # numpy would read it as a pickle, and say so
+        raise BadInput(f"{path}: not a space file (not an NPZ archive; `offline build` writes one)")
     try:
         with np.load(path, allow_pickle=False) as z:  # each z[k] is a new array of its own (not copied again)
             header = json.loads(str(z["header"]))
