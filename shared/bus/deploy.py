@@ -52,6 +52,8 @@ from shared.errors import BadInput
 
 SERVICES = ("pss", "simulator", "coach", "dialogue", "estimator", "capture")
 ROLES = SERVICES + ("cli", "dashboard", "router")
+#: the roles an identity of ``--identity`` may take (a router's is made by ``--router``)
+IDENTITY_ROLES = tuple(r for r in ROLES if r != "router")
 DEFAULT_PORT = 7447
 NAME_RE = re.compile(r"[a-z][a-z0-9-]{0,40}")
 #: link lease (ms): how long a router waits before declaring a silent peer gone. Zenoh's default is
@@ -104,9 +106,8 @@ def parse_identity(spec: str) -> tuple[str, str]:
     """``NAME:ROLE`` or ``ROLE`` (the name is then the role) -> (name, role)."""
     name, _, role = spec.partition(":")
     role = role or name
-    if role not in ROLES or role == "router":
-        raise BadInput(f"identity {spec!r}: role must be one of {', '.join(r for r in ROLES if r != 'router')}",
-                       field="identity")
+    if role not in IDENTITY_ROLES:
+        raise BadInput(f"identity {spec!r}: role must be one of {', '.join(IDENTITY_ROLES)}", field="identity")
     return check_name(name), role
 
 

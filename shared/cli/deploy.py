@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from shared.bus.deploy import SERVICES
+from shared.bus.deploy import IDENTITY_ROLES
 from shared.cli.common import JSON_HELP, app
 
 deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small CA, each process its own certificate, "
@@ -18,8 +18,6 @@ deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small 
                          no_args_is_help=True)
 app.add_typer(deploy_app, name="deploy")
 
-#: the roles an identity may take (a router is made by --router), each once by default
-IDENTITY_ROLES = [*SERVICES, "cli", "dashboard"]
 IDENTITY_HELP = ("NAME:ROLE (or ROLE): one process's identity; roles: " + ", ".join(IDENTITY_ROLES) + ". Repeat; two "
                  "instances of a service get two names (pss-a:pss, pss-b:pss). Default: one of each role.")
 
@@ -40,7 +38,7 @@ def deploy_init(out: Path = typer.Argument(..., help="Folder for the CA and one 
     Run a process with MIRRORCOACH_DEPLOY=OUT/NAME. ca/ca.key signs certificates: keep it off the hosts."""
     from shared.bus.deploy import init
 
-    made = init(out, router, identity or IDENTITY_ROLES, prefix=prefix, days=days, lease_ms=lease_ms, ca_from=ca)
+    made = init(out, router, identity or list(IDENTITY_ROLES), prefix=prefix, days=days, lease_ms=lease_ms, ca_from=ca)
     typer.echo(f"wrote {out}: " + ", ".join(f"{n} ({r})" for n, r in made.items()))
     typer.echo(f"run each process with MIRRORCOACH_DEPLOY={out}/<name>; keep {out}/ca/ca.key off the hosts")
 
