@@ -12,9 +12,9 @@ from typing import Any
 import typer
 
 from shared.cli.common import (
-    JSON_HELP,
+    JSON_OPTION,
     READING,
-    REPLACE_HELP,
+    REPLACE_OPTION,
     SKELETON_HELP,
     app,
     client,
@@ -109,7 +109,7 @@ def other_create(name: str = typer.Argument(..., help="Name of the other."),
                                                     "`other reveal`)."),
                  index: int = typer.Option(0, min=0, max=999, help="Which of the kind's population (0-999)."),
                  population_seed: int = typer.Option(2026, help="Seed of the population."),
-                 replace: bool = typer.Option(False, "--replace", help=REPLACE_HELP)):
+                 replace: bool = REPLACE_OPTION):
     """Create an other: a simulated agent with hidden parameters, or a person's seat."""
     params: dict[str, Any] = {"d": d} if person else {"mass": mass, "rule": rule, "d": d, "noise": noise, "seed": seed}
     if kind is not None and not person:
@@ -199,7 +199,7 @@ def other_reveal(name: str = typer.Argument(..., help="The simulated other.")):
 
 
 @app.command("agents")
-def agents_list(as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+def agents_list(as_json: bool = JSON_OPTION):
     """Every other and learner on the simulator."""
     with client() as c:
         r = c.request("simulator", "list")
@@ -220,7 +220,7 @@ def learner_create(name: str = typer.Argument(..., help="A name for the new lear
                    population_seed: int = typer.Option(0, help="Which seeded population."),
                    index: int = typer.Option(0, help="Which learner of the population."),
                    skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-                   replace: bool = typer.Option(False, "--replace", help=REPLACE_HELP)):
+                   replace: bool = REPLACE_OPTION):
     """Create a simulated learner of a target motion."""
     with client() as c:
         r = c.request("simulator", "learner_create", {"learner": name, "target": wire(read_clip(target, skeleton=skeleton)),
@@ -268,7 +268,7 @@ app.add_typer(estimator_app, name="estimator")
 
 @dialogue_app.command("transcript")
 def dialogue_transcript(dialogue: str = typer.Argument(..., help="Dialogue id (an estimate's name)."),
-                        as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+                        as_json: bool = JSON_OPTION):
     """Every question and answer of a dialogue, in order."""
     with client() as c:
         r = c.request("dialogue", "transcript", {"dialogue": dialogue})
@@ -312,7 +312,7 @@ def estimator_start(name: str = typer.Argument(..., help="Estimate id."), other:
                     missing: list[str] = typer.Option([], "--missing", help="A joint the other lacks (seen when it "
                                                       "imitates); the self holds it still. Repeatable."),
                     probes: int = typer.Option(4, help="Probe motions per conversation set (0: the thesis's sets only)."),
-                    replace: bool = typer.Option(False, "--replace", help=REPLACE_HELP)):
+                    replace: bool = REPLACE_OPTION):
     """Start estimating an other from the self's own experience (step 1)."""
     joints = [j for j in ["shoulder_pitch", "shoulder_roll", "elbow"] + (["knee"] if knee else []) if j not in missing]
     with client() as c:
@@ -368,7 +368,7 @@ def estimator_identify(name: str = typer.Argument(..., help=ESTIMATE_HELP),
 
 
 @estimator_app.command("info")
-def estimator_info(name: str = typer.Argument(..., help=ESTIMATE_HELP), as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+def estimator_info(name: str = typer.Argument(..., help=ESTIMATE_HELP), as_json: bool = JSON_OPTION):
     """An estimate's state."""
     with client() as c:
         r = c.request("estimator", "info", {"estimate": name})

@@ -15,7 +15,7 @@ from pathlib import Path
 import typer
 
 from shared.cli.common import (
-    JSON_HELP,
+    JSON_OPTION,
     POSE_FLOOR_HELP,
     SKELETON_HELP,
     app,
@@ -132,7 +132,7 @@ def space_build(out: Path = typer.Argument(..., help="Space file to write (.npz)
 @offline_app.command("recognize")
 def space_recognize(space_file: Path = typer.Argument(..., help="Space file."),
                     clips: list[Path] = typer.Argument(..., help="Clip(s): several are repetitions of one motion."),
-                    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
+                    as_json: bool = JSON_OPTION,
                     skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP)):
     """Recognise a motion: its class with a calibrated confidence (or "none of these"), its
     nearest proto-symbols and its point in the space (eq. 2.6). How the label is decided:

@@ -11,7 +11,7 @@ import typer
 
 from shared.bus.wirefiles import wire_file, wire_name
 from shared.cli.common import (
-    JSON_HELP,
+    JSON_OPTION,
     POSE_FLOOR_HELP,
     READING,
     SKELETON_HELP,
@@ -72,7 +72,7 @@ def space_build(name: str = typer.Argument(..., help="Name of the space (letters
 
 
 @space_app.command("list")
-def space_list(as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+def space_list(as_json: bool = JSON_OPTION):
     """Every space on the pss service (and any build that was interrupted)."""
     with client() as c:
         r = c.request("pss", "list", timeout=30)
@@ -90,7 +90,7 @@ def space_list(as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
 
 
 @space_app.command("show")
-def space_show(name: str = typer.Argument(..., help="Space name."), as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+def space_show(name: str = typer.Argument(..., help="Space name."), as_json: bool = JSON_OPTION):
     """A space's proto-symbols, points, parameters and stress."""
     with client() as c:
         info = c.request("pss", "info", {"space": name}, timeout=30)
@@ -137,7 +137,7 @@ def space_generate(name: str = typer.Argument(..., help="Space name."),
                    method: str = typer.Option("expected", help="'expected' (deterministic) or 'monte_carlo'."),
                    seed: int = typer.Option(0, help="Seed of the Monte Carlo generation."),
                    timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
-                   as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+                   as_json: bool = JSON_OPTION):
     """Generate a motion from a point or a mix of proto-symbols (eq. 2.7, 4.2) and write it."""
     from schemas.common import clip_from_wire
     from shared.io import save_clip
@@ -171,7 +171,7 @@ def space_add(name: str = typer.Argument(..., help="Space name."),
                                                 "again (eq. 2.5), N^2 distances."),
               skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
               timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
-              as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+              as_json: bool = JSON_OPTION):
     """Add clips to a space as new proto-symbols, without rebuilding the rest by default."""
     clips = load_clips(paths, skeleton, label)
     with client() as c, busy(f"adding {len(clips)} clips to {name}"):
@@ -194,7 +194,7 @@ def space_associate(name: str = typer.Argument(..., help="Space name."),
                                                                            "(.bvh, .npz or .amc)."),
                     skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
                     timeout: float | None = typer.Option(None, help=TIMEOUT_HELP),
-                    as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+                    as_json: bool = JSON_OPTION):
     """Associate (eq. 2.8): what the space's proto-symbols say of the part a clip lacks, and
     whether the clip lies within what the space learnt or the estimate extrapolates."""
     from schemas.common import clip_from_wire
@@ -239,7 +239,7 @@ def space_delete(name: str = typer.Argument(..., help="Space name.")):
 
 # ---------------------------------------------------------------------------- cluster
 @app.command("status")
-def status(as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+def status(as_json: bool = JSON_OPTION):
     """Each process of the cluster: alive, FROZEN (stopped by SIGSTOP), RESTARTING or DOWN (exit 1
     if any is not alive)."""
     from shared.bus.cluster import status as cluster_status

@@ -10,7 +10,7 @@ import typer
 
 from shared.cli.common import (
     BACKGROUND_HELP,
-    JSON_HELP,
+    JSON_OPTION,
     LABEL_HELP,
     SKELETON_HELP,
     SPACE_HELP,
@@ -100,7 +100,7 @@ def coach_start(target: str = typer.Option(..., help="Target: a clip file, or SP
                 policy_file: Path | None = typer.Option(None, help=POLICY_FILE_HELP),
                 mode: str = typer.Option("residual", help="residual (emphasis on the real target) or thesis (F_gen(x_s))."),
                 skeleton: Path | None = typer.Option(None, "--skeleton", help=SKELETON_HELP),
-                as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+                as_json: bool = JSON_OPTION):
     """Start a coaching session; prints its id."""
     if person and learner:
         fail("give --learner or --person, not both")
@@ -170,7 +170,7 @@ def _print_session(info: dict) -> None:
 
 
 @coach_app.command("show")
-def coach_show(session: str = typer.Argument(..., help=SESSION_HELP), as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+def coach_show(session: str = typer.Argument(..., help=SESSION_HELP), as_json: bool = JSON_OPTION):
     """A session's trials: d_p, R, alpha, adverb, feasibility."""
     with client() as c:
         r = c.request("coach", "state", {"session": session})
@@ -191,7 +191,7 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
               family: str = typer.Option("thesis", help="Learner family: thesis, error_based, two_rate, copy, fixed_step."),
               effort: bool = typer.Option(False, "--effort", help=EFFORT_HELP),
               strength: float | None = typer.Option(None, min=0.1, max=100.0, help=STRENGTH_HELP),
-              as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+              as_json: bool = JSON_OPTION):
     """Coach a simulated learner for a number of trials (a simulation, not a person)."""
     with client() as c:
         if session is None:

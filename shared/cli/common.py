@@ -22,8 +22,10 @@ offline_app = typer.Typer(help="Proto-symbol spaces as local .npz files, without
 app.add_typer(clip_app, name="clip")
 app.add_typer(offline_app, name="offline")
 
-JSON_HELP = "Print the result as JSON (for scripts) instead of text."
-REPLACE_HELP = "Replace an existing one of that name (default: refuse)."
+#: the ``--json`` and ``--replace`` options of the commands that say nothing more specific (one object each,
+#: as a command group's shared arguments are)
+JSON_OPTION = typer.Option(False, "--json", help="Print the result as JSON (for scripts) instead of text.")
+REPLACE_OPTION = typer.Option(False, "--replace", help="Replace an existing one of that name (default: refuse).")
 SKELETON_HELP = "ASF skeleton for AMC files (default: found beside the file or in a sibling asf/ folder)."
 BACKGROUND_HELP = ("Other motions (clips) a repetition must be nearer to the target than, so that a person doing "
                    "one of them is not cut into repetitions of the target; repeat the option.")

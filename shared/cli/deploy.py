@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 
 from shared.bus.deploy import IDENTITY_ROLES
-from shared.cli.common import JSON_HELP, app
+from shared.cli.common import JSON_OPTION, app
 
 deploy_app = typer.Typer(help="A cluster across several hosts, secured: a small CA, each process its own certificate, "
                               "Zenoh configs with TLS (mutual authentication) and access control per role.",
@@ -60,7 +60,7 @@ def deploy_acl(ca: Path = typer.Argument(..., help="The cluster's CA folder (its
 
 @deploy_app.command("show")
 def deploy_show(folder: Path = typer.Argument(..., help="An identity's folder (OUT/NAME)."),
-                as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+                as_json: bool = JSON_OPTION):
     """An identity: its role, routers, certificate's subject and expiry, what its role may do."""
     from cryptography import x509
 

@@ -11,7 +11,7 @@ import typer
 
 from shared.cli.common import (
     BACKGROUND_HELP,
-    JSON_HELP,
+    JSON_OPTION,
     LABEL_HELP,
     SKELETON_HELP,
     SPACE_HELP,
@@ -164,7 +164,7 @@ def _aeu_fit(source: Path, coaches: list[str] | None = None) -> dict:
 def study_aeu(folder: Path = FOLDER, coaches: str | None = typer.Option(None, help="Only these coaches "
                                                                            "(comma-separated), e.g. one group."),
               out: Path | None = typer.Option(None, help="Also write the fit as JSON (what `study init --aeu1` reads)."),
-              as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+              as_json: bool = JSON_OPTION):
     """AEU thresholds fitted from the coach seat's answers (thesis 5.3.3, table 5.2): coaches
     whose adverbs run backwards are left out and named; the two d_p cuts most answers agree with."""
     fit = _aeu_fit(folder, [c.strip() for c in coaches.split(",") if c.strip()] if coaches else None)
@@ -183,7 +183,7 @@ def study_aeu(folder: Path = FOLDER, coaches: str | None = typer.Option(None, he
 @study_app.command("emu2")
 def study_emu2(folder: Path = FOLDER, out: Path | None = typer.Option(None, help="Also write the alphas as JSON "
                                                                       "(what `study init --emu2` reads)."),
-               as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+               as_json: bool = JSON_OPTION):
     """EMU-Model 2 from a study's alpha sweep (figs. 5.7, 5.8): each participant's alpha whose
     session ended lowest, without and with the adverb, and R_4 at every alpha."""
     from shared.reports.study import SWEEP_CASES, emu2_from_sweep, trials_of
@@ -212,7 +212,7 @@ def study_emu2(folder: Path = FOLDER, out: Path | None = typer.Option(None, help
 
 @study_app.command("next")
 def study_next(folder: Path = FOLDER, participant: str | None = typer.Option(None, help="This participant's next step."),
-               as_json: bool = typer.Option(False, "--json", help=JSON_HELP)):
+               as_json: bool = JSON_OPTION):
     """What to do next: who, which case and trial, what to show and say."""
     from shared.reports.study import next_step, trials_of
 
