@@ -26,9 +26,9 @@ def nbytes(value) -> int:
 class Once:
     """A value computed once per key: requests asking for the same key at once wait for one
     answer; a failed one is asked again next time; past ``limit`` keys or ``max_bytes`` of kept
-    values the least recently asked are forgotten, and a value larger than ``max_bytes / 16`` is
-    answered but not kept (``largest``: a few huge requests would otherwise hold the process's memory after
-    them, and push out the many small values asked again and again)."""
+    values the least recently asked are forgotten, and a value larger than ``largest`` (by default
+    ``max_bytes / 16``) is answered but not kept (a few huge requests would otherwise hold the
+    process's memory after them, and push out the many small values asked again and again)."""
 
     def __init__(self, limit: int = 4096, max_bytes: int = 256 << 20, largest: int | None = None,
                  size: Callable[[Any], int] | None = None):
