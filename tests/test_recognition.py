@@ -338,6 +338,23 @@ def test_a_space_file_of_an_unknown_format_is_a_clear_error(tmp_path):
     assert ProtoSymbolSpace.load(tmp_path / "copy.npz").format != FORMAT
 
 
+def test_a_space_file_with_a_damaged_header_is_a_clear_error(tmp_path):
+    """A header missing a field or holding one of the wrong kind is refused as an unreadable space
+    file (a missing name ended in a KeyError traceback)."""
+    with np.load(FORMAT1, allow_pickle=False) as z:
+        arrays = {k: np.array(z[k]) for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    for k, (key, value) in enumerate((("name", None), ("params", "x"), ("symbols", [{}]), ("embedding", 3))):
+        damaged = dict(header)
+        if value is None:
+            damaged.pop(key)
+        else:
+            damaged[key] = value
+        np.savez(tmp_path / f"damaged{k}.npz", **{**arrays, "header": np.array(json.dumps(damaged))})
+        with pytest.raises(BadInput, match=f"damaged{k}.npz: not a readable space file .*build the space again"):
+            ProtoSymbolSpace.load(tmp_path / f"damaged{k}.npz")
+
+
 def test_channel_weights_are_saved_with_the_space_and_older_files_recognise_unweighted(dev_space, dev_split, tmp_path):
     from shared.pss.distance import ModelBank
 

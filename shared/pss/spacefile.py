@@ -133,6 +133,16 @@ def load(cls: type[ProtoSymbolSpace], path, added=()) -> ProtoSymbolSpace:
     skipped; one that does not follow the proto-symbols so far is refused."""
     path = Path(path)
     header, arrays, tests = read(path)
+    try:
+        return _space_of(cls, path, header, arrays, tests, added)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as e:  # a damaged header: no traceback
+        raise BadInput(f"{path}: not a readable space file (its header: {type(e).__name__}: {e}); build the space "
+                       "again from its clips") from None
+
+
+def _space_of(cls: type[ProtoSymbolSpace], path: Path, header: dict, arrays: dict, tests: dict,
+              added) -> ProtoSymbolSpace:
+    """:func:`load`'s space from the file's contents (:func:`read`)."""
     params = SpaceParams(**header["params"])
     features = MotionFeatures.from_json(header["features"])
     symbols = symbols_of(header, arrays, params)
