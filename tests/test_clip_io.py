@@ -250,6 +250,21 @@ def test_npz_zip_bomb_is_refused_before_it_is_inflated(tmp_path, monkeypatch):
         load_clip(tmp_path / "bomb.npz")
 
 
+def test_npz_whose_array_header_declares_more_than_it_holds_is_refused(bundled, tmp_path):
+    """numpy allocates what an array's header declares before reading it: a header of a trillion
+    elements in a member of a few bytes was a MemoryError traceback."""
+    import zipfile
+
+    save_clip(load_clip(next(iter(find_clips([bundled / "amc"])))), tmp_path / "ok.npz")
+    with zipfile.ZipFile(tmp_path / "ok.npz") as zin, zipfile.ZipFile(tmp_path / "huge.npz", "w") as zout:
+        zout.writestr("meta.npy", zin.read("meta.npy"))
+        with zout.open("data.npy", "w") as f:
+            np.lib.format.write_array_header_2_0(f, {"descr": "<f8", "fortran_order": False, "shape": (10 ** 6, 10 ** 6)})
+            f.write(b"\0" * 64)
+    with pytest.raises(ClipFormatError, match=r"'data.npy' declares an array of shape \(1000000, 1000000\)"):
+        load_clip(tmp_path / "huge.npz")
+
+
 def test_a_bvh_nested_deeper_than_any_body_is_a_clear_error(tmp_path):
     """10,000 nested joints were a RecursionError."""
     n = 10_000

@@ -355,6 +355,49 @@ def test_a_space_file_with_a_damaged_header_is_a_clear_error(tmp_path):
             ProtoSymbolSpace.load(tmp_path / f"damaged{k}.npz")
 
 
+def _with_member(src: Path, dst: Path, name: str, write, compression: int = 0) -> Path:
+    """``src``'s archive with member ``name`` written by ``write(file)`` instead."""
+    import zipfile
+
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w", compression) as zout:
+        for info in zin.infolist():
+            if info.filename != name:
+                zout.writestr(info.filename, zin.read(info.filename))
+        with zout.open(name, "w", force_zip64=True) as f:
+            write(f)
+    return dst
+
+
+def test_a_space_file_that_would_inflate_beyond_memory_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    """An array header declaring a trillion elements in a member of a few bytes made numpy ask for
+    7 TiB (a MemoryError traceback from `offline recognize`); a deflated member over the space's
+    limit, or an array of Python objects, is refused as well, each before numpy reads it."""
+    from shared.pss import spacefile
+
+    def header_of(shape, descr="<f8"):
+        def write(f):
+            np.lib.format.write_array_header_2_0(f, {"descr": descr, "fortran_order": False, "shape": shape})
+            f.write(b"\0" * 64)
+        return write
+
+    huge = _with_member(FORMAT1, tmp_path / "huge.npz", "means.npy", header_of((10 ** 12,)))
+    with pytest.raises(BadInput, match=r"huge.npz: not a readable space file \(member 'means.npy' declares an array "
+                                       r"of shape \(1000000000000,\) \(8000000000000 bytes\) but holds 64 bytes"):
+        ProtoSymbolSpace.load(huge)
+    objects = _with_member(FORMAT1, tmp_path / "objects.npz", "points.npy", header_of((8,), "|O"))
+    with pytest.raises(BadInput, match="objects.npz: .*'points.npy' holds Python objects"):
+        ProtoSymbolSpace.load(objects)
+    monkeypatch.setattr(spacefile, "MAX_SPACE_BYTES", 8 * 1024 * 1024)
+    zeros = np.zeros(2 * 1024 * 1024)  # 16 MiB of zeros: a few KB deflated
+    bomb = _with_member(FORMAT1, tmp_path / "bomb.npz", "distances.npy", lambda f: np.lib.format.write_array(f, zeros),
+                        compression=8)
+    assert bomb.stat().st_size < FORMAT1.stat().st_size + 64 * 1024
+    with pytest.raises(BadInput, match=r"bomb.npz: .*unpack to \d+ bytes, over the limit of 8388608 bytes"):
+        ProtoSymbolSpace.load(bomb)
+    shutil.copy(FORMAT1, tmp_path / "fine.npz")  # under the limit: read as before
+    assert len(ProtoSymbolSpace.load(tmp_path / "fine.npz").symbols) > 0
+
+
 def test_channel_weights_are_saved_with_the_space_and_older_files_recognise_unweighted(dev_space, dev_split, tmp_path):
     from shared.pss.distance import ModelBank
 

@@ -63,20 +63,52 @@ MAX_DATA_BYTES = 512 * 1024 * 1024
 MAX_META_BYTES = 16 * 1024 * 1024
 
 
-def _check_sizes(path: Path) -> None:
-    """Refuse a file whose members would inflate beyond the limits (a zip bomb), from the zip's
-    own directory, before numpy reads anything."""
+def npz_problem(path: Path, limits: dict[str, int], total: int, max_members: int = 4096) -> str | None:
+    """Why the NPZ archive at ``path`` may not be read, or ``None``: checked from the zip's own
+    directory and each array's header before numpy reads anything. Refused: a member that would
+    inflate beyond its limit in ``limits`` (by member name, e.g. ``"data.npy"``) or all of them
+    beyond ``total`` bytes (a zip bomb), more than ``max_members`` members, an array of Python
+    objects (numpy would unpickle it), and an array whose header declares more bytes than its
+    member holds (numpy allocates what the header declares before it reads: a header of a
+    trillion elements in a file of a few bytes asked for 7 TiB and ended in ``MemoryError``)."""
     try:
         with zipfile.ZipFile(path) as zf:
-            sizes = {i.filename: i.file_size for i in zf.infolist()}
-    except (OSError, zipfile.BadZipFile) as e:
-        raise ClipFormatError(path, f"cannot read NPZ clip: {e}") from None
-    for member, limit in (("data.npy", MAX_DATA_BYTES), ("meta.npy", MAX_META_BYTES)):
-        if sizes.get(member, 0) > limit:
-            raise ClipFormatError(path, f"NPZ member {member!r} unpacks to {sizes[member]} bytes, over the "
-                                        f"limit of {limit} bytes")
-    if len(sizes) > 16:
-        raise ClipFormatError(path, f"not a mirrorcoach clip ({len(sizes)} arrays; a clip has 'data' and 'meta')")
+            infos = zf.infolist()
+            if len(infos) > max_members:
+                return f"{len(infos)} arrays, more than the {max_members} allowed"
+            for info in infos:
+                limit = limits.get(info.filename)
+                if limit is not None and info.file_size > limit:
+                    return f"member {info.filename!r} unpacks to {info.file_size} bytes, over the limit of {limit} bytes"
+            inflated = sum(i.file_size for i in infos)
+            if inflated > total:
+                return f"its arrays unpack to {inflated} bytes, over the limit of {total} bytes"
+            for info in infos:
+                if not info.filename.endswith(".npy"):
+                    continue
+                with zf.open(info) as f:
+                    version = np.lib.format.read_magic(f)
+                    read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                                   else np.lib.format.read_array_header_2_0)
+                    shape, _, dtype = read_header(f)
+                    start = f.tell()
+                if dtype.hasobject:
+                    return f"member {info.filename!r} holds Python objects (it would have to be unpickled)"
+                declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                if declared > info.file_size - start:
+                    return (f"member {info.filename!r} declares an array of shape {tuple(shape)} ({declared} bytes) "
+                            f"but holds {info.file_size - start} bytes")
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zipfile.LargeZipFile) as e:
+        return f"unreadable NPZ archive ({type(e).__name__}: {e})"
+    return None
+
+
+def _check_sizes(path: Path) -> None:
+    """Refuse a clip file :func:`npz_problem` finds unsafe to read, or with more members than a clip."""
+    why = npz_problem(path, {"data.npy": MAX_DATA_BYTES, "meta.npy": MAX_META_BYTES},
+                      MAX_DATA_BYTES + MAX_META_BYTES, max_members=16)
+    if why is not None:
+        raise ClipFormatError(path, f"cannot read NPZ clip: {why}")
 
 
 def _meta_field(path: Path, meta: dict, key: str, kind, what: str):

@@ -15,7 +15,7 @@ import numpy as np
 
 from shared.errors import BadInput, NotFound
 from shared.io.atomic import atomic_write
-from shared.io.npz import Stacked, savez_stacked
+from shared.io.npz import Stacked, npz_problem, savez_stacked
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM
 from shared.pss.mds import Embedding
@@ -94,12 +94,21 @@ def save_added(space: ProtoSymbolSpace, path, first: int) -> Path:
     atomic_write(Path(path), lambda f: savez_stacked(f, arrays))
     return Path(path)
 
+#: what a space file (or a journal entry) may unpack to, checked before numpy reads it: about six
+#: times a space of 3,000 proto-symbols (its N x N distances twice and 0.18 GB of HMMs)
+MAX_SPACE_BYTES = 2 * 1024 ** 3
+
+
 def read(path) -> tuple[dict, dict, dict]:
     """A space file's header, arrays and the open set's fitted tests' arrays."""
     import zipfile
 
-    if Path(path).is_file() and not zipfile.is_zipfile(path):  # numpy would read it as a pickle, and say so
-        raise BadInput(f"{path}: not a space file (not an NPZ archive; `offline build` writes one)")
+    if Path(path).is_file():
+        if not zipfile.is_zipfile(path):  # numpy would read it as a pickle, and say so
+            raise BadInput(f"{path}: not a space file (not an NPZ archive; `offline build` writes one)")
+        why = npz_problem(Path(path), {}, MAX_SPACE_BYTES)
+        if why is not None:
+            raise BadInput(f"{path}: not a readable space file ({why})")
     try:
         with np.load(path, allow_pickle=False) as z:  # each z[k] is a new array of its own (not copied again)
             header = json.loads(str(z["header"]))
