@@ -21,7 +21,6 @@ import pytest
 pytestmark = pytest.mark.slow  # end-to-end: real clusters and processes (make test-quick leaves them out)
 
 REPO = Path(__file__).resolve().parent.parent
-SERVICES = ("pss", "simulator", "coach", "dialogue", "estimator")
 
 
 def free_port() -> int:
@@ -398,13 +397,16 @@ def test_the_secured_cluster_serves_its_roles_and_refuses_the_rest(secured, tmp_
 
 @pytest.mark.slow
 def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):
-    """The demo's steps across three hosts over TLS; a host's link cut mid-request; a second pss
-    on another host takes over; the first comes back as a standby."""
+    """The demo's steps across three hosts over TLS (its live take through a capture service on
+    another host than the coach's client); a host's link cut mid-request; a second pss on another
+    host takes over; the first comes back as a standby."""
+    from shared.bus.deploy import SERVICES
+
     out = tmp_path / "d"
     with Net() as net:
         r = run(["deploy", "init", out, "--router", f"router={net.ip('router')}", "--identity", "pss-a:pss", "--identity",
                  "pss-b:pss", "--identity", "simulator", "--identity", "coach", "--identity", "dialogue",
-                 "--identity", "estimator", "--identity", "cli", "--identity", "dashboard"])
+                 "--identity", "estimator", "--identity", "capture", "--identity", "cli", "--identity", "dashboard"])
         assert r.returncode == 0, r.stderr
         home = tmp_path / "shared-volume"  # both pss hosts mount it (here: the same folder)
         procs = Procs(tmp_path / "logs")
@@ -413,7 +415,7 @@ def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):
             procs.start("router", "shared.bus.router", env_for(out / "router", home), ns=net.ns("router"))
             procs.start("pss-a", "services.pss", env_for(out / "pss-a", home), ns=net.ns("a"))
             procs.start("simulator", "services.simulator", env_for(out / "simulator", home), ns=net.ns("a"))
-            for s in ("coach", "dialogue", "estimator"):
+            for s in ("coach", "dialogue", "estimator", "capture"):
                 procs.start(s, f"services.{s}", env_for(out / s, home), ns=net.ns("b"))
             wait_alive(cli_env, SERVICES, ns=net.ns("client"), within=90)
             wait_for(lambda: "pss-a leads" in procs.log("pss-a"), 30, "pss-a leads")
@@ -426,6 +428,9 @@ def test_three_hosts_over_tls_with_failover(tmp_path, hdm05):
                                timeout=600)
             assert r.returncode == 0, r.stdout + r.stderr
             assert "on the deployed cluster" in r.stdout and "trial 4:" in r.stdout and "estimator:" in r.stdout, r.stdout
+            # the live take: replayed through the capture service on host b, cut into its repetitions, coached
+            assert "live take 'demo-live'" in r.stdout and "4 repetition(s) found" in r.stdout, r.stdout
+            assert "coached: d_p" in r.stdout, r.stdout
             assert (tmp_path / "demo" / "emphatic_squat.bvh").stat().st_size > 1000
             procs.kill("observer", signal.SIGTERM)
             seen = re.search(r"stopped after (\d+) events \((\d+) refused\)", procs.log("observer"))
