@@ -64,6 +64,7 @@ bench: bytecode
 	$(BIN)/python -m bench.bus --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.sim --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.ch3 --hdm05 $(HDM05) --out bench/results
+	$(BIN)/python -m bench.questions --out bench/results
 	$(BIN)/python -m bench.coach --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.balance --hdm05 $(HDM05) --out bench/results
 	$(BIN)/python -m bench.tracking --hdm05 $(HDM05) --out bench/results

@@ -670,3 +670,30 @@ def test_the_identification_rates_come_with_their_exact_intervals():
     assert "without noise: in the model 10 of 10 (100.0 %" in text and "outside it" not in text.split("10 % noise")[0]
     assert "10 % noise: in the model 19 of 20 (95.0 %" in text and "outside it 17 of 20 (85.0 %" in text
     assert identification_interval_lines({}, 0.95) == []
+
+
+def test_the_conversation_length_benchmark_computes_its_words_and_scores_at_each_length():
+    """``bench.questions``: the verdict per kind comes from the mean errors at each length, and one
+    other's conversation is scored after each of its lengths, as many answers as sets asked."""
+    from bench.questions import CHECKPOINTS, one_other, verdict
+
+    def means(*rows):
+        return {s: dict(zip(("known", "unknown", "fast"), r)) for s, r in zip(CHECKPOINTS, rows)}
+
+    assert verdict(means((0.04, 0.05, 0.05), (0.03, 0.04, 0.04), (0.02, 0.03, 0.03))) == "met at 6 sets"
+    assert verdict(means((0.07, 0.05, 0.12), (0.04, 0.04, 0.08), (0.03, 0.03, 0.07))).startswith(
+        "met at 12 sets: missed for want of answers")
+    assert "worse with more questions" in verdict(means((0.10, 0.10, 0.12), (0.2, 0.2, 0.2), (0.3, 0.3, 0.3)))
+    assert verdict(means((0.14, 0.08, 0.10), (0.12, 0.07, 0.12), (0.11, 0.06, 0.13))).endswith(
+        "missed for want of a term the model lacks")
+    assert "want of answers and of a term" in verdict(means((0.15, 0.08, 0.10), (0.10, 0.07, 0.1), (0.07, 0.06, 0.1)))
+    p = population("mass", 1, seed=2026, d=6, g_max=0.6, joints=list(ARM))[0]
+    r = one_other(("mass", 0, p))
+    assert [row["sets"] for row in r["rows"]] == list(CHECKPOINTS)
+    assert [row["answers"] for row in r["rows"]] == [8 * s for s in CHECKPOINTS]  # 4 shared motions, 4 probes a set
+    assert all(0 <= row[g] < 1 for row in r["rows"] for g in ("known", "unknown", "fast"))
+    # the rule's stop: from the 6th set, at the first set whose estimate is not the extended model (or the 12th)
+    stop = r["rule"]
+    assert CHECKPOINTS[0] <= stop["sets"] <= 12 and (stop["model"] != "extended" or stop["sets"] == 12)
+    if stop["sets"] == CHECKPOINTS[0]:
+        assert stop == r["rows"][0]
