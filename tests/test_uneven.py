@@ -646,6 +646,12 @@ def test_the_report_says_missed_and_why_a_conversation_stopped(tmp_path):
     lines = equal_population_lines(summ, "in-model kinds")
     assert "| mass | 24 | 20.0 % | 20.0 % | 10.0 % (24) | body |" in lines
     assert any("on every kind:** missed (behind on legs)" in x for x in lines)
+    # outside the model, a missed kind points to where its why is measured (bench.questions); a met one does not
+    from shared.reproduce.ch3_report import outside_lines
+
+    missed = "\n".join(outside_lines({"springs": [_row(0.08, 0.3)] * 2}))
+    assert "(missed: springs)" in missed and "`python -m bench.questions`" in missed
+    assert "bench.questions" not in "\n".join(outside_lines({"springs": [_row(0.01, 0.02)] * 2}))
 
 
 def test_the_identification_rates_come_with_their_exact_intervals():

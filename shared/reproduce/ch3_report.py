@@ -197,6 +197,10 @@ def outside_lines(outside: dict | None) -> list[str]:
     lines += ["", f"**Goal: body estimator below 5 % known, 10 % unknown and 10 % unknown at {FAST:g}x "
               f"speed on every kind outside its model:** {verdict(not missed)}" + (f" (missed: {', '.join(missed)})" if missed else "") + ". Lowest "
               "unknown-motion error per kind: " + ", ".join(f"{k} {m}" for k, m in best.items()) + ".", ""]
+    if missed:
+        lines += ["Why a kind misses, for want of answers (the model has the terms, 6 sets do not pin them down), of a "
+                  "term the model lacks, or because the other changes while it is asked: the same others scored after "
+                  "6, 12 and 18 sets, `python -m bench.questions` (`bench/results/questions.md`, not part of this run).", ""]
     return lines + equal_population_lines(summ, "outside the model")
 
 
