@@ -63,6 +63,10 @@ MAX_DATA_BYTES = 512 * 1024 * 1024
 MAX_META_BYTES = 16 * 1024 * 1024
 
 
+#: :func:`npz_problem`'s answer for a file that is no zip archive at all
+NOT_AN_ARCHIVE = "not an NPZ archive"
+
+
 def npz_problem(path: Path, limits: dict[str, int], total: int, max_members: int = 4096) -> str | None:
     """Why the NPZ archive at ``path`` may not be read, or ``None``: checked from the zip's own
     directory and each array's header before numpy reads anything. Refused: a member that would
@@ -98,12 +102,14 @@ def npz_problem(path: Path, limits: dict[str, int], total: int, max_members: int
                 if declared > info.file_size - start:
                     return (f"member {info.filename!r} declares an array of shape {tuple(shape)} ({declared} bytes) "
                             f"but holds {info.file_size - start} bytes")
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zipfile.LargeZipFile) as e:
+    except zipfile.BadZipFile:  # numpy would try it as a pickle, and say so
+        return NOT_AN_ARCHIVE
+    except (OSError, ValueError, EOFError, zipfile.LargeZipFile) as e:
         return f"unreadable NPZ archive ({type(e).__name__}: {e})"
     return None
 
 
-def _check_sizes(path: Path) -> None:
+def _check_archive(path: Path) -> None:
     """Refuse a clip file :func:`npz_problem` finds unsafe to read, or with more members than a clip."""
     why = npz_problem(path, {"data.npy": MAX_DATA_BYTES, "meta.npy": MAX_META_BYTES},
                       MAX_DATA_BYTES + MAX_META_BYTES, max_members=16)
@@ -121,7 +127,7 @@ def _meta_field(path: Path, meta: dict, key: str, kind, what: str):
 def read_npz(path, label: str | None = None) -> Clip:
     path = Path(path)
     if path.is_file():
-        _check_sizes(path)
+        _check_archive(path)
     try:
         with np.load(path, allow_pickle=False) as z:
             if "data" not in z or "meta" not in z:

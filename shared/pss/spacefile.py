@@ -15,7 +15,7 @@ import numpy as np
 
 from shared.errors import BadInput, NotFound
 from shared.io.atomic import atomic_write
-from shared.io.npz import Stacked, npz_problem, savez_stacked
+from shared.io.npz import NOT_AN_ARCHIVE, Stacked, npz_problem, savez_stacked
 from shared.pss.features import MotionFeatures
 from shared.pss.hmm import LeftToRightHMM
 from shared.pss.mds import Embedding
@@ -101,12 +101,10 @@ MAX_SPACE_BYTES = 2 * 1024 ** 3
 
 def read(path) -> tuple[dict, dict, dict]:
     """A space file's header, arrays and the open set's fitted tests' arrays."""
-    import zipfile
-
     if Path(path).is_file():
-        if not zipfile.is_zipfile(path):  # numpy would read it as a pickle, and say so
-            raise BadInput(f"{path}: not a space file (not an NPZ archive; `offline build` writes one)")
         why = npz_problem(Path(path), {}, MAX_SPACE_BYTES)
+        if why == NOT_AN_ARCHIVE:
+            raise BadInput(f"{path}: not a space file (not an NPZ archive; `offline build` writes one)")
         if why is not None:
             raise BadInput(f"{path}: not a readable space file ({why})")
     try:
