@@ -23,10 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from shared.reproduce.ch3_report import GOALS as REPORT_GOALS
+
 #: the conversation lengths scored (sets of 4 shared motions and 4 probes)
 CHECKPOINTS = (6, 12, 18)
-#: the outside kinds' goals (issue text, as in the report): known, unknown, unknown at FAST speed
-GOALS = {"known": 0.05, "unknown": 0.10, "fast": 0.10}
+#: the outside kinds' goals, the report's (``ch3_report.GOALS``): known, unknown, and unknown at FAST speed as unknown
+GOALS = {"known": REPORT_GOALS["known"], "unknown": REPORT_GOALS["unknown"], "fast": REPORT_GOALS["unknown"]}
 SEED = 2026  # the report's population
 #: the rule's longest conversation: the extended model class has twice the rigid body's parameters
 RULE_SETS = 12
@@ -112,15 +114,12 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    from shared.agents.population import KINDS, OUTSIDE_KINDS, people_answers, population
+    from shared.agents.population import KINDS, OUTSIDE_KINDS, people_population, population
     from shared.estimation.motions import ARM
     from shared.reproduce.ch3_report import FAST, G_MAX
 
     def others(kind: str, n: int, seed: int, people: bool = False) -> list[dict]:
-        pop = population(kind, n, seed=seed, d=6, g_max=G_MAX, joints=list(ARM))
-        if people:  # as reproduce ch3's people section draws them
-            pop = [{**p, **a, "seed": p["seed"] + 500} for p, a in zip(pop, people_answers(n, seed))]
-        return pop
+        return (people_population if people else population)(kind, n, seed=seed, d=6, g_max=G_MAX, joints=list(ARM))
 
     jobs = [(kind, i, p, "report") for kinds, n in ((OUTSIDE_KINDS, args.others), (KINDS, args.reference))
             for kind in kinds

@@ -703,3 +703,16 @@ def test_the_conversation_length_benchmark_computes_its_words_and_scores_at_each
     assert CHECKPOINTS[0] <= stop["sets"] <= 12 and (stop["model"] != "extended" or stop["sets"] == 12)
     if stop["sets"] == CHECKPOINTS[0]:
         assert stop == r["rows"][0]
+
+
+def test_a_people_population_is_the_population_answering_like_people():
+    """The same bodies as :func:`population`, each with a person's way of answering and its own answers' seed."""
+    from shared.agents.population import people_answers, people_population
+
+    plain = population("mixed", 4, seed=13, d=6, joints=list(ARM))
+    people = people_population("mixed", 4, seed=13, d=6, joints=list(ARM))
+    ways = people_answers(4, 13)
+    for p, q, a in zip(plain, people, ways):
+        assert {k: v for k, v in q.items() if k not in a and k != "seed"} == {k: v for k, v in p.items() if k != "seed"}
+        assert all(q[k] == v for k, v in a.items()) and q["seed"] == p["seed"] + 500
+    assert len({q["gamma"] for q in people}) == 4  # each other its own word boundaries

@@ -157,3 +157,10 @@ def population(kind: str, n: int = 10, seed: int = 2026, **params) -> list[dict]
         out.append({**params, "mass": mass, "body": body, "kind": kind, "joints": joints,
                     "seed": int(params.get("seed", 0)) + i, **({"transmission": t} if t else {})})
     return out
+
+
+def people_population(kind: str, n: int = 10, seed: int = 2026, **params) -> list[dict]:
+    """:func:`population` answering like people (:func:`people_answers`, drawn from the same
+    ``seed``), each other's answers seeded apart from the population's plain others (``seed + 500``)."""
+    return [{**p, **a, "seed": p["seed"] + 500}
+            for p, a in zip(population(kind, n, seed, **params), people_answers(n, seed))]

@@ -33,7 +33,7 @@ import numpy as np
 
 from schemas.common import clip_from_wire, clip_to_wire
 from shared.agents.other import OtherParams, SimulatedOther
-from shared.agents.population import KINDS, OUTSIDE_KINDS, people_answers, population, seen_still
+from shared.agents.population import KINDS, OUTSIDE_KINDS, people_population, population, seen_still
 from shared.estimation.conversation import Language, evaluate, hold
 from shared.estimation.motions import ALL, ARM, basic_motions, unknown_motions
 from shared.reproduce.ch3_report import (
@@ -196,9 +196,8 @@ class Ch3:
         res = {}
         pops = {}
         for kind in kinds:
-            pop = population(kind, self.others, seed=self.population_seed, d=6, g_max=G_MAX, joints=list(ARM))
-            pops[kind] = [{**p, **a, "seed": p["seed"] + 500} for p, a in zip(pop, people_answers(self.others,
-                                                                                                  self.population_seed))]
+            pops[kind] = people_population(kind, self.others, seed=self.population_seed, d=6, g_max=G_MAX,
+                                           joints=list(ARM))
         with worker_pool(self.c, WORKERS) as pool:  # both kinds in one pool (see uneven)
             futures = {kind: [pool.submit(self.one_other, f"people-{kind}", i, p) for i, p in enumerate(pop)]
                        for kind, pop in pops.items()}
