@@ -7,10 +7,12 @@ import sys
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
-from concurrent.futures import Future
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:  # concurrent.futures costs a one-clip command 3 ms to import: imported at the first once()
+    from concurrent.futures import Future
 
 
 def nbytes(value) -> int:
@@ -54,6 +56,8 @@ class Once:
         self.kept_bytes -= self.sizes.pop(key, 0)
 
     def once(self, key, compute, timeout: float | None = None):
+        from concurrent.futures import Future
+
         with self.lock:
             kept = self.table.get(key)
             mine = kept is None

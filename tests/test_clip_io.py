@@ -58,6 +58,34 @@ def test_amc_reads_crlf_latin1_and_keeps_angles_past_360(hdm05):
     assert c.data[0, :6] == pytest.approx([float(v) for v in first.split()[1:]])
 
 
+
+def test_amc_frames_read_at_once_are_those_read_line_by_line(hdm05, tmp_path, monkeypatch):
+    """HDM05's files take the reader's path that converts all frames at once; a file whose frames
+    list their bones in different orders or sets takes the line-by-line one: the same numbers."""
+    import shared.io.asf_amc as amc
+
+    files = [hdm05 / SQUAT, hdm05 / PAST_360, *sorted((hdm05 / "amc").glob("*/HDM_dg_*.amc"))[:3]]
+    lines = amc._lines(hdm05 / SQUAT)
+    skeleton = read_asf(hdm05 / "asf/HDM_bd.asf")
+    bone_cols = {j.name: [0] * len(j.dofs) for j in skeleton.joints}
+    assert amc._regular_frames(lines, bone_cols, 1) is not None  # the path a regular file takes
+    # frame 2's first two bones swapped, frame 3 without its last bone: irregular, read line by line
+    at = [i for i, line in enumerate(lines) if line.strip().isdigit()]
+    mixed = lines[:at[1] + 1] + [lines[at[1] + 2], lines[at[1] + 1]] + lines[at[1] + 3:at[3] - 1] + lines[at[3]:]
+    (tmp_path / "mixed.amc").write_text("\n".join(mixed) + "\n", encoding="latin-1")
+    assert amc._regular_frames(amc._lines(tmp_path / "mixed.amc"), bone_cols, 1) is None
+    at_once = [load_clip(f) for f in files]
+    mixed_clip = load_clip(tmp_path / "mixed.amc", skeleton=hdm05 / "asf/HDM_bd.asf")
+    monkeypatch.setattr(amc, "_regular_frames", lambda *args: None)  # the line-by-line reader alone
+    for f, clip in zip(files, at_once, strict=True):
+        by_line = load_clip(f)
+        assert clip.channels == by_line.channels and clip.fps == by_line.fps and clip.label == by_line.label
+        assert np.array_equal(clip.data, by_line.data), f.name
+    assert np.array_equal(mixed_clip.data[:2], at_once[0].data[:2])
+    last = lines[at[3] - 1].split()[0]  # the bone frame 3 lacks is 0 there, as the file says nothing of it
+    columns = [i for i, c in enumerate(mixed_clip.channels) if c.startswith(last + ".")]
+    assert np.all(mixed_clip.data[2, columns] == 0) and np.any(at_once[0].data[2, columns] != 0)
+    assert np.array_equal(np.delete(mixed_clip.data[2], columns), np.delete(at_once[0].data[2], columns))
 def test_skeleton_is_found_in_the_usual_layouts(hdm05, tmp_path):
     assert find_skeleton(hdm05 / SQUAT).name == "HDM_bd.asf"  # amc/<class>/x.amc + asf/
     beside = tmp_path / "beside"

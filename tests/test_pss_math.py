@@ -464,6 +464,16 @@ def test_numpy_twins_of_distance_placement_and_kinematics_match_numba(hdm05):
     tb[::7] = tb[::7] * [1, -1, 1] + 180.0
     a, b = _kernel_both_ways(kinematics.continuous_tait_bryan, tb, np.zeros(3))
     np.testing.assert_allclose(a, b, atol=1e-9)
+    # angles with no continuity at all: every kind of step of the twins' chain (set, kept, flipped)
+    jumps = rng.uniform(-180, 180, size=(500, 3))
+    a, b = _kernel_both_ways(kinematics.continuous_tait_bryan, jumps, np.array([10.0, 170.0, -40.0]))
+    np.testing.assert_allclose(a, b, atol=1e-9)
+    following = np.array([[0, 0], [1, 1], [0, 1], [1, 0], [1, 0], [0, 1], [1, 1], [1, 0]])
+    for c0 in (0, 1):
+        chain = [c0]
+        for row in following:
+            chain.append(int(row[chain[-1]]))
+        assert kinematics._two_state_chain(c0, following).tolist() == chain
 
 
 def test_offline_recognize_runs_without_numba_and_answers_as_the_compiled_path(tmp_path, hdm05):

@@ -218,6 +218,9 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
     col = {c: i for i, c in enumerate(channels)}
     bone_cols = {j.name: [col[f"{j.name}.{d}"] for d in j.dofs] for j in skeleton.joints}
     nch = len(channels)
+    regular = _regular_frames(lines, bone_cols, nch)
+    if regular is not None:
+        return _amc_clip(path, skeleton, *regular, fps=fps, label=label)
     # one pass over the lines checks the layout; the numbers are converted at once at the end
     tokens: list[str] = []  # every value, in file order
     where: list[int] = []  # its flat index frame * nch + column
@@ -265,7 +268,12 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
         raise ClipFormatError(path, "unreadable number", starts[k][1])
     flat = np.zeros(n_frames * nch)
     flat[np.array(where, dtype=np.int64)] = values
-    data = flat.reshape(n_frames, nch)
+    return _amc_clip(path, skeleton, flat.reshape(n_frames, nch), declared, fps=fps, label=label)
+
+
+def _amc_clip(path: Path, skeleton: Skeleton, data: np.ndarray, declared: str | None, fps: float,
+              label: str | None) -> Clip:
+    channels = skeleton.channels()
     # angles in the unit the AMC declares (:RADIANS / :DEGREES), else its ASF's; lengths stay file units
     scale = {"radians": 180.0 / math.pi, "degrees": 1.0}.get(declared or "", skeleton.__dict__.get("amc_angle_scale", 1.0))
     if scale != 1.0:
@@ -274,6 +282,69 @@ def read_amc(path, skeleton: Skeleton, fps: float = 120.0, label: str | None = N
     cls = label if label is not None else path.parent.name
     return Clip(data=data, channels=channels, fps=fps, skeleton=skeleton, groups={"motion": list(channels)},
                 name=path.stem, label=cls, source=str(path))
+
+
+def _regular_frames(lines: list[str], bone_cols: dict[str, list[int]], nch: int) -> tuple[np.ndarray, str | None] | None:
+    """The frames (and the declared angle unit) of an AMC whose every frame lists the bones of its
+    first frame in the same order with the same counts of numbers, its frames numbered one by
+    one, nothing but comments and ``:`` keywords before the first: HDM05's and CMU's files. The
+    whole body is split into words once and each bone's numbers are one slice of them (every
+    frame is the same number of words), converted at once: a third of the time of reading it line
+    by line. ``None`` for any other file, which :func:`read_amc` then reads line by line (and
+    names what is wrong with it)."""
+    declared = None
+    first = None
+    for i, line in enumerate(lines):
+        head = line.lstrip()[:1]
+        if not head or head == "#":
+            continue
+        if head == ":":
+            word = line.split()[0].lower()
+            if word in (":radians", ":degrees"):
+                declared = word[1:]
+            continue
+        if not line.strip().isdigit():
+            return None
+        first = i
+        break
+    if first is None:
+        return None
+    bones: list[str] = []
+    frame_words = 1
+    for line in lines[first + 1:]:
+        parts = line.split()
+        if not parts:
+            continue
+        if parts[0].isdigit() and len(parts) == 1:
+            break
+        cols = bone_cols.get(parts[0])
+        if cols is None or len(parts) - 1 != len(cols) or parts[0] in bones:
+            return None
+        bones.append(parts[0])
+        frame_words += len(parts)
+    words = " ".join(lines[first:]).split()
+    n_frames, rest = divmod(len(words), frame_words)
+    if not bones or rest or len(list(filter(str.strip, lines[first:]))) != n_frames * (1 + len(bones)):
+        return None
+    start = int(words[0])
+    if words[0::frame_words] != [str(k) for k in range(start, start + n_frames)]:
+        return None
+    at = 1
+    value_at: list[int] = []
+    for bone in bones:
+        if words[at::frame_words] != [bone] * n_frames:
+            return None
+        value_at += range(at + 1, at + 1 + len(bone_cols[bone]))
+        at += 1 + len(bone_cols[bone])
+    try:
+        values = np.array([words[k::frame_words] for k in value_at], dtype=float)
+    except ValueError:
+        return None
+    if not np.all(np.isfinite(values)):
+        return None
+    data = np.zeros((n_frames, nch))
+    data[:, [c for bone in bones for c in bone_cols[bone]]] = values.T
+    return data, declared
 
 
 def write_amc(clip: Clip, path) -> None:

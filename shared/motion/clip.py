@@ -9,7 +9,6 @@ Angles are continuous (never wrapped frame by frame) and in degrees.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -74,6 +73,8 @@ class Clip:
         """What the motion is, as the key of anything computed from its frames alone (the frame
         rate, the channels and a digest of the frames; not its name): small and the same for
         one motion under two names."""
+        import hashlib  # imported when first used (shared.digest)
+
         data = np.ascontiguousarray(self.data)
         return float(self.fps), tuple(self.channels), data.shape, hashlib.blake2b(data.tobytes(), digest_size=16).digest()
 
