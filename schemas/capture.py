@@ -9,7 +9,7 @@ change of a take's state on ``<prefix>/events/capture/take``.
 from __future__ import annotations
 
 from schemas.base import NAME_PATTERN, Array, Bool, Endpoint, F, Float, Int, List, Map, Message, Str
-from schemas.common import CLIP, name
+from schemas.common import CLIP, DAMAGED, name
 
 SERVICE = "capture"
 TAKE = name("the take's name (its file: <take>.bvh in the service's data folder)")
@@ -134,7 +134,7 @@ SEGMENT = Endpoint(
 LIST = Endpoint(
     "list",
     Message("capture.list", Map({})),
-    Message("capture.list.reply", Map({"takes": F(List(TAKE_INFO, max_len=100_000))})),
+    Message("capture.list.reply", Map({"takes": F(List(TAKE_INFO, max_len=100_000)), "damaged": DAMAGED})),
     "Every take, recording or kept.",
 )
 

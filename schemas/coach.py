@@ -6,7 +6,7 @@ Keys: ``<prefix>/coach/<verb>``; every trial is published on ``<prefix>/events/c
 from __future__ import annotations
 
 from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
-from schemas.common import CLIP, name
+from schemas.common import CLIP, DAMAGED, name
 from schemas.simulator import FAMILIES, LEARNER_PARAMS
 from shared.errors import BadInput
 
@@ -170,7 +170,9 @@ POLICY_FIT = Endpoint(
 LIST = Endpoint("list", Message("coach.list", Map({})),
                 Message("coach.list.reply", Map({"sessions": F(List(Map({"session": SESSION, "trials": F(Int(0)),
                                                                          "learner": F(Str(max_len=64), required=False)}),
-                                                                    max_len=100_000))})), "Every session.")
+                                                                    max_len=100_000)),
+                                                 "damaged": DAMAGED})),
+                "Every session (and those whose files cannot be read back, in damaged).")
 DELETE = Endpoint("delete", Message("coach.delete", Map({"session": SESSION})),
                   Message("coach.delete.reply", Map({"session": SESSION, "deleted": F(Bool())})), "Delete a session.")
 

@@ -18,6 +18,13 @@ def name(doc: str) -> F:
     return F(Str(pattern=NAME_PATTERN, max_len=64), doc)
 
 
+#: a list verb's things whose saved files cannot be read back (shared/io/saved.py), beside the readable ones
+DAMAGED = F(List(Map({"kind": F(Str(max_len=32), "what it is: other, learner, estimate, coaching session, take"),
+                      "name": F(Str(max_len=64)),
+                      "message": F(Str(max_len=2000), "what is wrong with its file and what to do (the file is kept)")}),
+                 max_len=100_000), "saved files that cannot be read back", required=False, default=list)
+
+
 def _clip_columns(clip: dict, path: str):
     """data has one column per channel; sensor channels are among the channels."""
     cols = clip["data"].shape[1]

@@ -7,7 +7,7 @@ Keys: ``<prefix>/estimator/<verb>``; progress on ``<prefix>/events/estimator/pro
 from __future__ import annotations
 
 from schemas.base import AnyMap, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
-from schemas.common import CLIP, name
+from schemas.common import CLIP, DAMAGED, name
 
 SERVICE = "estimator"
 ESTIMATE = name("estimate id (one per other being estimated)")
@@ -130,8 +130,9 @@ INFO_EP = Endpoint("info", Message("estimator.info", Map({"estimate": ESTIMATE})
                    "An estimate's state.")
 LIST = Endpoint("list", Message("estimator.list", Map({})),
                 Message("estimator.list.reply", Map({"estimates": F(List(Map({"estimate": ESTIMATE, "other": F(Str(max_len=64)),
-                                                                               "sets_done": F(Int(0))}), max_len=10_000))})),
-                "Every estimate.")
+                                                                               "sets_done": F(Int(0))}), max_len=10_000)),
+                                                                     "damaged": DAMAGED})),
+                "Every estimate (and those whose files cannot be read back, in damaged).")
 DELETE = Endpoint("delete", Message("estimator.delete", Map({"estimate": ESTIMATE})),
                   Message("estimator.delete.reply", Map({"estimate": ESTIMATE, "deleted": F(Bool())})), "Delete an estimate.")
 

@@ -21,7 +21,7 @@ from schemas.base import (
     Message,
     Str,
 )
-from schemas.common import CLIP, name
+from schemas.common import CLIP, DAMAGED, name
 from shared.bus.wirefiles import FILE_PATTERN, READING_OPTIONS
 from shared.errors import BadInput
 
@@ -247,8 +247,9 @@ LIST = Endpoint(
                               "dim": F(Int(1)), "stress1": F(Float(0.0))}), max_len=10_000)),
         "interrupted": F(List(Map({"space": SPACE, "operation": F(Str(max_len=32)), "started": F(Float(0.0))}),
                               max_len=10_000), "builds or adds that never finished (the service stopped mid-way)"),
+        "damaged": DAMAGED,
     })),
-    "Every space, and any build that was interrupted.",
+    "Every space, any build that was interrupted, and any space file that cannot be read back.",
 )
 
 DELETE = Endpoint(

@@ -7,7 +7,7 @@ Keys: ``<prefix>/simulator/<verb>``; events on ``<prefix>/events/simulator/perfo
 from __future__ import annotations
 
 from schemas.base import AnyMap, Array, Bool, Endpoint, F, Float, Int, List, Map, MapOf, Message, Str
-from schemas.common import CLIP, name
+from schemas.common import CLIP, DAMAGED, name
 from shared.errors import BadInput
 from shared.estimation.symbols import COMPARISONS, RULES, WORDS
 
@@ -252,6 +252,7 @@ LIST = Endpoint(
     Message("simulator.list.reply", Map({
         "others": F(List(Map({"other": OTHER, "kind": F(Str(max_len=16))}), max_len=10_000)),
         "learners": F(List(Map({"learner": LEARNER, "trials": F(Int(0))}), max_len=10_000)),
+        "damaged": DAMAGED,
     })),
     "Every other and learner.",
 )

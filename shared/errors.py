@@ -62,3 +62,19 @@ class ModelError(MirrorcoachError):
     """A model could not be trained or used (degenerate HMM, too few frames, ...)."""
 
     code = "bad_request"
+
+
+class DamagedFile(BadInput):
+    """A file a service saved (an other, a learner, an estimate, a session, a take) cannot be read
+    back: a disk's fault, an edit by hand, a file of another program. Names the file, what is
+    wrong with it and what to do; the file is kept as it is (:func:`shared.io.saved.read_back`)."""
+
+    def __init__(self, what: str, name: str, path, why: str):
+        super().__init__(f"{what} {name!r} cannot be read from its file {path} ({why}); the file is kept as it is: "
+                         f"delete the {what} to start it again, or put back a good copy of the file",
+                         path=str(path), damaged=what)
+        self.what, self.name, self.path, self.why = what, name, str(path), why
+
+    def listed(self) -> dict:
+        """Its row in a list verb's ``damaged`` (schemas.common.DAMAGED)."""
+        return {"kind": self.what, "name": self.name, "message": self.message}

@@ -25,8 +25,9 @@ from schemas import capture as contract
 from schemas.common import clip_from_wire, clip_to_wire
 from shared.bus.config import Settings
 from shared.bus.runtime import Service
-from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound, Unavailable
+from shared.errors import BadInput, Conflict, DamagedFile, MirrorcoachError, NotFound, Unavailable
 from shared.io.atomic import atomic_write
+from shared.io.saved import read_back
 
 MAX_RECORDING = 4  # takes recorded at once
 BLOCK = 0.1  # seconds of frames in one published block
@@ -109,7 +110,8 @@ def make_service(settings: Settings | None = None) -> Service:
         p = root / f"{take}.json"
         if not p.exists():
             raise NotFound(f"no take {take!r}", take=take)
-        return contract.TAKE_INFO.check(json.loads(p.read_text()), "take")
+        with read_back(p, "take", take):
+            return contract.TAKE_INFO.check(json.loads(p.read_text()), "take")
 
     # a take the service stopped under (killed while recording) is failed, never left recording
     for p in root.glob("*.json"):
@@ -327,12 +329,14 @@ def make_service(settings: Settings | None = None) -> Service:
     @svc.handler("list")
     def list_takes(req):
         names = sorted({p.stem for p in root.glob("*.json")} | set(live))
-        out = []
+        out, damaged = [], []
         for n in names:
             try:
                 out.append(info_of(n))
-            except (NotFound, BadInput, ValueError):
+            except NotFound:  # deleted while listed
                 continue
-        return {"takes": out}
+            except DamagedFile as e:  # listed apart, with what is wrong with its file
+                damaged.append(e.listed())
+        return {"takes": out, "damaged": damaged}
 
     return svc

@@ -33,9 +33,10 @@ from shared.coaching.policies import (
 )
 from shared.coaching.session import Session, Trial, session_to_dict, start, trial, warm
 from shared.deadline import check_time, completed
-from shared.errors import BadInput, Conflict, NotFound
+from shared.errors import BadInput, Conflict, DamagedFile, NotFound
 from shared.io import load_clip, save_clip
 from shared.io.atomic import atomic_write
+from shared.io.saved import read_back
 from shared.motion.clip import Clip
 from shared.pss.store import check_name
 
@@ -125,13 +126,14 @@ class CoachHandlers:
         meta, target = self.paths(name)
         if not meta.exists():
             raise NotFound(f"no coaching session {name!r}", session=name)
-        d = json.loads(meta.read_text())
-        cog = d.get("target_cog")
-        return Session(name, load_clip(target), Policy.from_dict(d["policy"]), d.get("learner"),
-                       trials=[Trial(**t) for t in d["trials"]], mode=d.get("mode", "residual"),
-                       check=d.get("check", True), target_report=d.get("target_report"),
-                       target_cog=None if cog is None else np.asarray(cog), subgoals=d.get("subgoals"),
-                       effort=EffortEstimate.from_dict(d.get("effort")))
+        with read_back(meta, "coaching session", name):
+            d = json.loads(meta.read_text())
+            cog = d.get("target_cog")
+            return Session(name, load_clip(target), Policy.from_dict(d["policy"]), d.get("learner"),
+                           trials=[Trial(**t) for t in d["trials"]], mode=d.get("mode", "residual"),
+                           check=d.get("check", True), target_report=d.get("target_report"),
+                           target_cog=None if cog is None else np.asarray(cog), subgoals=d.get("subgoals"),
+                           effort=EffortEstimate.from_dict(d.get("effort")))
 
     def info(self, s: Session) -> dict:
         d = s.d()
@@ -304,10 +306,17 @@ class CoachHandlers:
 
     def list_sessions(self, req):
         rows = []
+        damaged = []
         for p in sorted(self.root.glob("*.json")):
-            d = json.loads(p.read_text())
-            rows.append({"session": p.stem, "trials": len(d["trials"]), "learner": d.get("learner")})
-        return {"sessions": rows}
+            try:
+                with read_back(p, "coaching session", p.stem):
+                    d = json.loads(p.read_text())
+                    rows.append({"session": p.stem, "trials": len(d["trials"]), "learner": d.get("learner")})
+            except NotFound:  # deleted while listed
+                continue
+            except DamagedFile as e:  # listed apart, with what is wrong with its file
+                damaged.append(e.listed())
+        return {"sessions": rows, "damaged": damaged}
 
     def delete(self, req):
         name = req["session"]

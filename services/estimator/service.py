@@ -28,7 +28,7 @@ from shared.bus.client import Client, RemoteError
 from shared.bus.config import Settings
 from shared.bus.runtime import OneWriter, Service
 from shared.deadline import check_time, completed
-from shared.errors import BadInput, Conflict, MirrorcoachError, NotFound
+from shared.errors import BadInput, Conflict, DamagedFile, MirrorcoachError, NotFound
 from shared.estimation.conversation import SPACES, TORQUE_PREFIX, Language, OtherEstimate, hold, with_torques
 from shared.estimation.motions import ALL, ARM, basic_motions
 from shared.estimation.rules import (
@@ -41,6 +41,7 @@ from shared.estimation.rules import (
     weighted_candidates,
 )
 from shared.estimation.symbols import word
+from shared.io.saved import read_back
 from shared.once import Once
 from shared.pss.store import check_name
 
@@ -221,7 +222,7 @@ class EstimatorHandlers:
             hit = self.loaded.get(name)
         if hit is not None and hit[0] == stamp:
             return stamp, copy.deepcopy(hit[1])  # a copy: a handler may change it and then fail before saving
-        est = OtherEstimate.load(self.path(name))
+        est = self._read(name, self.path(name))
         self._remember(name, stamp, est)
         return stamp, copy.deepcopy(est)
 
@@ -408,11 +409,23 @@ class EstimatorHandlers:
         return info_of(req["estimate"], self.load(req["estimate"]))
 
     def list_estimates(self, req):
-        rows = []
+        rows, damaged = [], []
         for p in sorted(self.root.glob("*.npz")):
-            est = OtherEstimate.load(p)
+            try:
+                est = self._read(p.stem, p)
+            except NotFound:  # deleted while listed
+                continue
+            except DamagedFile as e:  # listed apart, with what is wrong with its file
+                damaged.append(e.listed())
+                continue
             rows.append({"estimate": p.stem, "other": est.other, "sets_done": len(est.sets)})
-        return {"estimates": rows}
+        return {"estimates": rows, "damaged": damaged}
+
+    @staticmethod
+    def _read(name: str, path: Path) -> OtherEstimate:
+        """The estimate saved at ``path`` (a damaged file: :class:`DamagedFile`, the file kept)."""
+        with read_back(path, "estimate", name, npz=True):
+            return OtherEstimate.load(path)
 
     def delete(self, req):
         name = req["estimate"]

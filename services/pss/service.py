@@ -259,12 +259,18 @@ def make_service(settings: Settings | None = None) -> Service:
 
     @svc.handler("list")
     def list_spaces(req):
-        rows = []
+        rows, damaged = [], []
         for name in store.names():
-            sp = store.get(name)
+            try:
+                sp = store.get(name)
+            except NotFound:  # deleted while listed
+                continue
+            except BadInput as e:  # its file cannot be read back: listed apart, the others still are
+                damaged.append({"kind": "space", "name": name, "message": e.message})
+                continue
             rows.append({"space": name, "n_proto_symbols": len(sp.symbols), "labels": sorted(set(sp.labels)),
                          "dim": sp.params.dim, "stress1": float(sp.embedding.stress1)})
-        return {"spaces": rows, "interrupted": store.interrupted()}
+        return {"spaces": rows, "interrupted": store.interrupted(), "damaged": damaged}
 
     @svc.handler("delete")
     def delete(req):

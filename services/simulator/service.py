@@ -212,7 +212,8 @@ class SimulatorHandlers:
     def list_all(self, req):
         with self.store.lock:
             return {"others": [{"other": n, "kind": k} for n, (k, _) in sorted(self.store.others.items())],
-                    "learners": [{"learner": n, "trials": lr.trials} for n, lr in sorted(self.store.learners.items())]}
+                    "learners": [{"learner": n, "trials": lr.trials} for n, lr in sorted(self.store.learners.items())],
+                    "damaged": [e.listed() for _, e in sorted(self.store.damaged.items())]}
 
     def delete(self, req):
         return {"deleted": self.store.delete(req["other"], req["learner"])}

@@ -18,6 +18,7 @@ from shared.cli.common import (
     SKELETON_HELP,
     app,
     client,
+    echo_damaged,
     fail,
     jsonable,
     need,
@@ -210,7 +211,8 @@ def agents_list(as_json: bool = JSON_OPTION):
         typer.echo(f"other    {o['other']:<24} {o['kind']}")
     for lr in r["learners"]:
         typer.echo(f"learner  {lr['learner']:<24} {lr['trials']} trial(s)")
-    if not r["others"] and not r["learners"]:
+    echo_damaged(r["damaged"])
+    if not r["others"] and not r["learners"] and not r["damaged"]:
         typer.echo("no agents")
 
 

@@ -19,6 +19,7 @@ from shared.cli.common import (
     SKELETON_HELP,
     SPACE_HELP,
     app,
+    echo_damaged,
     fail,
     read_clip,
     say_if_unguarded,
@@ -240,13 +241,15 @@ def capture_takes(as_json: bool = typer.Option(False, "--json", help="Print as J
     from shared.cli.common import client
 
     with client() as c:
-        takes = c.request("capture", "list", {})["takes"]
+        listed = c.request("capture", "list", {})
+    takes = listed["takes"]
     if as_json:
-        typer.echo(json.dumps(takes, indent=1))
+        typer.echo(json.dumps(takes + [{"take": d["name"], "damaged": d["message"]} for d in listed["damaged"]], indent=1))
         return
     for t in takes:
         typer.echo(_take_line(t))
-    if not takes:
+    echo_damaged(listed["damaged"])
+    if not takes and not listed["damaged"]:
         typer.echo("no takes yet (record one with `mirrorcoach capture take NAME --source ...`)", err=True)
 
 

@@ -19,6 +19,7 @@ from shared.cli.common import (
     app,
     busy,
     client,
+    echo_damaged,
     fail,
     jsonable,
     load_clips,
@@ -79,7 +80,7 @@ def space_list(as_json: bool = JSON_OPTION):
     if as_json:
         typer.echo(json.dumps(jsonable(r)))
         return
-    if not r["spaces"]:
+    if not r["spaces"] and not r["damaged"]:
         typer.echo("no spaces (build one with `mirrorcoach space build NAME CLIPS...`)")
     for s in r["spaces"]:
         typer.echo(f"{s['space']:<24} {s['n_proto_symbols']:>4} proto-symbols  {len(s['labels']):>3} labels  "
@@ -87,6 +88,7 @@ def space_list(as_json: bool = JSON_OPTION):
     for i in r["interrupted"]:
         typer.echo(f"{i['space']:<24} INTERRUPTED: its {i['operation']} never finished (the service stopped); "
                    "build it again or delete it")
+    echo_damaged(r["damaged"])
 
 
 @space_app.command("show")

@@ -16,6 +16,7 @@ from shared.cli.common import (
     SPACE_HELP,
     app,
     client,
+    echo_damaged,
     fail,
     jsonable,
     read_clip,
@@ -216,8 +217,10 @@ def coach_run(learner: str = typer.Option(..., help="The simulated learner."),
 def coach_list():
     """Every coaching session."""
     with client() as c:
-        for s in c.request("coach", "list")["sessions"]:
-            typer.echo(f"{s['session']:<24} {s['trials']} trial(s)  {s.get('learner') or 'person'}")
+        listed = c.request("coach", "list")
+    for s in listed["sessions"]:
+        typer.echo(f"{s['session']:<24} {s['trials']} trial(s)  {s.get('learner') or 'person'}")
+    echo_damaged(listed["damaged"])
 
 
 @coach_app.command("live")

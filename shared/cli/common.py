@@ -177,6 +177,12 @@ def recognition_text(r: dict) -> str:
     return "\n".join(lines)
 
 
+def echo_damaged(damaged: list[dict]) -> None:
+    """A list verb's saved files that cannot be read back (shared/io/saved.py), one line each."""
+    for d in damaged:
+        typer.echo(f"{d['kind']:<8} {d['name']:<24} DAMAGED: {d['message']}")
+
+
 def client(**kw):
     from shared.bus.client import Client
 
