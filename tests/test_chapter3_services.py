@@ -63,6 +63,13 @@ def test_dialogue_and_estimator_answer_within_their_contracts(chapter3_services,
     assert bad.value.code == "bad_request" and "clips[1]" in str(bad.value.details) + bad.value.message
     assert _ok(est.INFO_EP, c.request("estimator", "info", {"estimate": "r2"}))["sets_done"] == 3
     assert {"estimate": "r2", "other": "r2", "sets_done": 3} in _ok(est.LIST, c.request("estimator", "list"))["estimates"]
+    import subprocess
+    import sys
+
+    listed = subprocess.run([sys.executable, "-m", "shared.cli", "estimator", "list"], env=env, capture_output=True,
+                            text=True, timeout=120)
+    assert listed.returncode == 0 and any(line.split() == ["r2", "of", "r2:", "3", "set(s)"]
+                                          for line in listed.stdout.splitlines()), listed.stdout + listed.stderr
     deadline = time.monotonic() + 5
     while len(progress) < 3 and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -60,7 +60,8 @@ def test_damaged_saved_files_are_listed_and_answered_never_fatal(tmp_path, clien
             [("sp1", True)]
 
         for argv, line in [(["agents"], "learner  bad"), (["coach", "list"], "coaching session s1"),
-                           (["capture", "takes"], "take     t1"), (["space", "list"], "space    sp1")]:  # as a user sees them
+                           (["capture", "takes"], "take     t1"), (["space", "list"], "space    sp1"),
+                           (["estimator", "list"], "estimate e1")]:  # as a user sees them
             out = subprocess.run([sys.executable, "-m", "shared.cli", *argv], env=env, capture_output=True, text=True,
                                  timeout=120)
             assert out.returncode == 0 and any(x.startswith(line) and "DAMAGED: " in x for x in out.stdout.splitlines()), \

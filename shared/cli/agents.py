@@ -377,6 +377,21 @@ def estimator_info(name: str = typer.Argument(..., help=ESTIMATE_HELP), as_json:
     typer.echo(json.dumps(jsonable(r))) if as_json else _print_estimate(r)
 
 
+@estimator_app.command("list")
+def estimator_list(as_json: bool = JSON_OPTION):
+    """Every estimate: its other and the conversation sets done (and any whose file cannot be read back)."""
+    with client() as c:
+        r = c.request("estimator", "list")
+    if as_json:
+        typer.echo(json.dumps(jsonable(r)))
+        return
+    for e in r["estimates"]:
+        typer.echo(f"{e['estimate']:<24} of {e['other'] or '?'}: {e['sets_done']} set(s)")
+    echo_damaged(r["damaged"])
+    if not r["estimates"] and not r["damaged"]:
+        typer.echo("no estimates (start one with `mirrorcoach estimator start NAME OTHER`)")
+
+
 @app.command("reproduce")
 def reproduce(chapters: list[str] = typer.Argument(..., help="Which chapters: ch3 (more arrive with the coach)."),
               out: Path = typer.Option(Path("reports"), help="Folder for the reports and plots (one sub-folder per chapter)."),
