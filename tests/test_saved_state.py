@@ -89,6 +89,10 @@ def test_damaged_saved_files_are_listed_and_answered_never_fatal(tmp_path, clien
         c.request("simulator", "other_create", {"other": "odd", "replace": True})
         agents = c.request("simulator", "list", {})
         assert [o["other"] for o in agents["others"]] == ["broken", "odd"] and [d["name"] for d in agents["damaged"]] == ["bad"]
+        shown = subprocess.run([sys.executable, "-m", "shared.cli", "agents"], env=env, capture_output=True, text=True,
+                               timeout=120).stdout.splitlines()
+        assert [line.split()[:3] for line in shown] == [["other", "broken", "simulated"], ["other", "odd", "simulated"],
+                                                        ["learner", "bad", "DAMAGED:"]]
         assert c.request("estimator", "delete", {"estimate": "e1"})["deleted"]
         for service in ("simulator", "estimator", "coach", "capture", "pss"):
             assert procs.procs[service].poll() is None

@@ -199,13 +199,21 @@ def other_reveal(name: str = typer.Argument(..., help="The simulated other.")):
         typer.echo(json.dumps(jsonable(c.request("simulator", "other_reveal", {"other": name}))))
 
 
+def _listed(service: str, as_json: bool) -> dict | None:
+    """A service's ``list`` reply to print as text, or ``None`` once it is printed as JSON."""
+    with client() as c:
+        r = c.request(service, "list")
+    if as_json:
+        typer.echo(json.dumps(jsonable(r)))
+        return None
+    return r
+
+
 @app.command("agents")
 def agents_list(as_json: bool = JSON_OPTION):
     """Every other and learner on the simulator."""
-    with client() as c:
-        r = c.request("simulator", "list")
-    if as_json:
-        typer.echo(json.dumps(jsonable(r)))
+    r = _listed("simulator", as_json)
+    if r is None:
         return
     for o in r["others"]:
         typer.echo(f"other    {o['other']:<24} {o['kind']}")
@@ -380,10 +388,8 @@ def estimator_info(name: str = typer.Argument(..., help=ESTIMATE_HELP), as_json:
 @estimator_app.command("list")
 def estimator_list(as_json: bool = JSON_OPTION):
     """Every estimate: its other and the conversation sets done (and any whose file cannot be read back)."""
-    with client() as c:
-        r = c.request("estimator", "list")
-    if as_json:
-        typer.echo(json.dumps(jsonable(r)))
+    r = _listed("estimator", as_json)
+    if r is None:
         return
     for e in r["estimates"]:
         typer.echo(f"{e['estimate']:<24} of {e['other'] or '?'}: {e['sets_done']} set(s)")
