@@ -67,6 +67,10 @@ def test_damaged_saved_files_are_listed_and_answered_never_fatal(tmp_path, clien
             assert out.returncode == 0 and any(x.startswith(line) and "DAMAGED: " in x for x in out.stdout.splitlines()), \
                 (argv, out.stdout, out.stderr)
 
+        as_json = subprocess.run([sys.executable, "-m", "shared.cli", "capture", "takes", "--json"], env=env,
+                                 capture_output=True, text=True, timeout=120)
+        assert [(t["take"], t["state"]) for t in json.loads(as_json.stdout)] == [("t1", "damaged")]
+
         for service, verb, req, file in [("simulator", "learner_reveal", {"learner": "bad"}, "bad.npz"),
                                          ("simulator", "other_reveal", {"other": "broken"}, "broken.json"),
                                          ("estimator", "info", {"estimate": "e1"}, "e1.npz"),

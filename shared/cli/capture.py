@@ -244,7 +244,8 @@ def capture_takes(as_json: bool = typer.Option(False, "--json", help="Print as J
         listed = c.request("capture", "list", {})
     takes = listed["takes"]
     if as_json:
-        typer.echo(json.dumps(takes + [{"take": d["name"], "damaged": d["message"]} for d in listed["damaged"]], indent=1))
+        damaged = [{"take": d["name"], "state": "damaged", "damaged": d["message"]} for d in listed["damaged"]]
+        typer.echo(json.dumps(takes + damaged, indent=1))
         return
     for t in takes:
         typer.echo(_take_line(t))
