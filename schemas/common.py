@@ -19,7 +19,7 @@ def name(doc: str) -> F:
 
 
 #: a list verb's things whose saved files cannot be read back (shared/io/saved.py), beside the readable ones
-DAMAGED = F(List(Map({"kind": F(Str(max_len=32), "what it is: other, learner, estimate, coaching session, take"),
+DAMAGED = F(List(Map({"kind": F(Str(max_len=32), "what it is: other, learner, estimate, coaching session, take, space"),
                       "name": F(Str(max_len=64)),
                       "message": F(Str(max_len=2000), "what is wrong with its file and what to do (the file is kept)")}),
                  max_len=100_000), "saved files that cannot be read back", required=False, default=list)

@@ -120,3 +120,13 @@ def test_reading_back_a_saved_file_names_what_is_wrong(tmp_path):
         np.load(good)["no such array"]
     with pytest.raises(NotFound, match="no take 'gone'"), read_back(tmp_path / "gone.json", "take", "gone"):
         (tmp_path / "gone.json").read_text()
+    # JSON nested past the parser's recursion, a count of 1e999: damaged too, not a service that cannot start
+    from shared.agents.store import AgentStore
+
+    (tmp_path / "agents" / "others").mkdir(parents=True)
+    (tmp_path / "agents" / "others" / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
+    (tmp_path / "agents" / "others" / "huge.json").write_text(json.dumps({"kind": "simulated", "name": "huge",
+                                                                         "params": {}}).replace("{", '{"asked": 1e999, ', 1))
+    store = AgentStore(tmp_path / "agents")
+    assert {k: e.why.split(":")[0] for k, e in store.damaged.items()} == {("other", "deep"): "RecursionError",
+                                                                         ("other", "huge"): "OverflowError"}

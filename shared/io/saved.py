@@ -24,9 +24,10 @@ from shared.io.npz import npz_problem
 MAX_SAVED_BYTES = 2 * 1024 ** 3
 
 #: what reading a damaged file raises: the file's bytes or the JSON and arrays in it are not what
-#: the reader expects (a value out of range is refused by the objects built from it: BadInput)
+#: the reader expects (a value out of range is refused by the objects built from it: BadInput; JSON
+#: nested deeper than the parser recurses: RecursionError; a count of 1e999: OverflowError)
 DAMAGE = (BadInput, OSError, ValueError, KeyError, TypeError, IndexError, AttributeError, EOFError,
-          zipfile.BadZipFile)
+          RecursionError, OverflowError, zipfile.BadZipFile)
 
 
 @contextmanager
