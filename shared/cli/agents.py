@@ -199,29 +199,27 @@ def other_reveal(name: str = typer.Argument(..., help="The simulated other.")):
         typer.echo(json.dumps(jsonable(c.request("simulator", "other_reveal", {"other": name}))))
 
 
-def _listed(service: str, as_json: bool) -> dict | None:
-    """A service's ``list`` reply to print as text, or ``None`` once it is printed as JSON."""
+def _print_list(service: str, as_json: bool, lines, empty: str) -> None:
+    """A service's ``list`` reply: as JSON, or its ``lines(reply)`` and any file that cannot be read
+    back, or ``empty`` when there is neither."""
     with client() as c:
         r = c.request(service, "list")
     if as_json:
         typer.echo(json.dumps(jsonable(r)))
-        return None
-    return r
+        return
+    text = lines(r)
+    for line in text:
+        typer.echo(line)
+    echo_damaged(r["damaged"])
+    if not text and not r["damaged"]:
+        typer.echo(empty)
 
 
 @app.command("agents")
 def agents_list(as_json: bool = JSON_OPTION):
     """Every other and learner on the simulator."""
-    r = _listed("simulator", as_json)
-    if r is None:
-        return
-    for o in r["others"]:
-        typer.echo(f"other    {o['other']:<24} {o['kind']}")
-    for lr in r["learners"]:
-        typer.echo(f"learner  {lr['learner']:<24} {lr['trials']} trial(s)")
-    echo_damaged(r["damaged"])
-    if not r["others"] and not r["learners"] and not r["damaged"]:
-        typer.echo("no agents")
+    _print_list("simulator", as_json, lambda r: [f"other    {o['other']:<24} {o['kind']}" for o in r["others"]] +
+                [f"learner  {lr['learner']:<24} {lr['trials']} trial(s)" for lr in r["learners"]], "no agents")
 
 
 # ---------------------------------------------------------------------------- learners
@@ -388,14 +386,9 @@ def estimator_info(name: str = typer.Argument(..., help=ESTIMATE_HELP), as_json:
 @estimator_app.command("list")
 def estimator_list(as_json: bool = JSON_OPTION):
     """Every estimate: its other and the conversation sets done (and any whose file cannot be read back)."""
-    r = _listed("estimator", as_json)
-    if r is None:
-        return
-    for e in r["estimates"]:
-        typer.echo(f"{e['estimate']:<24} of {e['other'] or '?'}: {e['sets_done']} set(s)")
-    echo_damaged(r["damaged"])
-    if not r["estimates"] and not r["damaged"]:
-        typer.echo("no estimates (start one with `mirrorcoach estimator start NAME OTHER`)")
+    _print_list("estimator", as_json,
+                lambda r: [f"{e['estimate']:<24} of {e['other'] or '?'}: {e['sets_done']} set(s)" for e in r["estimates"]],
+                "no estimates (start one with `mirrorcoach estimator start NAME OTHER`)")
 
 
 @app.command("reproduce")
