@@ -39,8 +39,8 @@ CHOICE = {"development kinds (seeds 13, 14)": (("drag", "bias"), (13, 14), False
 
 def one_other(job: tuple) -> dict:
     """One other's conversation (``job``: kind, index, the other's parameters, and the population
-    it was drawn for), scored after each of :data:`CHECKPOINTS` sets and where the rule (module
-    docstring) would have stopped it."""
+    it was drawn for, default the report's), scored after each of :data:`CHECKPOINTS` sets and where
+    the rule (module docstring) would have stopped it."""
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
@@ -81,7 +81,7 @@ def one_other(job: tuple) -> dict:
             rule = row or scored(s)
         if row is not None:
             rows.append(row)
-    return {"kind": kind, "i": i, "rows": rows, "rule": rule}
+    return {"kind": kind, "i": i, "population": job[3] if len(job) > 3 else "report", "rows": rows, "rule": rule}
 
 
 def verdict(means: dict[int, dict[str, float]]) -> str:
@@ -136,8 +136,6 @@ def main(argv=None) -> int:
     print()
     seconds = time.perf_counter() - t0
     table = {}
-    for r, job in zip(results, jobs):
-        r["population"] = job[3]
     report = [r for r in results if r["population"] == "report"]
     for name, kinds in [(k, (k,)) for k in OUTSIDE_KINDS] + [("in-model kinds (reference)", KINDS)]:
         rs = [r for r in report if r["kind"] in kinds]

@@ -695,7 +695,7 @@ def test_the_conversation_length_benchmark_computes_its_words_and_scores_at_each
     assert "want of answers and of a term" in verdict(means((0.15, 0.08, 0.10), (0.10, 0.07, 0.1), (0.07, 0.06, 0.1)))
     p = population("mass", 1, seed=2026, d=6, g_max=0.6, joints=list(ARM))[0]
     r = one_other(("mass", 0, p))
-    assert [row["sets"] for row in r["rows"]] == list(CHECKPOINTS)
+    assert r["population"] == "report" and [row["sets"] for row in r["rows"]] == list(CHECKPOINTS)
     assert [row["answers"] for row in r["rows"]] == [8 * s for s in CHECKPOINTS]  # 4 shared motions, 4 probes a set
     assert all(0 <= row[g] < 1 for row in r["rows"] for g in ("known", "unknown", "fast"))
     # the rule's stop: from the 6th set, at the first set whose estimate is not the extended model (or the 12th)
