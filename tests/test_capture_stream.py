@@ -57,6 +57,47 @@ def test_skipped_frames_a_stopped_source_and_a_reconnect_are_reported(squat, tmp
     assert take.frames == 30 and "did not come back" in take.ended
 
 
+def test_the_recorders_own_work_is_not_taken_for_frames_the_source_skipped(squat, tmp_path):
+    """A recorder busy with a frame (the capture service publishing it on the bus) reads the lines
+    that came meanwhile at once: only the time it waited for the source is a silence, so a busy
+    recorder says no frame missing (measured between the lines it read: 5 per pause), and frames
+    the source really leaves out are still said missing."""
+    def busy(index, values, frame_time):
+        if index % 6 == 5:
+            time.sleep(0.2)  # 6 frame times at 30 fps
+
+    with ReplaySource(squat, connections=1) as src:
+        take = record(src.address, tmp_path / "busy.bvh", seconds=30, idle=1.0, on_frame=busy)
+    assert take.frames == squat.n_frames and take.skipped == 0, take.events
+    with ReplaySource(squat, skip=set(range(20, 30)), connections=1) as src:  # 0.33 s, 0.1 of it while busy
+        take = record(src.address, tmp_path / "busy_gaps.bvh", seconds=30, idle=1.0, on_frame=busy)
+    assert take.frames == squat.n_frames - 10 and take.skipped >= 5, take.events
+    assert any("missing after frame 20" in e for e in take.events), take.events
+
+
+def test_joined_takes_are_one_performers_clips_in_turn_and_refuse_two_skeletons(bundled):
+    """`capture serve --repetitions`' takes: the clips in groups, the last wrapping round, each
+    joined as :func:`join` joins them (the same rests for the same clips); clips of two performers
+    in one take are refused before anything plays."""
+    from shared.capture.takes import JoinedTakes, join
+
+    bd = [load_clip(f) for f in sorted((bundled / "amc/squat1Reps").glob("HDM_bd_*.amc"))]
+    bk = [load_clip(f) for f in sorted((bundled / "amc/squat1Reps").glob("HDM_bk_*.amc"))]
+    takes = JoinedTakes(bd + bd[:1], 2)
+    assert len(takes) == 2 and [c.name for c in takes.group(1)] == [bd[0].name, bd[0].name]
+    take, bounds = takes.joined(1)
+    again, same = join(takes.group(1), seed=1)
+    assert np.array_equal(take.data, again.data) and bounds == same and len(bounds) == 2
+    assert takes[0].n_frames == takes.joined(0)[0].n_frames > sum(c.n_frames for c in bd)  # rests between them
+    assert len(JoinedTakes(bd + bk, 2)) == 2  # each performer's clips a take of their own
+    with pytest.raises(BadInput, match="take 1 would join .*HDM_bk.*, of other bones: .* one performer's"):
+        JoinedTakes(bd + bk, 3)  # (the same channels, another body)
+    with pytest.raises(BadInput, match="has other bones than"):
+        join([bd[0], bk[0]])
+    with pytest.raises(BadInput, match="at least 1"):
+        JoinedTakes(bd, 0)
+
+
 def test_a_skeleton_change_ends_the_take(squat, cmu, tmp_path):
     other = load_clip(cmu / "scaled_131_01.bvh").frames(0, 10)
     with ReplaySource(squat, speed=4.0, stop_after=25, switch=other, connections=1) as src:
@@ -95,6 +136,41 @@ def test_malformed_lines_are_dropped_and_counted_and_a_headerless_stream_needs_i
     assert take.frames == 5 and take.clip.fps == pytest.approx(30.0)
 
 
+def test_lines_held_back_and_sent_together_are_late_not_missing(squat, tmp_path):
+    """A source whose network stack holds small writes back sends a burst of frames every few
+    frame times (Nagle's algorithm against delayed acknowledgements: about 40 ms): those frames
+    came, late; only a silence the burst after it does not make up is frames skipped."""
+    save_clip(squat, tmp_path / "skeleton.bvh")
+    text = (tmp_path / "skeleton.bvh").read_text().splitlines()
+    motion = text.index("MOTION")
+    header, rows = text[:motion + 1], text[motion + 3:]
+    dt = 1 / 30
+
+    def bursts(conn, skip=()):
+        conn.sendall(("\n".join(header + ["Frames: 0", f"Frame Time: {dt}"]) + "\n").encode())
+        t0 = time.monotonic()
+        for start in range(0, len(rows), 6):  # 6 frames (0.2 s) at once, when the last of them is due
+            time.sleep(max(t0 + (start + 5) * dt - time.monotonic(), 0))
+            part = [r for i, r in enumerate(rows[start:start + 6], start) if i not in skip]
+            if part:
+                conn.sendall(("\n".join(part) + "\n").encode())
+
+    for skip, missing in (((), 0), (set(range(12, 24)), 12)):  # two whole bursts left out: 0.4 s, 12 frames
+        srv = socket.create_server(("127.0.0.1", 0))
+
+        def serve(srv=srv, skip=skip):
+            conn, _ = srv.accept()
+            with conn:
+                bursts(conn, skip)
+            srv.close()
+
+        threading.Thread(target=serve, daemon=True).start()
+        take = record(f"tcp://127.0.0.1:{srv.getsockname()[1]}", tmp_path / "bursts.bvh", seconds=30, idle=1.0)
+        assert take.frames == len(rows) - len(skip), take.events
+        assert abs(take.skipped - missing) <= 2, take.events  # (not 5 per burst, as between the lines read)
+        assert bool(skip) == any("missing after frame 12" in e for e in take.events), take.events
+
+
 def test_bad_sources_are_refused_clearly(tmp_path):
     for bad in ("localhost", "tcp://host:port", "tcp://:80", "tcp://h:70000"):
         with pytest.raises(BadInput, match="tcp://HOST:PORT"):
@@ -110,19 +186,21 @@ def test_bad_sources_are_refused_clearly(tmp_path):
 
 @pytest.mark.slow
 def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp_path):
-    """`capture serve` plays a take as a live source on a loopback port, `capture record` records
-    it, `capture segment` cuts it into rep files that `study attempt` takes: no file cut by hand."""
+    """`capture serve --repetitions` plays one performer's clips joined with rests as a live source
+    on a loopback port (a trial's take without a suit, its true repetitions printed), `capture
+    record` records it, `capture segment` cuts it into rep files that `study attempt` takes: no
+    file made or cut by hand."""
     import json
+    import re
     import subprocess
     import sys
 
-    from shared.capture.takes import join
+    from shared.capture.takes import JoinedTakes
 
     squats = sorted((bundled / "amc/squat1Reps").glob("HDM_bd_*.amc"))
-    take, truth = join([load_clip(f) for f in squats] * 2, seed=4)  # four repetitions of one performer
-    save_clip(take.resample(30.0), tmp_path / "joined.bvh")
+    files = [str(f) for f in squats] * 2  # four repetitions of one performer
     cmd = [sys.executable, "-m", "shared.cli"]
-    server = subprocess.Popen(cmd + ["capture", "serve", str(tmp_path / "joined.bvh"), "--port", "0", "--speed", "8"],
+    server = subprocess.Popen(cmd + ["capture", "serve", *files, "--repetitions", "4", "--port", "0", "--speed", "8"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         address = server.stdout.readline().strip()
@@ -131,10 +209,14 @@ def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp
                                   "--idle", "1", "--json"], capture_output=True, text=True, timeout=120)
         assert r.returncode == 0, r.stderr
         rec = json.loads(r.stdout)
-        assert rec["frames"] == load_clip(tmp_path / "joined.bvh").n_frames and rec["dropped"] == 0
     finally:
         server.terminate()
-        server.wait(timeout=10)
+        _, said = server.communicate(timeout=10)
+    take, truth = JoinedTakes([load_clip(f) for f in files], 4).joined(0)  # what was served, as the library joins it
+    assert rec["frames"] == take.n_frames and rec["dropped"] == 0 and rec["skipped"] == 0, rec
+    assert "as 1 take(s) of 4 repetitions" in said, said
+    printed = [(float(a), float(b)) for a, b in re.findall(r"HDM_bd_squat1Reps_\d+_120 ([\d.]+)-([\d.]+) s", said)]
+    assert printed == [(round(a, 2), round(b, 2)) for a, b in truth], said
     r = subprocess.run(cmd + ["capture", "segment", str(tmp_path / "take.bvh"), "--target", str(squats[0]),
                               "--expected", "4", "--out", str(tmp_path / "reps"), "--json"],
                        capture_output=True, text=True, timeout=300)
@@ -143,6 +225,7 @@ def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp
     assert "note: no --background or --space" in r.stderr and "may be cut into repetitions" in r.stderr, r.stderr
     out = json.loads(r.stdout)
     assert len(out["files"]) == len(out["repetitions"]) >= 3 and all(Path(f).exists() for f in out["files"])
+    assert score([(x["start"], x["end"]) for x in out["repetitions"]], truth)["f1"] >= 0.85, (out["repetitions"], truth)
     assert all(load_clip(f).n_frames > 10 for f in out["files"])
     r = subprocess.run(cmd + ["capture", "record", str(tmp_path / "x.txt"), "--source", address, "--seconds", "1"],
                        capture_output=True, text=True, timeout=60)

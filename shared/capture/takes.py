@@ -10,6 +10,8 @@ last ended is shifted by that turn).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from shared.errors import BadInput
@@ -28,6 +30,25 @@ def _sway(n: int, channels: int, r: np.random.Generator) -> np.ndarray:
     kernel /= np.sqrt((kernel ** 2).sum())
     smooth = np.stack([np.convolve(noise[:, c], kernel, mode="valid") for c in range(channels)], axis=1)
     return SWAY * smooth[:n]
+
+
+def other_body(first: Clip, clip: Clip) -> str:
+    """Why ``clip`` cannot be a repetition of ``first``'s performer in one take ("" when it can):
+    other channels, or a skeleton with other joints or other bones (each joint's offset from its
+    parent, to a thousandth of the longest; the root's place in the world may differ)."""
+    if clip.channels != first.channels:
+        return "other channels"
+    a, b = first.skeleton, clip.skeleton
+    if a is None or b is None:
+        return ""
+    if [j.name for j in a.joints] != [j.name for j in b.joints]:
+        return "other joints"
+    bones = [k for k, j in enumerate(a.joints) if j.parent >= 0]
+    ours = np.array([a.joints[k].offset for k in bones]) * a.unit_m
+    theirs = np.array([b.joints[k].offset for k in bones]) * b.unit_m
+    if bones and not np.allclose(ours, theirs, rtol=0.0, atol=1e-3 * max(float(np.abs(ours).max()), 1e-9)):
+        return "other bones"
+    return ""
 
 
 def join(clips: list[Clip], seed: int = 0, rest: tuple[float, float] = REST, lead: float = 1.0,
@@ -53,8 +74,9 @@ def join(clips: list[Clip], seed: int = 0, rest: tuple[float, float] = REST, lea
         return out
 
     for clip in clips:
-        if clip.channels != first.channels:
-            raise BadInput(f"clip {clip.name!r} has other channels than {first.name!r}: one performer's clips only")
+        why = other_body(first, clip)
+        if why:
+            raise BadInput(f"clip {clip.name!r} has {why} than {first.name!r}: one performer's clips only")
         data = clip.resample(fps).data.copy()
         if prev is not None and angle:  # continue the angles where the last clip ended (whole turns)
             turns = np.round((prev[angle] - data[0, angle]) / 360.0) * 360.0
@@ -76,6 +98,46 @@ def join(clips: list[Clip], seed: int = 0, rest: tuple[float, float] = REST, lea
     parts.append(rest_frames(prev, lead))
     take = first.with_data(np.vstack(parts), name=name, label=first.label)
     return take, bounds
+
+
+class JoinedTakes(Sequence):
+    """``clips`` taken ``repetitions`` at a time, in order (the last take wrapping round to the
+    first clips), each group :func:`join`-ed into one take: what ``capture serve --repetitions``
+    plays, one take per connection, as a person performs a trial's repetitions with rests between
+    them. A take is joined when it is asked for (a long list of clips is never held joined); take
+    ``k``'s rests are drawn with seed ``k``, so the same clips give the same takes. Every take's
+    clips must be one performer's (:func:`other_body`): checked here, before anything plays."""
+
+    def __init__(self, clips: Sequence[Clip], repetitions: int):
+        if repetitions < 1:
+            raise BadInput(f"repetitions must be at least 1, got {repetitions}", field="repetitions")
+        if not clips:
+            raise BadInput("no clips to join")
+        self.clips, self.repetitions = list(clips), int(repetitions)
+        for k in range(len(self)):
+            group = self.group(k)
+            for c in group[1:]:
+                why = other_body(group[0], c)
+                if why:
+                    raise BadInput(f"take {k + 1} would join {group[0].name!r} and {c.name!r}, of {why}: the clips of "
+                                   f"one take must be one performer's (give each performer's clips "
+                                   f"{self.repetitions} at a time)")
+
+    def group(self, k: int) -> list[Clip]:
+        """The clips of take ``k`` (from 0)."""
+        return [self.clips[(k * self.repetitions + i) % len(self.clips)] for i in range(self.repetitions)]
+
+    def joined(self, k: int) -> tuple[Clip, list[tuple[float, float]]]:
+        """Take ``k`` and its repetitions' (start, end) in seconds (:func:`join`)."""
+        if not 0 <= k < len(self):
+            raise IndexError(k)
+        return join(self.group(k), seed=k, name=f"take{k + 1}")
+
+    def __len__(self) -> int:
+        return -(-len(self.clips) // self.repetitions)
+
+    def __getitem__(self, k):  # type: ignore[override]  # (an index; slices are not taken)
+        return self.joined(k)[0]
 
 
 def score(found: list[tuple[float, float]], truth: list[tuple[float, float]], iou: float = 0.5) -> dict:

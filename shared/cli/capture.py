@@ -40,22 +40,38 @@ def capture_serve(clips: list[Path] = typer.Argument(..., help="Clips to play (.
                   loop: bool = typer.Option(False, "--loop", help="Play again from the start, forever."),
                   header: bool = typer.Option(True, "--header/--no-header",
                                               help="Send the BVH header first (as most suites do)."),
-                  skeleton: Path | None = typer.Option(None, help=SKELETON_HELP)):
+                  skeleton: Path | None = typer.Option(None, help=SKELETON_HELP),
+                  repetitions: int = typer.Option(1, min=1, help="Join this many clips into each take, with rests "
+                                                  "between them as a person rests between repetitions (one "
+                                                  "performer's clips, in the order given; the last take wraps "
+                                                  "round to the first clips): a trial's take without a suit. "
+                                                  "Each take's true repetitions are printed on stderr.")):
     """Serve clips as a live BVH stream (the stand-in for a capture suit) until Ctrl-C: each
-    connection gets the next clip (a study's takes, one per trial)."""
+    connection gets the next clip, or the next take of ``--repetitions`` clips (a study's takes,
+    one per trial)."""
     from shared.capture.stream import ReplaySource
+    from shared.capture.takes import JoinedTakes
 
     cs = [read_clip(c, skeleton=skeleton) for c in clips]
     for path, c in zip(clips, cs):
         if c.skeleton is None:
             fail(f"{path} has no skeleton: a live BVH stream needs one")
+    takes = cs if repetitions == 1 else JoinedTakes(cs, repetitions)  # (BadInput: said by the CLI's handler)
     try:
-        src = ReplaySource(cs, host=host, port=port, header=header, speed=speed, loop=loop)
+        src = ReplaySource(takes, host=host, port=port, header=header, speed=speed, loop=loop)
     except OSError as e:
         fail(f"cannot listen on {host}:{port}: {e.strerror or e}")
     with src:
         typer.echo(f"serving {len(cs)} clip(s) ({', '.join(p.name for p in clips[:3])}"
-                   f"{', ...' if len(cs) > 3 else ''}) on {src.address}", err=True)
+                   f"{', ...' if len(cs) > 3 else ''})"
+                   + (f" as {len(takes)} take(s) of {repetitions} repetitions" if repetitions > 1 else "")
+                   + f" on {src.address}", err=True)
+        if isinstance(takes, JoinedTakes):
+            for k in range(len(takes)):
+                take, bounds = takes.joined(k)
+                typer.echo(f"  take {k + 1} ({take.duration:.1f} s): "
+                           + ", ".join(f"{c.name} {s:.2f}-{e:.2f} s" for c, (s, e) in zip(takes.group(k), bounds)),
+                           err=True)
         typer.echo(src.address)
         try:
             while True:
