@@ -945,6 +945,22 @@ def test_a_whole_study_runs_live_from_replayed_takes(cluster, bundled, tmp_path)
     assert r.returncode == 0, r.stderr
     rows = read(tmp_path / "trials.csv")
     assert len(rows) == 8 and {r["world"] for r in rows} == {"people"}
+    # a second study with the same participants (in a folder of the same name) records takes of its own on the
+    # capture service: the first study's are not recorded over (they are named with each study's id)
+    again = tmp_path / "again" / "study"
+    r = cli(env, "study", "init", again, "--target", squats[0], "--participants", "2", "--cases", "1,2", "--trials",
+            "2", "--seed", "5")
+    assert r.returncode == 0, r.stderr
+    with ReplaySource(takes[:1], speed=8.0, connections=1, hold=True) as src:
+        r = cli(env, "study", "run", again, "--source", src.address, "--expected", "4", "--idle", "0.5", "--steps", "1",
+                timeout=900)
+    assert r.returncode == 0, r.stdout + r.stderr
+    r = cli(env, "capture", "takes", "--json")
+    assert r.returncode == 0, r.stderr
+    names = [t["take"] for t in json.loads(r.stdout)]
+    first, second = (json.loads((f / "log.jsonl").read_text().splitlines()[0])["plan"]["study"] for f in (study, again))
+    assert first != second, first
+    assert sum(n.startswith(first + "-") for n in names) == 8 and sum(n.startswith(second + "-") for n in names) == 1, names
 
 
 @pytest.mark.slow
@@ -995,6 +1011,40 @@ def test_a_live_take_is_redone_and_a_participant_skipped_on_request(cluster, bun
                                                                        "P02_case2_trial2_1.bvh"]
     step = json.loads(cli(env, "study", "next", study, "--json").stdout)
     assert (step["participant"], step["trial"]) == ("P01", 2), step
+
+
+def test_ctrl_c_during_a_live_take_stops_it_and_the_run_starts_again(cluster, bundled, tmp_path):
+    """Ctrl-C while `study run` records stops the take on the capture service too (it would go on
+    recording a suit that streams on, and the run started again would be refused: "is being
+    recorded"); the run started again records the trial."""
+    from shared.capture.stream import ReplaySource
+    from shared.capture.takes import join
+    from shared.io import load_clip
+
+    env = cluster
+    squats = sorted((bundled / "amc/squat1Reps").glob("*.amc"))
+    bd = [load_clip(s).resample(30.0) for s in squats if "_bd_" in s.name]
+    study = tmp_path / "study"
+    assert cli(env, "study", "init", study, "--target", squats[0], "--participants", "1", "--cases", "2", "--trials",
+               "2", "--seed", "5").returncode == 0
+    still = bd[0].with_data(np.repeat(bd[0].data[:1], 60, axis=0))  # a person standing, streamed without end
+    with ReplaySource([still, join(bd * 2, seed=1)[0]], connections=2, hold=True, speed=4.0) as src:
+        run = subprocess.Popen([sys.executable, "-m", "shared.cli", "study", "run", str(study), "--source", src.address,
+                                "--expected", "4", "--idle", "5"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, env=env, cwd=REPO)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not [t for t in json.loads(cli(env, "capture", "takes", "--json").stdout)
+                                                   if t["state"] == "recording" and t["frames"] > 0]:
+            time.sleep(0.2)
+        run.send_signal(signal.SIGINT)
+        out, _ = run.communicate(timeout=60)
+        assert run.returncode != 0 and "interrupted" in out and "Traceback" not in out, out
+        takes = json.loads(cli(env, "capture", "takes", "--json").stdout)
+        assert [t["state"] for t in takes if "P01_case2_trial1" in t["take"]] == ["done"], takes
+        r = cli(env, "study", "run", study, "--source", src.address, "--expected", "4", "--idle", "5", "--steps", "1",
+                timeout=300)
+    assert r.returncode == 0 and "P01, case 2, trial 1: d_p" in r.stdout, r.stdout + r.stderr
+    assert r.stderr.count("4 repetitions seen") == 1, r.stderr
 
 
 def test_coach_live_runs_trials_from_a_live_source(cluster, bundled, tmp_path):

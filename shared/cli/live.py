@@ -4,6 +4,7 @@ keyboard's redo or skip honoured on the way."""
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 
@@ -63,20 +64,27 @@ def _record(c, name: str, msg: dict, controls: Controls) -> tuple[dict, str | No
     ended = threading.Event()
     c.subscribe("events/capture/take", lambda k, m: ended.set() if m.get("take") == name and m["state"] != "recording"
                 else None)
-    c.request("capture", "record", {**msg, "take": name, "replace": True})
-    deadline = time.monotonic() + msg["seconds"] + msg["idle"] + 60
-    polled = 0.0
-    while time.monotonic() < deadline:
-        word = controls.next()
-        if word is not None:  # redo or skip
-            c.request("capture", "stop", {"take": name})
-            return c.request("capture", "status", {"take": name}), word
-        ended.wait(0.05)
-        if ended.is_set() or time.monotonic() - polled > 1.0:  # the event, or a slow poll if it was missed
-            polled = time.monotonic()
-            info = c.request("capture", "status", {"take": name})
-            if info["state"] != "recording":
-                return info, None
+    try:
+        c.request("capture", "record", {**msg, "take": name, "replace": True})
+        deadline = time.monotonic() + msg["seconds"] + msg["idle"] + 60
+        polled = 0.0
+        while time.monotonic() < deadline:
+            word = controls.next()
+            if word is not None:  # redo or skip
+                c.request("capture", "stop", {"take": name})
+                return c.request("capture", "status", {"take": name}), word
+            ended.wait(0.05)
+            if ended.is_set() or time.monotonic() - polled > 1.0:  # the event, or a slow poll if it was missed
+                polled = time.monotonic()
+                info = c.request("capture", "status", {"take": name})
+                if info["state"] != "recording":
+                    return info, None
+    except KeyboardInterrupt:
+        # Ctrl-C stops the take as well: the service would go on recording it (up to --seconds, from a suit that
+        # streams on), and the run started again to record this trial would be refused ("is being recorded")
+        with contextlib.suppress(Exception):
+            c.request("capture", "stop", {"take": name}, timeout=10)
+        raise
     c.request("capture", "stop", {"take": name})
     return c.request("capture", "status", {"take": name}), None
 
