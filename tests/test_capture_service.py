@@ -230,3 +230,34 @@ def test_a_replay_of_several_clips_is_one_take_of_all_of_them(capture_service, c
     c.request("capture", "record", {"take": "both", "replay": [clip_to_wire(s) for s in squats]})
     info = _wait_done(c, "both")
     assert info["state"] == "done" and info["frames"] == sum(s.n_frames for s in squats) and info["reconnects"] == 1, info
+
+
+def test_ctrl_c_while_the_cli_waits_for_a_take_ends_it(capture_service, client_of, squats):
+    """`capture take` waiting on a source that never stops: Ctrl-C ends the take on the service
+    (it went on recording up to --seconds) and shows it, its frames kept."""
+    import signal
+    import subprocess
+    import sys
+
+    from tests.conftest import REPO
+
+    env, _ = capture_service
+    c = client_of(env)
+    with ReplaySource(squats[0], connections=1, hold=True) as src:
+        run = subprocess.Popen([sys.executable, "-m", "shared.cli", "capture", "take", "ctrlc", "--source", src.address,
+                                "--seconds", "600"], cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                if c.request("capture", "status", {"take": "ctrlc"})["frames"] > 0:
+                    break
+            except RemoteError:  # not asked for yet
+                pass
+            time.sleep(0.1)
+        time.sleep(0.5)  # the command polls the take: it is waiting now
+        run.send_signal(signal.SIGINT)
+        out, err = run.communicate(timeout=60)
+    assert run.returncode == 0 and "ctrlc: done" in out and "stopped on request" in out, out + err
+    info = c.request("capture", "status", {"take": "ctrlc"})
+    assert info["state"] == "done" and info["frames"] > 0, info

@@ -232,6 +232,27 @@ def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp
     assert r.returncode == 2 and "error:" in r.stderr and "Traceback" not in r.stderr
 
 
+def test_ctrl_c_ends_a_take_recorded_on_the_command_line_and_keeps_it(squat, tmp_path):
+    """`capture record` from a source that never stops: Ctrl-C ends the take and writes it with
+    the frames so far (they were lost: the file is written when the take ends)."""
+    import signal
+    import subprocess
+    import sys
+
+    with ReplaySource(squat, connections=1, hold=True) as src:
+        run = subprocess.Popen([sys.executable, "-m", "shared.cli", "capture", "record", str(tmp_path / "take.bvh"),
+                                "--source", src.address, "--seconds", "600"], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 60  # until frames are coming in (the rows beside the take, as they arrive)
+        while time.monotonic() < deadline and not any(f.stat().st_size for f in tmp_path.glob(".rows-*.part")):
+            time.sleep(0.1)
+        run.send_signal(signal.SIGINT)
+        out, err = run.communicate(timeout=60)
+    assert run.returncode == 0 and "stopped on request" in out and "Traceback" not in err, out + err
+    take = load_clip(tmp_path / "take.bvh")
+    assert take.n_frames == int(out.split()[0]) >= 1, out
+
+
 def test_capture_segment_says_which_test_failed_and_takes_a_larger_first_cost(bundled, tmp_path):
     """Another performer's kicks against a kick farther from them than the default first cost:
     the command says so with the number (exit 1); with ``--max-cost`` above it, the kicks are

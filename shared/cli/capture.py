@@ -92,12 +92,30 @@ def capture_record(out: Path = typer.Argument(..., help="The take's file (.bvh).
                    reconnect: int = typer.Option(0, help="Connect again this many times when the source stops."),
                    as_json: bool = typer.Option(False, "--json", help="Print the take's report as JSON.")):
     """Record a take from a live BVH stream; dropped and missing frames, a source that stops or
-    comes back, and a skeleton that changes are reported."""
+    comes back, and a skeleton that changes are reported. Ctrl-C ends the take and keeps it
+    (a second Ctrl-C gives up on it)."""
+    import os
+    import signal
+    import threading
+
     from shared.capture.stream import record
 
     if out.suffix.lower() != ".bvh":
         fail("a take is written as .bvh")
-    take = record(source, out, seconds=seconds, frames=frames, skeleton=skeleton, idle=idle, reconnect=reconnect)
+    stop = threading.Event()
+
+    def ctrl_c(signum, frame):  # the first ends the take (its frames kept, at the next line or --idle), the second aborts
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+        os.write(2, b"Ctrl-C: ending the take (again to give it up)\n")  # (a print in a handler may meet another)
+
+    before = signal.signal(signal.SIGINT, ctrl_c)
+    try:
+        take = record(source, out, seconds=seconds, frames=frames, skeleton=skeleton, idle=idle, reconnect=reconnect,
+                      stop_when=stop)
+    finally:
+        signal.signal(signal.SIGINT, before)
     if as_json:
         typer.echo(json.dumps(take.to_dict(), indent=1))
     else:
@@ -203,7 +221,8 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
                  as_json: bool = typer.Option(False, "--json", help="Print the take's state as JSON.")):
     """Record a take on the capture service (needs `make up`): its frames are published on the bus
     as they arrive (events/capture/frames); dropped or missing frames, a source that stops or
-    comes back and a skeleton that changes are in its events."""
+    comes back and a skeleton that changes are in its events. Ctrl-C while waiting ends the take
+    (its frames kept)."""
     from shared.cli.common import client, wire
 
     if (source is None) == (not replay):
@@ -226,21 +245,27 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
             msg["skeleton"] = skeleton.read_text(encoding="latin-1")
         except OSError as e:
             fail(f"{skeleton}: {e.strerror or e}")
+    from rich.progress import Progress, SpinnerColumn, TextColumn
+
     with client() as c:
         info = c.request("capture", "record", msg)
-        typer.echo(_take_line(info), err=True)
         if wait:
-            from rich.progress import Progress, SpinnerColumn, TextColumn
-
             deadline = time.monotonic() + seconds + idle * (reconnect + 1) + 60
-            with Progress(SpinnerColumn(), TextColumn("{task.description}"), transient=True) as prog:
-                task = prog.add_task("recording", total=None)
-                while info["state"] == "recording" and time.monotonic() < deadline:
-                    time.sleep(0.25)
-                    info = c.request("capture", "status", {"take": name})
-                    prog.update(task, description=f"recording {name}: {info['frames']} frames ({info['seconds']:.1f} s)")
+            try:
+                typer.echo(_take_line(info), err=True)
+                with Progress(SpinnerColumn(), TextColumn("{task.description}"), transient=True) as prog:
+                    task = prog.add_task("recording", total=None)
+                    while info["state"] == "recording" and time.monotonic() < deadline:
+                        time.sleep(0.25)
+                        info = c.request("capture", "status", {"take": name})
+                        prog.update(task, description=f"recording {name}: {info['frames']} frames "
+                                                      f"({info['seconds']:.1f} s)")
+            except KeyboardInterrupt:  # Ctrl-C while waiting ends the take, as `capture record`'s does
+                typer.echo("Ctrl-C: ending the take", err=True)
             if info["state"] == "recording":
                 info = c.request("capture", "stop", {"take": name})
+        else:
+            typer.echo(_take_line(info), err=True)
     if as_json:
         typer.echo(json.dumps(info, indent=1))
     else:
