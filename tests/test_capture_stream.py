@@ -217,10 +217,17 @@ def test_from_a_live_stream_to_repetition_files_on_the_command_line(bundled, tmp
     assert "as 1 take(s) of 4 repetitions" in said, said
     printed = [(float(a), float(b)) for a, b in re.findall(r"HDM_bd_squat1Reps_\d+_120 ([\d.]+)-([\d.]+) s", said)]
     assert printed == [(round(a, 2), round(b, 2)) for a, b in truth], said
+    (tmp_path / "reps").mkdir()
+    for name in ("rep7.bvh", "rep12.bvh", "rep_kept.bvh", "notes.txt"):  # an earlier cut's repetitions, and files of the user's
+        (tmp_path / "reps" / name).write_text("from before\n")
     r = subprocess.run(cmd + ["capture", "segment", str(tmp_path / "take.bvh"), "--target", str(squats[0]),
                               "--expected", "4", "--out", str(tmp_path / "reps"), "--json"],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
+    # the earlier cut's repetitions are gone (a glob rep*.bvh took them with this take's), the user's files kept
+    assert "removed rep7.bvh, rep12.bvh from" in r.stderr, r.stderr
+    assert not (tmp_path / "reps/rep7.bvh").exists() and not (tmp_path / "reps/rep12.bvh").exists()
+    assert (tmp_path / "reps/rep_kept.bvh").exists() and (tmp_path / "reps/notes.txt").exists()
     # with neither other motions nor a space, the command says what only the first cost can tell
     assert "note: no --background or --space" in r.stderr and "may be cut into repetitions" in r.stderr, r.stderr
     out = json.loads(r.stdout)

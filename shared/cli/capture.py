@@ -152,7 +152,6 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
     from dataclasses import replace
 
     from shared.capture.segment import Settings, segment
-    from shared.io import save_clip
 
     space_fields(None if space is None else str(space), label)  # --label needs --space: said before any file is read
     t = read_clip(take, skeleton=skeleton)
@@ -168,13 +167,7 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
 
         sp = ProtoSymbolSpace.load(space)
     result = segment(t, tgt, expected=expected, background=bg, settings=how, space=sp, label=label)
-    files = []
-    if out is not None and result.repetitions:
-        out.mkdir(parents=True, exist_ok=True)
-        for part in result.cut(t):
-            path = out / f"{part.name}.bvh"
-            save_clip(part, path)
-            files.append(str(path))
+    files = _write_repetitions(out, result.cut(t) if result.repetitions else []) if out is not None else []
     if as_json:
         typer.echo(json.dumps({**result.to_dict(), "files": files}, indent=1))
     else:
@@ -186,6 +179,29 @@ def capture_segment(take: Path = typer.Argument(..., help="The take: .amc, .bvh 
         typer.echo(result.verdict)
     if not result.repetitions:
         raise typer.Exit(1)
+
+
+def _write_repetitions(out: Path, parts: list) -> list[str]:
+    """Each repetition as ``out/rep<k>.bvh`` (the files, in order). The ``rep<k>.bvh`` of an earlier
+    cut into the same folder beyond these are removed, and said so: they were left, and `study
+    attempt out/rep*.bvh` took another take's repetitions with this one's."""
+    import re
+
+    from shared.io import save_clip
+
+    out.mkdir(parents=True, exist_ok=True)
+    files = []
+    for k, part in enumerate(parts, 1):
+        save_clip(part, out / f"rep{k}.bvh")
+        files.append(str(out / f"rep{k}.bvh"))
+    stale = sorted((f for f in out.glob("rep*.bvh") if (m := re.fullmatch(r"rep(\d+)\.bvh", f.name)) and int(m[1]) > len(parts)),
+                   key=lambda f: int(f.stem[3:]))
+    for f in stale:
+        f.unlink(missing_ok=True)
+    if stale:
+        typer.echo(f"removed {', '.join(f.name for f in stale)} from {out}: an earlier cut's (this take has "
+                   f"{len(parts)} repetition(s))", err=True)
+    return files
 
 
 # ---------------------------------------------------------------- the capture service (`make up`)
@@ -332,9 +348,7 @@ def capture_cut(name: str = typer.Argument(..., help="A finished take on the cap
         out.mkdir(parents=True, exist_ok=True)
         assert whole is not None  # (asked for with out)
         save_clip(clip_from_wire(whole), out / "take.bvh")
-        for k, part in enumerate(r["clips"], 1):
-            save_clip(clip_from_wire(part), out / f"rep{k}.bvh")
-            files.append(str(out / f"rep{k}.bvh"))
+        files = _write_repetitions(out, [clip_from_wire(part) for part in r["clips"]])
     if as_json:
         typer.echo(json.dumps({k: v for k, v in r.items() if k != "clips"} | {"files": files}, indent=1))
     else:
