@@ -960,7 +960,8 @@ def test_a_whole_study_runs_live_from_replayed_takes(cluster, bundled, tmp_path)
     names = [t["take"] for t in json.loads(r.stdout)]
     first, second = (json.loads((f / "log.jsonl").read_text().splitlines()[0])["plan"]["study"] for f in (study, again))
     assert first != second, first
-    assert sum(n.startswith(first + "-") for n in names) == 8 and sum(n.startswith(second + "-") for n in names) == 1, names
+    assert sum(n.startswith(f"study-{first}-") for n in names) == 8, names
+    assert sum(n.startswith(f"study-{second}-") for n in names) == 1, names
 
 
 @pytest.mark.slow
