@@ -94,28 +94,15 @@ def capture_record(out: Path = typer.Argument(..., help="The take's file (.bvh).
     """Record a take from a live BVH stream; dropped and missing frames, a source that stops or
     comes back, and a skeleton that changes are reported. Ctrl-C ends the take and keeps it
     (a second Ctrl-C gives up on it)."""
-    import os
-    import signal
-    import threading
-
     from shared.capture.stream import record
+    from shared.cli.common import ctrl_c_ends
 
     if out.suffix.lower() != ".bvh":
         fail("a take is written as .bvh")
-    stop = threading.Event()
-
-    def ctrl_c(signum, frame):  # the first ends the take (its frames kept, at the next line or --idle), the second aborts
-        if stop.is_set():
-            raise KeyboardInterrupt
-        stop.set()
-        os.write(2, b"Ctrl-C: ending the take (again to give it up)\n")  # (a print in a handler may meet another)
-
-    before = signal.signal(signal.SIGINT, ctrl_c)
-    try:
+    # the first Ctrl-C ends the take (its frames kept, at the next line or --idle), the second gives it up
+    with ctrl_c_ends("ending the take (again to give it up)") as stop:
         take = record(source, out, seconds=seconds, frames=frames, skeleton=skeleton, idle=idle, reconnect=reconnect,
                       stop_when=stop)
-    finally:
-        signal.signal(signal.SIGINT, before)
     if as_json:
         typer.echo(json.dumps(take.to_dict(), indent=1))
     else:
@@ -263,25 +250,22 @@ def capture_take(name: str = typer.Argument(..., help="The take's name (letters,
             fail(f"{skeleton}: {e.strerror or e}")
     from rich.progress import Progress, SpinnerColumn, TextColumn
 
-    with client() as c:
+    from shared.cli.common import ctrl_c_ends
+
+    # Ctrl-C ends the take (its frames kept), as `capture record`'s does
+    with client() as c, ctrl_c_ends("ending the take") as stop:
         info = c.request("capture", "record", msg)
+        typer.echo(_take_line(info), err=True)
         if wait:
             deadline = time.monotonic() + seconds + idle * (reconnect + 1) + 60
-            try:
-                typer.echo(_take_line(info), err=True)
-                with Progress(SpinnerColumn(), TextColumn("{task.description}"), transient=True) as prog:
-                    task = prog.add_task("recording", total=None)
-                    while info["state"] == "recording" and time.monotonic() < deadline:
-                        time.sleep(0.25)
-                        info = c.request("capture", "status", {"take": name})
-                        prog.update(task, description=f"recording {name}: {info['frames']} frames "
-                                                      f"({info['seconds']:.1f} s)")
-            except KeyboardInterrupt:  # Ctrl-C while waiting ends the take, as `capture record`'s does
-                typer.echo("Ctrl-C: ending the take", err=True)
-            if info["state"] == "recording":
-                info = c.request("capture", "stop", {"take": name})
-        else:
-            typer.echo(_take_line(info), err=True)
+            with Progress(SpinnerColumn(), TextColumn("{task.description}"), transient=True) as prog:
+                task = prog.add_task("recording", total=None)
+                while info["state"] == "recording" and time.monotonic() < deadline and not stop.is_set():
+                    stop.wait(0.25)
+                    info = c.request("capture", "status", {"take": name})
+                    prog.update(task, description=f"recording {name}: {info['frames']} frames ({info['seconds']:.1f} s)")
+        if info["state"] == "recording" and (wait or stop.is_set()):
+            info = c.request("capture", "stop", {"take": name})
     if as_json:
         typer.echo(json.dumps(info, indent=1))
     else:

@@ -7,6 +7,7 @@ them (``register``) and adds its own groups. Nothing here imports numpy at impor
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 from typing import NoReturn
 
@@ -198,6 +199,35 @@ def wire(clip, with_skeleton=True) -> dict:
     if "label" in d:
         d["label"] = wire_name(d["label"])
     return d
+
+
+@contextmanager
+def ctrl_c_ends(message: str):
+    """While inside, Ctrl-C sets the yielded event instead of raising KeyboardInterrupt wherever
+    the program is (inside a bus request, half-way through writing a file), and says ``message``;
+    the caller ends what it is doing at its next look (a take stopped, a file written). A second
+    Ctrl-C raises KeyboardInterrupt. Outside the main thread Ctrl-C is left as it is."""
+    import os
+    import signal
+    import threading
+
+    stop = threading.Event()
+
+    def handler(signum, frame):
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+        os.write(2, f"Ctrl-C: {message}\n".encode())  # (a print in a handler may meet another print)
+
+    try:
+        before = signal.signal(signal.SIGINT, handler)
+    except ValueError:  # not the main thread
+        before = None
+    try:
+        yield stop
+    finally:
+        if before is not None:
+            signal.signal(signal.SIGINT, before)
 
 
 def busy(message: str):

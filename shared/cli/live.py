@@ -4,7 +4,6 @@ keyboard's redo or skip honoured on the way."""
 
 from __future__ import annotations
 
-import contextlib
 import time
 from pathlib import Path
 
@@ -64,11 +63,15 @@ def _record(c, name: str, msg: dict, controls: Controls) -> tuple[dict, str | No
     ended = threading.Event()
     c.subscribe("events/capture/take", lambda k, m: ended.set() if m.get("take") == name and m["state"] != "recording"
                 else None)
-    try:
+    from shared.cli.common import ctrl_c_ends
+
+    # Ctrl-C stops the take as well, then ends the run: the service would go on recording it (up to --seconds, from
+    # a suit that streams on), and the run started again to record this trial would be refused ("is being recorded")
+    with ctrl_c_ends("stopping the take, then the run") as interrupted:
         c.request("capture", "record", {**msg, "take": name, "replace": True})
         deadline = time.monotonic() + msg["seconds"] + msg["idle"] + 60
         polled = 0.0
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not interrupted.is_set():
             word = controls.next()
             if word is not None:  # redo or skip
                 c.request("capture", "stop", {"take": name})
@@ -79,13 +82,9 @@ def _record(c, name: str, msg: dict, controls: Controls) -> tuple[dict, str | No
                 info = c.request("capture", "status", {"take": name})
                 if info["state"] != "recording":
                     return info, None
-    except KeyboardInterrupt:
-        # Ctrl-C stops the take as well: the service would go on recording it (up to --seconds, from a suit that
-        # streams on), and the run started again to record this trial would be refused ("is being recorded")
-        with contextlib.suppress(Exception):
-            c.request("capture", "stop", {"take": name}, timeout=10)
-        raise
-    c.request("capture", "stop", {"take": name})
+        c.request("capture", "stop", {"take": name})
+        if interrupted.is_set():
+            raise KeyboardInterrupt
     return c.request("capture", "status", {"take": name}), None
 
 
