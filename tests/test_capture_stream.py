@@ -366,3 +366,18 @@ def test_a_stream_that_stops_being_bvh_keeps_the_frames_it_sent(squat, tmp_path)
     source = _raw_server((payload + "\n" + "1" * (MAX_LINE + 10)).encode())
     take = record(source, tmp_path / "cut.bvh", seconds=10, idle=1.0)
     assert take.frames == 5 and take.ended == "the stream stopped being BVH" and take.clip.n_frames == 5
+
+
+def test_the_live_benchmarks_verdict_is_computed_per_case_and_an_unmeasured_case_is_not_met():
+    """bench.live's goal words: met on a case only where every trial of both runs was ready within
+    1 s; a case one run did not measure is missed and said so (it counted as met before)."""
+    from bench.live import _verdict
+
+    both = {1: [0.5, 0.7], 2: [0.9], 3: [1.4], 4: [0.8]}
+    assert _verdict(both, both) == "Goal (1 s): met on case(s) 1, 2, 4; **missed** on case(s) 3 (longest 1.40 s)."
+    assert _verdict({k: [0.5] for k in (1, 2, 3, 4)}, {k: [0.9] for k in (1, 2, 3, 4)}) == \
+        "Goal (1 s): **met** on every case."
+    assert "missed** on case(s) 4 (not measured in every run: case(s) 4)" in _verdict({1: [0.5], 2: [0.5], 3: [0.5]},
+                                                                                     {k: [0.5] for k in (1, 2, 3, 4)})
+    assert _verdict({k: [2.0] for k in (1, 2, 3, 4)}, {k: [0.5] for k in (1, 2, 3, 4)}).startswith(
+        "Goal (1 s): **missed** on every case (longest 2.00 s)")
