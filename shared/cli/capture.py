@@ -181,8 +181,8 @@ def _write_repetitions(out: Path, parts: list) -> list[str]:
     for k, part in enumerate(parts, 1):
         save_clip(part, out / f"rep{k}.bvh")
         files.append(str(out / f"rep{k}.bvh"))
-    stale = sorted((f for f in out.glob("rep*.bvh") if (m := re.fullmatch(r"rep(\d+)\.bvh", f.name)) and int(m[1]) > len(parts)),
-                   key=lambda f: int(f.stem[3:]))
+    earlier = {int(m[1]): f for f in out.glob("rep*.bvh") if (m := re.fullmatch(r"rep(\d+)\.bvh", f.name))}
+    stale = [earlier[k] for k in sorted(earlier) if k > len(parts)]
     for f in stale:
         f.unlink(missing_ok=True)
     if stale:

@@ -392,7 +392,8 @@ def study_run(folder: Path = FOLDER,
                 _start_session(c, folder, p, who, case)
             # named on the capture service with the study's id, as its coach sessions are (session_name): two
             # studies on one cluster (each with a P01) never record over each other's takes
-            got = take_and_cut(c, f"study-{p['study']}-{who}_case{case}_trial{n}", msg, controls, retries,
+            on_service = f"study-{p['study']}-"
+            got = take_and_cut(c, f"{on_service}{who}_case{case}_trial{n}", msg, controls, retries,
                                lambda t: typer.echo(t, err=True))
         if got.get("word") == "skip":
             typer.echo(f"  {who}: skipped on request (their trials are left for a later `study run`)")
@@ -407,8 +408,8 @@ def study_run(folder: Path = FOLDER,
         if line:
             typer.echo(line, err=True)
         with client() as c:  # kept beside the study, after the person has their next demonstration
-            short = got["name"].removeprefix(f"study-{p['study']}-")  # the file's name as before: the folder is the study
-            save_take(c, got["name"], folder / "takes" / f"{short}.bvh")
+            # the file keeps its name without the study's id: the folder is the study
+            save_take(c, got["name"], folder / "takes" / f"{got['name'].removeprefix(on_service)}.bvh")
         done += 1
         word = controls.next()  # a redo or skip typed now is for the next trial
         if word is not None:
